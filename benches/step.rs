@@ -1,0 +1,94 @@
+//! Criterion benchmarks of one 1/60 s solver step on the trade-off scene (1 m², 1 kg, two
+//! corner pins), serial and on a task pool with one thread per core.
+//!
+//! `cargo bench --bench step`
+
+use std::hint::black_box;
+
+use bevy::tasks::TaskPoolBuilder;
+use bevy_cloth::cloth::TaskPoolParallel;
+use bevy_cloth::solver::{
+    Grid, MassDistribution, Pin, Serial, Simulation, Solver, SolverParams, TopologyOptions,
+};
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+
+fn scene(n: u32, solver: Solver, substeps: u32) -> Simulation {
+    let grid = Grid::new(n, n, 1.0, 1.0);
+    let topology = grid.topology(TopologyOptions::default()).unwrap();
+    let masses = topology.masses(1.0, MassDistribution::Uniform);
+    let mut sim = Simulation::new(
+        topology,
+        &masses,
+        SolverParams {
+            solver,
+            substeps,
+            iterations: 1,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let rest = grid.positions();
+    sim.state_mut()
+        .set_pins([grid.index(0, 0), grid.index(n - 1, 0)].map(|v| Pin {
+            vertex: v,
+            target: rest[v as usize],
+        }))
+        .unwrap();
+    // Start from a hanging drape, not the flat start.
+    for _ in 0..30 {
+        sim.step(1.0 / 60.0, &Serial);
+    }
+    sim
+}
+
+fn bench(c: &mut Criterion) {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let pool = TaskPoolBuilder::new()
+        .num_threads(threads.saturating_sub(1).max(1))
+        .build();
+    let par = TaskPoolParallel(&pool);
+    let xpbd = Solver::Xpbd {
+        stretch: 0.0,
+        shear: 1e-6,
+        bending: 1e-3,
+    };
+    let mut g = c.benchmark_group("xpbd_10x1");
+    for n in [32u32, 64, 128] {
+        let mut sim = scene(n, xpbd, 10);
+        g.bench_with_input(BenchmarkId::new("pool", n), &n, |b, _| {
+            b.iter(|| sim.step(black_box(1.0 / 60.0), &par))
+        });
+        let mut sim = scene(n, xpbd, 10);
+        g.bench_with_input(BenchmarkId::new("serial", n), &n, |b, _| {
+            b.iter(|| sim.step(black_box(1.0 / 60.0), &Serial))
+        });
+    }
+    g.finish();
+    let mut g = c.benchmark_group("solver_64_10x1");
+    for (name, solver) in [
+        ("xpbd", xpbd),
+        (
+            "xpbd_no_bending",
+            Solver::Xpbd {
+                stretch: 0.0,
+                shear: 1e-6,
+                bending: f32::INFINITY,
+            },
+        ),
+        (
+            "pbd",
+            Solver::Pbd {
+                stretch: 1.0,
+                shear: 1.0,
+                bending: 0.5,
+            },
+        ),
+    ] {
+        let mut sim = scene(64, solver, 10);
+        g.bench_function(name, |b| b.iter(|| sim.step(black_box(1.0 / 60.0), &par)));
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

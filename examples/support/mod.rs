@@ -1,0 +1,267 @@
+//! Shared by the examples: command-line flags, headless or windowed apps, the final JSON line.
+//!
+//! Every example accepts `--headless` (no window, no GPU: `MinimalPlugins`, frames of the fixed
+//! time step) and `--frames N` (stop after N frames; windowed runs otherwise go on until closed),
+//! and ends by printing one JSON line of measurements.
+
+#![allow(dead_code, reason = "each example uses a different part")]
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use bevy::app::AppExit;
+use bevy::mesh::MeshPlugin;
+use bevy::prelude::*;
+use bevy::time::TimeUpdateStrategy;
+use bevy_cloth::prelude::*;
+
+/// Parsed command line.
+#[derive(Clone, Debug, Default)]
+pub struct Args {
+    /// `--headless`.
+    pub headless: bool,
+    /// `--frames N`.
+    pub frames: Option<u32>,
+    /// Every other `--key value` (or `--flag` → `"true"`).
+    pub rest: BTreeMap<String, String>,
+}
+
+impl Args {
+    /// Reads `std::env::args`.
+    pub fn parse() -> Self {
+        let mut out = Args::default();
+        let mut it = std::env::args().skip(1).peekable();
+        while let Some(a) = it.next() {
+            let Some(key) = a.strip_prefix("--") else {
+                eprintln!("ignoring argument {a:?}");
+                continue;
+            };
+            let value = match it.peek() {
+                Some(v) if !v.starts_with("--") => it.next().unwrap(),
+                _ => "true".to_string(),
+            };
+            match key {
+                "headless" => out.headless = value == "true",
+                "frames" => {
+                    out.frames = Some(value.parse().unwrap_or_else(|_| {
+                        eprintln!("--frames needs a number, got {value:?}");
+                        std::process::exit(2)
+                    }))
+                }
+                _ => {
+                    out.rest.insert(key.to_string(), value);
+                }
+            }
+        }
+        out
+    }
+
+    /// A `--key value` parsed as `T`, or `default`.
+    pub fn get<T: std::str::FromStr>(&self, key: &str, default: T) -> T {
+        match self.rest.get(key) {
+            None => default,
+            Some(v) => v.parse().unwrap_or_else(|_| {
+                eprintln!("--{key}: cannot parse {v:?}");
+                std::process::exit(2)
+            }),
+        }
+    }
+}
+
+/// One JSON object, written by hand (flat, numbers and strings only).
+#[derive(Default)]
+pub struct Json(Vec<(String, String)>);
+
+impl Json {
+    /// Adds a number (NaN and infinities become `null`).
+    pub fn num(mut self, k: &str, v: impl Into<f64>) -> Self {
+        let v: f64 = v.into();
+        let s = if v.is_finite() {
+            format!("{v}")
+        } else {
+            "null".to_string()
+        };
+        self.0.push((k.to_string(), s));
+        self
+    }
+
+    /// Adds a string.
+    pub fn str(mut self, k: &str, v: &str) -> Self {
+        self.0.push((k.to_string(), format!("{v:?}")));
+        self
+    }
+}
+
+impl core::fmt::Display for Json {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{{")?;
+        for (i, (k, v)) in self.0.iter().enumerate() {
+            if i > 0 {
+                write!(f, ",")?;
+            }
+            write!(f, "{k:?}:{v}")?;
+        }
+        write!(f, "}}")
+    }
+}
+
+/// Wall time spent in the cloth systems, frame by frame.
+#[derive(Resource, Default)]
+pub struct ClothTiming {
+    start: Option<Instant>,
+    /// Simulation time per rendered frame (sum over that frame's fixed steps).
+    pub per_frame: Vec<Duration>,
+    current: Duration,
+}
+
+fn timing_start(mut t: ResMut<ClothTiming>) {
+    t.start = Some(Instant::now());
+}
+
+fn timing_stop(mut t: ResMut<ClothTiming>) {
+    if let Some(s) = t.start.take() {
+        t.current += s.elapsed();
+    }
+}
+
+fn timing_frame(mut t: ResMut<ClothTiming>) {
+    let c = core::mem::take(&mut t.current);
+    t.per_frame.push(c);
+}
+
+/// The app every example starts from: a window with `DefaultPlugins`, or with `--headless`
+/// `MinimalPlugins` plus transforms, assets and meshes, stepping one fixed step per frame.
+pub fn app(args: &Args, title: &str, fixed_step: f64) -> App {
+    let mut app = App::new();
+    if args.headless {
+        app.add_plugins((
+            MinimalPlugins,
+            TransformPlugin,
+            AssetPlugin::default(),
+            MeshPlugin,
+        ))
+        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+            fixed_step,
+        )));
+    } else {
+        app.add_plugins(DefaultPlugins.set(WindowPlugin {
+            primary_window: Some(Window {
+                title: title.into(),
+                ..default()
+            }),
+            ..default()
+        }));
+    }
+    app.add_plugins(ClothPlugins::default())
+        .insert_resource(Time::<Fixed>::from_seconds(fixed_step))
+        .init_resource::<ClothTiming>()
+        .add_systems(
+            FixedPostUpdate,
+            (
+                timing_start.before(ClothSystems::Prepare),
+                timing_stop.after(ClothSystems::Simulate),
+            ),
+        )
+        .add_systems(Last, timing_frame);
+    app
+}
+
+/// What every example reports about its cloths.
+pub fn cloth_report(world: &mut World) -> Json {
+    let mut q = world.query::<&ClothSim>();
+    let (mut vertices, mut max_strain, mut nan, mut steps) = (0usize, 0.0f32, 0usize, 0u64);
+    for c in q.iter(world) {
+        let s = c.simulation();
+        vertices += s.state().len();
+        max_strain = max_strain.max(s.strain().max);
+        nan += s.state().non_finite_count();
+        steps = steps.max(c.steps());
+    }
+    let t = world.resource::<ClothTiming>();
+    let frames = t.per_frame.len();
+    let mut ms: Vec<f64> = t
+        .per_frame
+        .iter()
+        .skip(frames.min(5))
+        .map(|d| d.as_secs_f64() * 1e3)
+        .collect();
+    ms.sort_by(f64::total_cmp);
+    let median = ms.get(ms.len() / 2).copied().unwrap_or(0.0);
+    Json::default()
+        .num("frames", frames as f64)
+        .num("steps", steps as f64)
+        .num("vertices", vertices as f64)
+        .num("max_strain", max_strain)
+        .num("nan_count", nan as f64)
+        .num("ms_per_frame", median)
+}
+
+/// Runs the app: `--frames N` frames (headless: driven here; windowed: then exits), then prints
+/// `report(world)` as one JSON line.
+pub fn run(mut app: App, args: &Args, report: fn(&mut World) -> Json) {
+    if args.headless {
+        let frames = args.frames.unwrap_or(300);
+        app.finish();
+        app.cleanup();
+        for _ in 0..frames {
+            app.update();
+        }
+        println!("{}", report(app.world_mut()));
+        return;
+    }
+    #[derive(Resource)]
+    struct Limit(Option<u32>, fn(&mut World) -> Json);
+    fn stop(world: &mut World) {
+        let frames = world.resource::<ClothTiming>().per_frame.len() as u32;
+        let limit = world.resource::<Limit>();
+        let (max, report) = (limit.0, limit.1);
+        if max.is_some_and(|m| frames >= m) {
+            println!("{}", report(world));
+            world.write_message(AppExit::Success);
+        }
+    }
+    app.insert_resource(Limit(args.frames, report))
+        .add_systems(Last, stop.after(timing_frame));
+    app.run();
+}
+
+/// A camera, a sun with shadows, and a ground plane.
+pub fn stage(
+    commands: &mut Commands,
+    meshes: &mut Assets<Mesh>,
+    materials: &mut Assets<StandardMaterial>,
+    eye: Vec3,
+    target: Vec3,
+) {
+    commands.spawn((
+        Camera3d::default(),
+        Transform::from_translation(eye).looking_at(target, Vec3::Y),
+    ));
+    commands.spawn((
+        DirectionalLight {
+            illuminance: 8_000.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::from_xyz(3.0, 8.0, 5.0).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    commands.insert_resource(GlobalAmbientLight {
+        brightness: 300.0,
+        ..default()
+    });
+    commands.spawn((
+        Mesh3d(meshes.add(Plane3d::default().mesh().size(30.0, 30.0))),
+        MeshMaterial3d(materials.add(Color::srgb(0.35, 0.37, 0.33))),
+    ));
+}
+
+/// A double-sided cloth material.
+pub fn cloth_material(color: Color) -> StandardMaterial {
+    StandardMaterial {
+        base_color: color,
+        perceptual_roughness: 0.9,
+        double_sided: true,
+        cull_mode: None,
+        ..default()
+    }
+}

@@ -1,0 +1,18 @@
+//! The Bevy side of a cloth: components, plugin, systems, mesh write-back.
+//!
+//! Data flow: a [`Cloth`] entity's [`Mesh3d`] is read once into a solver
+//! [`Simulation`](crate::solver::Simulation), stored in a [`ClothSim`] component. Each fixed step
+//! ([`ClothSystems::Prepare`], [`ClothSystems::Simulate`]) applies config and pin changes, moves
+//! pins to their anchors and steps the solver; each frame [`ClothSystems::Writeback`] copies
+//! positions, normals and tangents into the cloth's own mesh asset.
+
+mod components;
+mod mesh;
+mod plugin;
+mod sim;
+mod writeback;
+
+pub use components::{Cloth, ClothConfig, ClothPin, ClothPins, PinAnchor};
+pub use mesh::{MeshData, grid_mesh, read_mesh};
+pub use plugin::{ClothPlugin, ClothPlugins, ClothSystems};
+pub use sim::{ClothError, ClothInvalid, ClothSim, TaskPoolParallel};

@@ -1,0 +1,360 @@
+//! The per-cloth simulation component and the systems that create, configure and step it.
+
+use bevy::prelude::*;
+use bevy::tasks::{ComputeTaskPool, TaskPool};
+
+use crate::solver::{
+    Parallel, Pin, Serial, Simulation, SolverError, SolverParams, Topology, TopologyOptions,
+};
+
+use super::mesh::{cloth_mesh, read_mesh};
+use super::{Cloth, ClothConfig, ClothPins, PinAnchor};
+
+/// Why a cloth is not simulated. Logged once (naming the entity) and stored in
+/// [`ClothInvalid`]; every other cloth keeps running.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ClothError {
+    /// The mesh is not a triangle list (the topology found is given).
+    NotTriangleList(String),
+    /// The mesh has no `POSITION` attribute.
+    NoPositions,
+    /// The positions are not `Float32x3` (the format found is given).
+    PositionFormat(String),
+    /// The mesh has no index buffer.
+    NoIndices,
+    /// The mesh's vertex data lives only in the render world (`RenderAssetUsages::RENDER_WORLD`):
+    /// the CPU cannot read it.
+    MeshNotInMainWorld,
+    /// The entity's [`Mesh3d`] handle points at no mesh asset (it failed to load or was removed).
+    MeshMissing,
+    /// The cloth's total mass is not finite and positive.
+    BadMass(f32),
+    /// The solver rejected the mesh, masses, pins or parameters.
+    Solver(SolverError),
+}
+
+impl core::fmt::Display for ClothError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            ClothError::NotTriangleList(t) => {
+                write!(f, "mesh topology is {t}, not a triangle list")
+            }
+            ClothError::NoPositions => write!(f, "mesh has no POSITION attribute"),
+            ClothError::PositionFormat(t) => write!(f, "mesh positions are {t}, not Float32x3"),
+            ClothError::NoIndices => write!(f, "mesh has no indices"),
+            ClothError::MeshNotInMainWorld => write!(
+                f,
+                "mesh data is only in the render world; create it with RenderAssetUsages::MAIN_WORLD"
+            ),
+            ClothError::MeshMissing => write!(f, "the Mesh3d handle points at no mesh asset"),
+            ClothError::BadMass(m) => write!(f, "cloth mass {m} must be finite and > 0"),
+            ClothError::Solver(e) => e.fmt(f),
+        }
+    }
+}
+
+impl std::error::Error for ClothError {}
+
+impl From<SolverError> for ClothError {
+    fn from(e: SolverError) -> Self {
+        ClothError::Solver(e)
+    }
+}
+
+/// Present on a cloth entity that cannot be simulated, with the reason.
+///
+/// The plugin tries again when [`Cloth`], [`ClothConfig`], [`ClothPins`] or [`Mesh3d`] change.
+#[derive(Component, Clone, Debug, PartialEq)]
+pub struct ClothInvalid(pub ClothError);
+
+/// The running simulation of a cloth entity, inserted by the plugin on its first step.
+///
+/// Read it for the simulated positions (world space), normals and strain; mutate it through
+/// [`ClothSim::simulation_mut`] to teleport or reset the cloth.
+#[derive(Component)]
+pub struct ClothSim {
+    pub(crate) sim: Simulation,
+    pub(crate) mesh: Handle<Mesh>,
+    steps: u64,
+    pub(crate) dirty: bool,
+}
+
+impl ClothSim {
+    /// The solver-side simulation (topology, state in world space, parameters).
+    #[must_use]
+    pub fn simulation(&self) -> &Simulation {
+        &self.sim
+    }
+
+    /// Mutable access, e.g. to [`ClothState::reset`](crate::solver::ClothState::reset) the
+    /// cloth. Changes are written to the mesh at the next write-back.
+    pub fn simulation_mut(&mut self) -> &mut Simulation {
+        self.dirty = true;
+        &mut self.sim
+    }
+
+    /// The cloth's own mesh asset (a copy of the source mesh).
+    #[must_use]
+    pub fn mesh(&self) -> &Handle<Mesh> {
+        &self.mesh
+    }
+
+    /// Steps simulated so far.
+    #[must_use]
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+}
+
+/// Runs solver work items on Bevy's [`ComputeTaskPool`].
+#[derive(Clone, Copy)]
+pub struct TaskPoolParallel<'a>(pub &'a TaskPool);
+
+impl Parallel for TaskPoolParallel<'_> {
+    fn for_each_mut<T: Send, F: Fn(&mut T) + Sync>(&self, items: &mut [T], f: F) {
+        if items.len() < 2 || self.0.thread_num() == 0 {
+            items.iter_mut().for_each(f);
+            return;
+        }
+        let f = &f;
+        self.0.scope(|s| {
+            for item in items.iter_mut() {
+                s.spawn(async move { f(item) });
+            }
+        });
+    }
+}
+
+/// Where each pin should be now.
+fn pin_targets<'a>(
+    pins: &'a ClothPins,
+    rest: &'a [Vec3],
+    own: &'a GlobalTransform,
+    transforms: &'a Query<&GlobalTransform>,
+) -> impl Iterator<Item = Option<Vec3>> + 'a {
+    pins.0.iter().map(move |p| match p.anchor {
+        PinAnchor::Rest => rest.get(p.vertex as usize).map(|r| own.transform_point(*r)),
+        PinAnchor::World(w) => Some(w),
+        PinAnchor::Entity { entity, offset } => transforms
+            .get(entity)
+            .ok()
+            .map(|t| t.transform_point(offset)),
+    })
+}
+
+fn build(
+    cloth: &Cloth,
+    config: &ClothConfig,
+    pins: &ClothPins,
+    mesh: &Mesh,
+    own: &GlobalTransform,
+    transforms: &Query<&GlobalTransform>,
+) -> Result<(Simulation, Mesh), ClothError> {
+    if !(cloth.mass.is_finite() && cloth.mass > 0.0) {
+        return Err(ClothError::BadMass(cloth.mass));
+    }
+    let data = read_mesh(mesh)?;
+    let topology = Topology::from_triangles(
+        &data.positions,
+        data.uvs.as_deref(),
+        &data.indices,
+        TopologyOptions {
+            bend_rest: cloth.bend_rest,
+        },
+    )
+    .map_err(SolverError::from)?;
+    let masses = topology.masses(cloth.mass, cloth.mass_distribution);
+    let world: Vec<Vec3> = data
+        .positions
+        .iter()
+        .map(|p| own.transform_point(*p))
+        .collect();
+    let mut sim = Simulation::with_positions(topology, &world, &masses, (*config).into())?;
+    set_pins(&mut sim, pins, own, transforms)?;
+    sim.state_mut().snap_pins();
+    sim.update_shading();
+    Ok((sim, cloth_mesh(mesh, &data)))
+}
+
+fn set_pins(
+    sim: &mut Simulation,
+    pins: &ClothPins,
+    own: &GlobalTransform,
+    transforms: &Query<&GlobalTransform>,
+) -> Result<(), SolverError> {
+    let rest = sim.topology().rest_positions().to_vec();
+    let current: Vec<Vec3> = pins
+        .0
+        .iter()
+        .map(|p| {
+            sim.state()
+                .positions
+                .get(p.vertex as usize)
+                .map_or(Vec3::ZERO, |x| x.truncate())
+        })
+        .collect();
+    let list: Vec<Pin> = pins
+        .0
+        .iter()
+        .zip(pin_targets(pins, &rest, own, transforms))
+        .zip(current)
+        .map(|((p, target), here)| Pin {
+            vertex: p.vertex,
+            target: target.unwrap_or(here),
+        })
+        .collect();
+    sim.state_mut().set_pins(list)?;
+    Ok(())
+}
+
+fn report(commands: &mut Commands, entity: Entity, error: ClothError) {
+    error!("cloth {entity}: {error}; it is not simulated");
+    commands.entity(entity).try_insert(ClothInvalid(error));
+}
+
+/// Creates the simulation of cloths that have none yet (waiting while their mesh loads).
+#[expect(clippy::type_complexity, reason = "a query filter, read once")]
+pub(crate) fn init_cloths(
+    mut commands: Commands,
+    mut meshes: Option<ResMut<Assets<Mesh>>>,
+    asset_server: Option<Res<AssetServer>>,
+    new: Query<
+        (
+            Entity,
+            &Cloth,
+            &ClothConfig,
+            &ClothPins,
+            &Mesh3d,
+            &GlobalTransform,
+        ),
+        (Without<ClothSim>, Without<ClothInvalid>),
+    >,
+    transforms: Query<&GlobalTransform>,
+) {
+    let Some(meshes) = meshes.as_deref_mut() else {
+        return;
+    };
+    for (entity, cloth, config, pins, mesh3d, own) in &new {
+        let Some(mesh) = meshes.get(&mesh3d.0) else {
+            // Not loaded yet: wait. Failed to load: say so once.
+            let failed = asset_server.as_ref().is_some_and(|s| {
+                matches!(
+                    s.get_load_state(&mesh3d.0),
+                    Some(bevy::asset::LoadState::Failed(_))
+                )
+            });
+            if failed {
+                report(&mut commands, entity, ClothError::MeshMissing);
+            }
+            continue;
+        };
+        match build(cloth, config, pins, mesh, own, &transforms) {
+            Ok((sim, mesh)) => {
+                let handle = meshes.add(mesh);
+                commands.entity(entity).try_insert((
+                    Mesh3d(handle.clone()),
+                    ClothSim {
+                        sim,
+                        mesh: handle,
+                        steps: 0,
+                        dirty: true,
+                    },
+                ));
+            }
+            Err(e) => report(&mut commands, entity, e),
+        }
+    }
+}
+
+/// Clears [`ClothInvalid`] when the user changes what made the cloth invalid, so it is tried
+/// again; drops the simulation when the entity's mesh is replaced by another one.
+#[expect(clippy::type_complexity, reason = "a query filter, read once")]
+pub(crate) fn retry_cloths(
+    mut commands: Commands,
+    invalid: Query<
+        Entity,
+        (
+            With<ClothInvalid>,
+            Or<(
+                Changed<Cloth>,
+                Changed<ClothConfig>,
+                Changed<ClothPins>,
+                Changed<Mesh3d>,
+            )>,
+        ),
+    >,
+    swapped: Query<(Entity, &Mesh3d, &ClothSim), Changed<Mesh3d>>,
+) {
+    for entity in &invalid {
+        commands.entity(entity).remove::<(ClothInvalid, ClothSim)>();
+    }
+    for (entity, mesh, sim) in &swapped {
+        if mesh.0 != sim.mesh {
+            commands.entity(entity).remove::<ClothSim>();
+        }
+    }
+}
+
+/// Applies changed [`ClothConfig`]s and [`ClothPins`], and moves pin targets to their anchors.
+pub(crate) fn sync_cloths(
+    mut commands: Commands,
+    mut cloths: Query<
+        (
+            Entity,
+            &mut ClothSim,
+            Ref<ClothConfig>,
+            Ref<ClothPins>,
+            &GlobalTransform,
+        ),
+        Without<ClothInvalid>,
+    >,
+    transforms: Query<&GlobalTransform>,
+) {
+    for (entity, mut cloth, config, pins, own) in &mut cloths {
+        let cloth = &mut *cloth;
+        if config.is_changed()
+            && *cloth.sim.params() != SolverParams::from(*config)
+            && let Err(e) = cloth.sim.set_params((*config).into())
+        {
+            report(&mut commands, entity, SolverError::Params(e).into());
+            continue;
+        }
+        if pins.is_changed() {
+            if let Err(e) = set_pins(&mut cloth.sim, &pins, own, &transforms) {
+                report(&mut commands, entity, e.into());
+                continue;
+            }
+        } else {
+            let rest = cloth.sim.topology().rest_positions();
+            let targets: Vec<Option<Vec3>> = pin_targets(&pins, rest, own, &transforms).collect();
+            let current: Vec<Vec3> = cloth.sim.state().pins().iter().map(|p| p.target).collect();
+            cloth.sim.state_mut().set_pin_targets(
+                targets
+                    .into_iter()
+                    .zip(current)
+                    .map(|(t, c)| t.unwrap_or(c)),
+            );
+        }
+    }
+}
+
+/// Advances every valid cloth by one fixed step.
+pub(crate) fn step_cloths(
+    time: Res<Time>,
+    mut cloths: Query<&mut ClothSim, Without<ClothInvalid>>,
+) {
+    let dt = time.delta_secs();
+    if dt <= 0.0 {
+        return;
+    }
+    let pool = ComputeTaskPool::try_get();
+    for mut cloth in &mut cloths {
+        let cloth = &mut *cloth;
+        match pool {
+            Some(pool) => cloth.sim.step(dt, &TaskPoolParallel(pool)),
+            None => cloth.sim.step(dt, &Serial),
+        }
+        cloth.steps += 1;
+        cloth.dirty = true;
+    }
+}

@@ -1,0 +1,46 @@
+//! Cloth simulation for Bevy: Position Based Dynamics on the CPU, as a plugin.
+//!
+//! Add [`ClothPlugins`](cloth::ClothPlugins), put a [`Cloth`](cloth::Cloth) on an entity with a
+//! [`Mesh3d`](bevy::prelude::Mesh3d), pin a few vertices, and the mesh hangs, swings and folds.
+//!
+//! ```no_run
+//! use bevy::prelude::*;
+//! use bevy_cloth::prelude::*;
+//!
+//! fn main() {
+//!     App::new()
+//!         .add_plugins((DefaultPlugins, ClothPlugins::default()))
+//!         .add_systems(Startup, setup)
+//!         .run();
+//! }
+//!
+//! fn setup(mut commands: Commands, mut meshes: ResMut<Assets<Mesh>>) {
+//!     let grid = Grid::new(32, 32, 1.0, 1.0);
+//!     commands.spawn((
+//!         Mesh3d(meshes.add(grid_mesh(&grid))),
+//!         Cloth::default(),
+//!         ClothPins::rest([grid.index(0, 0), grid.index(31, 0)]),
+//!     ));
+//! }
+//! ```
+//!
+//! # Modules
+//! - [`solver`]: the pure solver (no Bevy): topology, constraints, the step, shading data.
+//! - [`cloth`]: components, plugin and systems.
+//!
+//! # Headless
+//! A [`MinimalPlugins`](bevy::prelude::MinimalPlugins) app simulates cloth with no window and
+//! no GPU; add `TransformPlugin`, `AssetPlugin` and `MeshPlugin` for transforms and meshes.
+//! See the README and `tests/headless.rs`.
+
+pub mod cloth;
+pub mod solver;
+
+/// The types most apps need.
+pub mod prelude {
+    pub use crate::cloth::{
+        Cloth, ClothConfig, ClothError, ClothInvalid, ClothPin, ClothPins, ClothPlugin,
+        ClothPlugins, ClothSim, ClothSystems, PinAnchor, grid_mesh,
+    };
+    pub use crate::solver::{BendRest, Grid, MassDistribution, Solver};
+}

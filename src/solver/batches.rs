@@ -1,0 +1,615 @@
+//! Constraints laid out for projection: partitioned, coloured, structure-of-arrays.
+//!
+//! Built once per topology (no allocation, hashing or sorting while stepping):
+//!
+//! 1. **Partition.** The vertices are cut into `K` contiguous index ranges (row strips on a
+//!    grid). A constraint whose vertices all lie in one range belongs to that *part*; the
+//!    others form the *boundary*. Parts touch disjoint vertices, so they are projected on
+//!    different threads with no locks; the boundary is projected after them. `K` depends only
+//!    on the vertex count, never on the thread count, so results are bit-identical however
+//!    many threads run.
+//! 2. **Colouring.** Inside each part (and the boundary), constraints are greedily coloured so
+//!    that no two of one colour share a vertex. A colour is projected four constraints at a
+//!    time with SIMD lanes; the GPU backend will project a colour per dispatch. Constraints
+//!    that find no free colour among 128 go to a last batch projected one by one.
+//! 3. **Layout.** Each set stores its constraints colour by colour in parallel arrays
+//!    (indices, rest values, material parameter, XPBD multiplier λ).
+
+use core::ops::Range;
+
+use glam::Vec4;
+
+use super::bending::bend_correction;
+use super::distance::distance_correction;
+use wide::f32x4;
+
+use super::lanes::{Real, add1, add4, idx, lanes, load1, load4};
+use super::params::{Solver, SolverParams};
+use super::topology::{EdgeKind, Topology};
+
+/// Largest `α̃` used: keeps `α̃·λ` finite for absurd compliances.
+const MAX_ALPHA_TILDE: f32 = 1e30;
+
+/// How a projection pass turns the stored material parameter into `(α̃, k)`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Mode {
+    /// Stored parameter is a stiffness in `[0, 1]`: `α̃ = 0`, `k = param`.
+    Pbd,
+    /// Stored parameter is a compliance: `α̃ = param/h²`, `k = 1`.
+    Xpbd { inv_h2: f32 },
+}
+
+impl Mode {
+    #[inline(always)]
+    fn lanes<T: Real>(self, param: T) -> (T, T) {
+        match self {
+            Mode::Pbd => (T::splat(0.0), param),
+            Mode::Xpbd { inv_h2 } => (
+                (param * T::splat(inv_h2)).min(T::splat(MAX_ALPHA_TILDE)),
+                T::splat(1.0),
+            ),
+        }
+    }
+}
+
+/// Colour ranges of a coloured constraint list.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct Colours {
+    /// Each range holds constraints that share no vertex.
+    pub independent: Vec<Range<usize>>,
+    /// Constraints left over after 128 colours, to be projected sequentially.
+    pub sequential: Range<usize>,
+}
+
+/// Greedy colouring: returns the order in which to store the constraints and their colours.
+fn colour<const N: usize>(constraints: &[[u32; N]], vertex_count: usize) -> (Vec<usize>, Colours) {
+    let mut used = vec![0u128; vertex_count];
+    let mut colour_of = Vec::with_capacity(constraints.len());
+    let mut count = [0usize; 129];
+    for c in constraints {
+        let busy = c.iter().fold(0u128, |m, &v| m | used[v as usize]);
+        let k = (!busy).trailing_zeros() as usize; // 128 when all are taken
+        if k < 128 {
+            for &v in c {
+                used[v as usize] |= 1 << k;
+            }
+        }
+        colour_of.push(k);
+        count[k] += 1;
+    }
+    let mut start = [0usize; 130];
+    for k in 0..129 {
+        start[k + 1] = start[k] + count[k];
+    }
+    let mut order = vec![0; constraints.len()];
+    let mut fill = start;
+    for (i, &k) in colour_of.iter().enumerate() {
+        order[fill[k]] = i;
+        fill[k] += 1;
+    }
+    let independent = (0..128)
+        .filter(|&k| count[k] > 0)
+        .map(|k| start[k]..start[k + 1])
+        .collect();
+    (
+        order,
+        Colours {
+            independent,
+            sequential: start[128]..start[129],
+        },
+    )
+}
+
+/// Distance constraints of one part or of the boundary.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct DistanceSet {
+    pub a: Vec<u32>,
+    pub b: Vec<u32>,
+    pub rest: Vec<f32>,
+    pub param: Vec<f32>,
+    pub lambda: Vec<f32>,
+    /// Index into [`Topology::edges`].
+    pub edge: Vec<u32>,
+    pub colours: Colours,
+}
+
+/// Bending constraints of one part or of the boundary.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct BendSet {
+    pub v: [Vec<u32>; 4],
+    pub rest: Vec<f32>,
+    pub param: Vec<f32>,
+    pub lambda: Vec<f32>,
+    /// Index into [`Topology::bends`].
+    pub bend: Vec<u32>,
+    pub colours: Colours,
+}
+
+impl DistanceSet {
+    fn build(topology: &Topology, edges: &[u32], base: u32, vertex_count: usize) -> Self {
+        let local: Vec<[u32; 2]> = edges
+            .iter()
+            .map(|&e| topology.edges()[e as usize].v.map(|v| v - base))
+            .collect();
+        let (order, colours) = colour(&local, vertex_count);
+        let mut s = DistanceSet {
+            colours,
+            ..Default::default()
+        };
+        for i in order {
+            let e = edges[i];
+            s.a.push(local[i][0]);
+            s.b.push(local[i][1]);
+            s.rest.push(topology.edges()[e as usize].rest);
+            s.edge.push(e);
+        }
+        s.param = vec![0.0; s.a.len()];
+        s.lambda = vec![0.0; s.a.len()];
+        s
+    }
+
+    fn set_params(&mut self, topology: &Topology, stretch: f32, shear: f32) {
+        for (p, &e) in self.param.iter_mut().zip(&self.edge) {
+            *p = match topology.edges()[e as usize].kind {
+                EdgeKind::Stretch => stretch,
+                EdgeKind::Shear => shear,
+            };
+        }
+    }
+
+    /// Projects every constraint once, colour by colour. `ACC`: read and accumulate the XPBD
+    /// multipliers (only needed with more than one iteration; otherwise they stay zero).
+    pub(crate) fn project<const ACC: bool>(&mut self, pos: &mut [Vec4], mode: Mode) {
+        for c in 0..self.colours.independent.len() {
+            let r = self.colours.independent[c].clone();
+            let simd_end = r.start + r.len() / 4 * 4;
+            let chunks = self.a[r.start..simd_end]
+                .chunks_exact(4)
+                .zip(self.b[r.start..simd_end].chunks_exact(4))
+                .zip(self.rest[r.start..simd_end].chunks_exact(4))
+                .zip(self.param[r.start..simd_end].chunks_exact(4))
+                .zip(self.lambda[r.start..simd_end].chunks_exact_mut(4));
+            for ((((a, b), rest), param), lambda) in chunks {
+                let (ia, ib) = (idx(a), idx(b));
+                let (xa, wa) = load4(pos, ia);
+                let (xb, wb) = load4(pos, ib);
+                let (alpha, k) = mode.lanes(lanes(param));
+                let l = if ACC { lanes(lambda) } else { f32x4::ZERO };
+                let (da, db, dl) = distance_correction(xa, wa, xb, wb, lanes(rest), alpha, k, l);
+                add4(pos, ia, da);
+                add4(pos, ib, db);
+                if ACC {
+                    lambda.copy_from_slice(&(l + dl).to_array());
+                }
+            }
+            self.project_one_by_one::<ACC>(pos, mode, simd_end..r.end);
+        }
+        self.project_one_by_one::<ACC>(pos, mode, self.colours.sequential.clone());
+    }
+
+    fn project_one_by_one<const ACC: bool>(
+        &mut self,
+        pos: &mut [Vec4],
+        mode: Mode,
+        r: Range<usize>,
+    ) {
+        for i in r {
+            let (a, b) = (self.a[i] as usize, self.b[i] as usize);
+            let (xa, wa) = load1(pos[a]);
+            let (xb, wb) = load1(pos[b]);
+            let (alpha, k) = mode.lanes(self.param[i]);
+            let l = if ACC { self.lambda[i] } else { 0.0 };
+            let (da, db, dl) = distance_correction(xa, wa, xb, wb, self.rest[i], alpha, k, l);
+            add1(&mut pos[a], da);
+            add1(&mut pos[b], db);
+            if ACC {
+                self.lambda[i] = l + dl;
+            }
+        }
+    }
+}
+
+impl BendSet {
+    fn build(topology: &Topology, bends: &[u32], base: u32, vertex_count: usize) -> Self {
+        let local: Vec<[u32; 4]> = bends
+            .iter()
+            .map(|&b| topology.bends()[b as usize].v.map(|v| v - base))
+            .collect();
+        let (order, colours) = colour(&local, vertex_count);
+        let mut s = BendSet {
+            colours,
+            ..Default::default()
+        };
+        for i in order {
+            let b = bends[i];
+            for k in 0..4 {
+                s.v[k].push(local[i][k]);
+            }
+            s.rest.push(topology.bends()[b as usize].rest_angle);
+            s.bend.push(b);
+        }
+        s.param = vec![0.0; s.rest.len()];
+        s.lambda = vec![0.0; s.rest.len()];
+        s
+    }
+
+    /// Projects every constraint once, colour by colour (`ACC` as for distances).
+    pub(crate) fn project<const ACC: bool>(&mut self, pos: &mut [Vec4], mode: Mode) {
+        for c in 0..self.colours.independent.len() {
+            let r = self.colours.independent[c].clone();
+            let e = r.start + r.len() / 4 * 4;
+            let [v0, v1, v2, v3] = &self.v;
+            let chunks = v0[r.start..e]
+                .chunks_exact(4)
+                .zip(v1[r.start..e].chunks_exact(4))
+                .zip(v2[r.start..e].chunks_exact(4))
+                .zip(v3[r.start..e].chunks_exact(4))
+                .zip(self.rest[r.start..e].chunks_exact(4))
+                .zip(self.param[r.start..e].chunks_exact(4))
+                .zip(self.lambda[r.start..e].chunks_exact_mut(4));
+            for ((((((i0, i1), i2), i3), rest), param), lambda) in chunks {
+                let (i0, i1, i2, i3) = (idx(i0), idx(i1), idx(i2), idx(i3));
+                let (x0, w0) = load4(pos, i0);
+                let (x1, w1) = load4(pos, i1);
+                let (x2, w2) = load4(pos, i2);
+                let (x3, w3) = load4(pos, i3);
+                let (alpha, k) = mode.lanes(lanes(param));
+                let l = if ACC { lanes(lambda) } else { f32x4::ZERO };
+                let (dx, dl) =
+                    bend_correction([x0, x1, x2, x3], [w0, w1, w2, w3], lanes(rest), alpha, k, l);
+                add4(pos, i0, dx[0]);
+                add4(pos, i1, dx[1]);
+                add4(pos, i2, dx[2]);
+                add4(pos, i3, dx[3]);
+                if ACC {
+                    lambda.copy_from_slice(&(l + dl).to_array());
+                }
+            }
+            self.project_one_by_one::<ACC>(pos, mode, e..r.end);
+        }
+        self.project_one_by_one::<ACC>(pos, mode, self.colours.sequential.clone());
+    }
+
+    fn project_one_by_one<const ACC: bool>(
+        &mut self,
+        pos: &mut [Vec4],
+        mode: Mode,
+        r: Range<usize>,
+    ) {
+        for i in r {
+            let ix = [
+                self.v[0][i] as usize,
+                self.v[1][i] as usize,
+                self.v[2][i] as usize,
+                self.v[3][i] as usize,
+            ];
+            let (x0, w0) = load1(pos[ix[0]]);
+            let (x1, w1) = load1(pos[ix[1]]);
+            let (x2, w2) = load1(pos[ix[2]]);
+            let (x3, w3) = load1(pos[ix[3]]);
+            let (alpha, k) = mode.lanes(self.param[i]);
+            let (dx, dl) = bend_correction(
+                [x0, x1, x2, x3],
+                [w0, w1, w2, w3],
+                self.rest[i],
+                alpha,
+                k,
+                if ACC { self.lambda[i] } else { 0.0 },
+            );
+            for v in 0..4 {
+                add1(&mut pos[ix[v]], dx[v]);
+            }
+            if ACC {
+                self.lambda[i] += dl;
+            }
+        }
+    }
+}
+
+/// The constraints of one vertex range (or of the boundary, with range `0..n`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct Part {
+    pub range: Range<usize>,
+    pub distance: DistanceSet,
+    pub bending: BendSet,
+}
+
+impl Part {
+    /// Zeroes the XPBD multipliers (start of a substep).
+    pub(crate) fn reset_lambda(&mut self) {
+        self.distance.lambda.fill(0.0);
+        self.bending.lambda.fill(0.0);
+    }
+
+    /// Like [`Self::project`] but one constraint at a time (the SIMD path's reference).
+    #[cfg(test)]
+    pub(crate) fn project_scalar(&mut self, pos: &mut [Vec4], mode: Mode, bending: bool) {
+        let d = &mut self.distance;
+        for r in d.colours.independent.clone() {
+            d.project_one_by_one::<false>(pos, mode, r);
+        }
+        if bending {
+            let b = &mut self.bending;
+            for r in b.colours.independent.clone() {
+                b.project_one_by_one::<false>(pos, mode, r);
+            }
+        }
+    }
+
+    /// Projects distance then (if on) bending constraints once; `accumulate` keeps XPBD
+    /// multipliers across iterations.
+    pub(crate) fn project(
+        &mut self,
+        pos: &mut [Vec4],
+        mode: Mode,
+        bending: bool,
+        accumulate: bool,
+    ) {
+        if accumulate {
+            self.distance.project::<true>(pos, mode);
+            if bending {
+                self.bending.project::<true>(pos, mode);
+            }
+        } else {
+            self.distance.project::<false>(pos, mode);
+            if bending {
+                self.bending.project::<false>(pos, mode);
+            }
+        }
+    }
+}
+
+/// Number of parts for `n` vertices: about 2048 vertices a part, at most 16.
+#[must_use]
+pub fn default_part_count(n: usize) -> usize {
+    (n / 2048).clamp(1, 16)
+}
+
+/// All constraints of a cloth, partitioned and coloured for projection.
+///
+/// Build it with [`ConstraintBatches::new`] and keep it beside the [`ClothState`]
+/// (crate::solver::ClothState); call [`ConstraintBatches::set_params`] when the material
+/// changes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ConstraintBatches {
+    pub(crate) parts: Vec<Part>,
+    pub(crate) boundary: Part,
+    pub(crate) bending: bool,
+    pub(crate) mode_is_xpbd: bool,
+}
+
+impl ConstraintBatches {
+    /// Partitions `topology` into `parts` vertex ranges (see [`default_part_count`]),
+    /// colours each, and loads the material of `params`.
+    #[must_use]
+    pub fn new(topology: &Topology, params: &SolverParams, parts: usize) -> Self {
+        let n = topology.vertex_count();
+        let k = parts.clamp(1, n.max(1));
+        let ranges: Vec<Range<usize>> = (0..k).map(|p| p * n / k..(p + 1) * n / k).collect();
+        let part_of = |v: u32| -> usize {
+            // Ranges are equal-sized up to rounding: guess, then step to the right one.
+            let v = v as usize;
+            let mut p = (v * k / n.max(1)).min(k - 1);
+            while v < ranges[p].start {
+                p -= 1;
+            }
+            while v >= ranges[p].end {
+                p += 1;
+            }
+            p
+        };
+        let mut part_edges = vec![Vec::new(); k];
+        let mut boundary_edges = Vec::new();
+        for (i, e) in topology.edges().iter().enumerate() {
+            let p = part_of(e.v[0]);
+            if part_of(e.v[1]) == p {
+                part_edges[p].push(i as u32);
+            } else {
+                boundary_edges.push(i as u32);
+            }
+        }
+        let mut part_bends = vec![Vec::new(); k];
+        let mut boundary_bends = Vec::new();
+        for (i, b) in topology.bends().iter().enumerate() {
+            let p = part_of(b.v[0]);
+            if b.v.iter().all(|&v| part_of(v) == p) {
+                part_bends[p].push(i as u32);
+            } else {
+                boundary_bends.push(i as u32);
+            }
+        }
+        let parts = ranges
+            .iter()
+            .enumerate()
+            .map(|(p, r)| Part {
+                range: r.clone(),
+                distance: DistanceSet::build(topology, &part_edges[p], r.start as u32, r.len()),
+                bending: BendSet::build(topology, &part_bends[p], r.start as u32, r.len()),
+            })
+            .collect();
+        let boundary = Part {
+            range: 0..n,
+            distance: DistanceSet::build(topology, &boundary_edges, 0, n),
+            bending: BendSet::build(topology, &boundary_bends, 0, n),
+        };
+        let mut batches = Self {
+            parts,
+            boundary,
+            bending: false,
+            mode_is_xpbd: false,
+        };
+        batches.set_params(topology, params);
+        batches
+    }
+
+    /// Loads the material of `params` (stiffness or compliance per constraint). Cheap: no
+    /// rebuild, no allocation.
+    pub fn set_params(&mut self, topology: &Topology, params: &SolverParams) {
+        let (stretch, shear, bending) = match params.solver {
+            Solver::Lab { .. } => (1.0, 1.0, 0.0),
+            Solver::Pbd {
+                stretch,
+                shear,
+                bending,
+            }
+            | Solver::Xpbd {
+                stretch,
+                shear,
+                bending,
+            } => (stretch, shear, bending),
+        };
+        self.bending = params.solver.bending_enabled();
+        self.mode_is_xpbd = matches!(params.solver, Solver::Xpbd { .. });
+        for part in self
+            .parts
+            .iter_mut()
+            .chain(core::iter::once(&mut self.boundary))
+        {
+            part.distance.set_params(topology, stretch, shear);
+            part.bending.param.fill(bending);
+        }
+    }
+
+    /// Number of vertex ranges projected in parallel.
+    #[must_use]
+    pub fn part_count(&self) -> usize {
+        self.parts.len()
+    }
+
+    /// Constraints (distance + bending) that straddle two parts and run after them.
+    #[must_use]
+    pub fn boundary_len(&self) -> usize {
+        self.boundary.distance.a.len() + self.boundary.bending.rest.len()
+    }
+
+    /// Every distance constraint's vertices in global indices, colour by colour:
+    /// `(part, colour) → [(a, b)]`. Used to check colourings.
+    #[must_use]
+    pub fn distance_colours(&self) -> Vec<Vec<[u32; 2]>> {
+        let mut out = Vec::new();
+        for part in self.parts.iter().chain(core::iter::once(&self.boundary)) {
+            let base = part.range.start as u32;
+            let s = &part.distance;
+            for r in &s.colours.independent {
+                out.push(r.clone().map(|i| [s.a[i] + base, s.b[i] + base]).collect());
+            }
+        }
+        out
+    }
+
+    /// Every bending constraint's vertices in global indices, colour by colour.
+    #[must_use]
+    pub fn bending_colours(&self) -> Vec<Vec<[u32; 4]>> {
+        let mut out = Vec::new();
+        for part in self.parts.iter().chain(core::iter::once(&self.boundary)) {
+            let base = part.range.start as u32;
+            let s = &part.bending;
+            for r in &s.colours.independent {
+                out.push(
+                    r.clone()
+                        .map(|i| [0, 1, 2, 3].map(|k| s.v[k][i] + base))
+                        .collect(),
+                );
+            }
+        }
+        out
+    }
+
+    pub(crate) fn mode(&self, h: f32) -> Mode {
+        if self.mode_is_xpbd {
+            Mode::Xpbd {
+                inv_h2: 1.0 / (h * h),
+            }
+        } else {
+            Mode::Pbd
+        }
+    }
+}
+
+/// Scalar and SIMD paths agree (they share the math; only lane grouping differs).
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::solver::topology::{Grid, TopologyOptions};
+    use std::collections::HashSet;
+
+    fn batches(n: u32, parts: usize) -> (Topology, ConstraintBatches) {
+        let t = Grid::new(n, n, 1.0, 1.0)
+            .topology(TopologyOptions::default())
+            .unwrap();
+        let b = ConstraintBatches::new(&t, &SolverParams::default(), parts);
+        (t, b)
+    }
+
+    #[test]
+    fn colours_share_no_vertex_and_cover_everything() {
+        for parts in [1, 3, 7] {
+            let (t, b) = batches(17, parts);
+            let mut seen = 0;
+            for colour in b.distance_colours() {
+                let mut verts = HashSet::new();
+                for c in &colour {
+                    assert!(verts.insert(c[0]) && verts.insert(c[1]), "shared vertex");
+                }
+                seen += colour.len();
+            }
+            let seq: usize = b
+                .parts
+                .iter()
+                .chain([&b.boundary])
+                .map(|p| p.distance.colours.sequential.len())
+                .sum();
+            assert_eq!(seen + seq, t.edges().len());
+            let mut seen = 0;
+            for colour in b.bending_colours() {
+                let mut verts = HashSet::new();
+                for c in &colour {
+                    for v in c {
+                        assert!(verts.insert(*v), "shared vertex");
+                    }
+                }
+                seen += colour.len();
+            }
+            assert_eq!(seen, t.bends().len());
+        }
+    }
+
+    #[test]
+    fn a_grid_needs_few_colours() {
+        let (_, b) = batches(32, 1);
+        let d = b.distance_colours().len();
+        let bend = b.bending_colours().len();
+        assert!(d <= 8, "{d} distance colours");
+        assert!(bend <= 16, "{bend} bending colours");
+    }
+
+    #[test]
+    fn parts_only_hold_their_own_vertices() {
+        let (t, b) = batches(20, 4);
+        assert_eq!(b.part_count(), 4);
+        for p in &b.parts {
+            for (&a, &bb) in p.distance.a.iter().zip(&p.distance.b) {
+                assert!((a as usize) < p.range.len() && (bb as usize) < p.range.len());
+            }
+        }
+        let inside: usize = b.parts.iter().map(|p| p.distance.a.len()).sum();
+        assert_eq!(inside + b.boundary.distance.a.len(), t.edges().len());
+        // Row strips: the boundary is a few rows' worth, not the whole cloth.
+        assert!(b.boundary_len() < (t.edges().len() + t.bends().len()) / 4);
+    }
+
+    #[test]
+    fn overfull_vertices_fall_back_to_sequential() {
+        // A fan of 200 triangles around vertex 0: 200 spokes share it, so 72 cannot be coloured.
+        let mut pos = vec![glam::Vec3::ZERO];
+        let mut idx = Vec::new();
+        for i in 0..200u32 {
+            let a = i as f32 / 200.0 * core::f32::consts::TAU;
+            pos.push(glam::Vec3::new(a.cos(), 0.0, a.sin()));
+            idx.extend_from_slice(&[0, 1 + i, 1 + (i + 1) % 200]);
+        }
+        let t = Topology::from_triangles(&pos, None, &idx, TopologyOptions::default()).unwrap();
+        let b = ConstraintBatches::new(&t, &SolverParams::default(), 1);
+        assert_eq!(b.parts[0].distance.colours.sequential.len(), 72);
+    }
+}

@@ -1,0 +1,23 @@
+//! How the solver runs independent work items: serially or on a thread pool.
+//!
+//! The solver never spawns threads. It hands a slice of independent items (one per vertex
+//! range) to a [`Parallel`] implementation; the Bevy plugin passes one backed by Bevy's
+//! `ComputeTaskPool`, tests pass [`Serial`].
+
+/// Runs a function over independent items, possibly on several threads.
+pub trait Parallel: Sync {
+    /// Calls `f` once for every item; returns when all calls have returned. Items may be
+    /// processed in any order and concurrently: `f` must not depend on the order.
+    fn for_each_mut<T: Send, F: Fn(&mut T) + Sync>(&self, items: &mut [T], f: F);
+}
+
+/// Runs everything on the calling thread, in order.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Serial;
+
+impl Parallel for Serial {
+    #[inline]
+    fn for_each_mut<T: Send, F: Fn(&mut T) + Sync>(&self, items: &mut [T], f: F) {
+        items.iter_mut().for_each(f);
+    }
+}

@@ -1,0 +1,194 @@
+//! Solver settings: which solver, how many substeps and iterations, and the material.
+//!
+//! These are plain data. The Bevy component [`ClothConfig`](crate::cloth::ClothConfig)
+//! mirrors them and converts with `into()`; tests and headless tools use them directly.
+
+use glam::Vec3;
+
+/// Relaxation weight of the lab rule (seed 000): `x ← (0.2·x + Σx)/(0.2 + n)`.
+pub const LAB_WEIGHT: f32 = 0.2;
+
+/// Which constraint solver projects the cloth, with its material parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Solver {
+    /// Seed 000's Jacobi averaging: every edge projection is summed per vertex, then
+    /// `x ← (0.2·x + Σx)/(0.2 + n)` and `v ← v + (x_new − x)/Δt` each iteration.
+    ///
+    /// Every triangle edge is a rigid distance constraint; there is no bending. Velocities are
+    /// multiplied by `velocity_keep` once per step, before gravity (the lab uses 0.99).
+    /// [`SolverParams::damping`] is not used by this solver.
+    Lab {
+        /// Fraction of the velocity kept at the start of each step (seed 000: 0.99).
+        velocity_keep: f32,
+    },
+    /// Gauss–Seidel Position Based Dynamics (Müller et al. 2006). Stiffnesses are in `[0, 1]`:
+    /// the fraction of each constraint's error removed per projection. The effective stiffness
+    /// grows with iterations and substeps.
+    Pbd {
+        /// Stiffness of warp/weft (stretch) edges, `[0, 1]`.
+        stretch: f32,
+        /// Stiffness of diagonal (shear) edges, `[0, 1]`.
+        shear: f32,
+        /// Dihedral bending stiffness, `[0, 1]`; `0` switches the bending pass off.
+        bending: f32,
+    },
+    /// Extended PBD (Macklin et al. 2016): compliances (inverse stiffnesses) that give the same
+    /// material whatever the iteration count and time step.
+    Xpbd {
+        /// Compliance of stretch edges in m/N; `0` is inextensible.
+        stretch: f32,
+        /// Compliance of shear edges in m/N.
+        shear: f32,
+        /// Dihedral bending compliance in rad/(N·m); `f32::INFINITY` switches bending off.
+        bending: f32,
+    },
+}
+
+impl Solver {
+    /// Seed 000's lab solver with its damping of 0.99.
+    pub const LAB: Solver = Solver::Lab {
+        velocity_keep: 0.99,
+    };
+
+    /// Short lower-case name: `lab`, `pbd` or `xpbd`.
+    #[must_use]
+    pub fn name(&self) -> &'static str {
+        match self {
+            Solver::Lab { .. } => "lab",
+            Solver::Pbd { .. } => "pbd",
+            Solver::Xpbd { .. } => "xpbd",
+        }
+    }
+
+    /// Whether this solver projects bending constraints at all with these parameters.
+    #[must_use]
+    pub fn bending_enabled(&self) -> bool {
+        match *self {
+            Solver::Lab { .. } => false,
+            Solver::Pbd { bending, .. } => bending > 0.0,
+            Solver::Xpbd { bending, .. } => bending.is_finite(),
+        }
+    }
+}
+
+impl Default for Solver {
+    /// XPBD with inextensible stretch, slightly compliant shear and soft bending.
+    fn default() -> Self {
+        Solver::Xpbd {
+            stretch: 0.0,
+            shear: 1e-6,
+            bending: 1e-3,
+        }
+    }
+}
+
+/// Everything a step needs to know about how to solve, apart from the cloth itself.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolverParams {
+    /// The solver and its material.
+    pub solver: Solver,
+    /// Substeps per step: each integrates and projects once per iteration. For PBD and XPBD,
+    /// prefer substeps over iterations (Macklin et al., "Small Steps in Physics Simulation").
+    pub substeps: u32,
+    /// Projection iterations per substep.
+    pub iterations: u32,
+    /// Gravity acceleration in m/s².
+    pub gravity: Vec3,
+    /// Linear velocity damping in 1/s (PBD and XPBD): `v ← v / (1 + damping·h)` each substep.
+    pub damping: f32,
+}
+
+impl Default for SolverParams {
+    fn default() -> Self {
+        Self {
+            solver: Solver::default(),
+            substeps: 10,
+            iterations: 1,
+            gravity: Vec3::new(0.0, -9.81, 0.0),
+            damping: 0.1,
+        }
+    }
+}
+
+/// A solver parameter that is out of its range.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamError {
+    /// The parameter's name, e.g. `"substeps"`.
+    pub name: &'static str,
+    /// Why it is rejected.
+    pub reason: String,
+}
+
+impl core::fmt::Display for ParamError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "invalid solver parameter `{}`: {}",
+            self.name, self.reason
+        )
+    }
+}
+
+impl std::error::Error for ParamError {}
+
+fn check_range(name: &'static str, v: f32, lo: f32, hi: f32) -> Result<(), ParamError> {
+    if v.is_nan() || v < lo || v > hi {
+        return Err(ParamError {
+            name,
+            reason: format!("{v} is outside [{lo}, {hi}]"),
+        });
+    }
+    Ok(())
+}
+
+impl SolverParams {
+    /// Largest accepted substep and iteration counts: enough for any converged reference.
+    pub const MAX_COUNT: u32 = 10_000;
+
+    /// Checks every parameter and says which one is wrong.
+    ///
+    /// # Errors
+    /// A [`ParamError`] naming the first parameter out of range: counts (substeps, iterations)
+    /// of zero or over
+    /// [`Self::MAX_COUNT`], non-finite gravity, negative or NaN damping, stiffness outside
+    /// `[0, 1]`, negative or NaN compliance (infinite bending compliance is allowed: it means
+    /// no bending).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        for (name, n) in [("substeps", self.substeps), ("iterations", self.iterations)] {
+            if n == 0 || n > Self::MAX_COUNT {
+                return Err(ParamError {
+                    name,
+                    reason: format!("{n} is outside [1, {}]", Self::MAX_COUNT),
+                });
+            }
+        }
+        if !self.gravity.is_finite() {
+            return Err(ParamError {
+                name: "gravity",
+                reason: format!("{} is not finite", self.gravity),
+            });
+        }
+        check_range("damping", self.damping, 0.0, f32::MAX)?;
+        match self.solver {
+            Solver::Lab { velocity_keep } => check_range("velocity_keep", velocity_keep, 0.0, 1.0),
+            Solver::Pbd {
+                stretch,
+                shear,
+                bending,
+            } => {
+                check_range("stretch", stretch, 0.0, 1.0)?;
+                check_range("shear", shear, 0.0, 1.0)?;
+                check_range("bending", bending, 0.0, 1.0)
+            }
+            Solver::Xpbd {
+                stretch,
+                shear,
+                bending,
+            } => {
+                check_range("stretch", stretch, 0.0, f32::MAX)?;
+                check_range("shear", shear, 0.0, f32::MAX)?;
+                check_range("bending", bending, 0.0, f32::INFINITY)
+            }
+        }
+    }
+}

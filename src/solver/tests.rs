@@ -1,0 +1,369 @@
+//! Whole-step tests of the solver: physics against analytic answers, determinism, pins.
+
+use super::*;
+use glam::Vec4Swizzles;
+
+/// A triangle hanging from its two pinned top corners: A(−½,0,0), B(½,0,0), C(0,−½,0).
+fn hanging_triangle(params: SolverParams) -> Simulation {
+    let p = [
+        Vec3::new(-0.5, 0.0, 0.0),
+        Vec3::new(0.5, 0.0, 0.0),
+        Vec3::new(0.0, -0.5, 0.0),
+    ];
+    let t = Topology::from_triangles(&p, None, &[0, 1, 2], TopologyOptions::default()).unwrap();
+    let mut sim = Simulation::new(t, &[1.0, 1.0, 1.0], params).unwrap();
+    sim.state_mut()
+        .set_pins([0, 1].map(|v| Pin {
+            vertex: v,
+            target: p[v as usize],
+        }))
+        .unwrap();
+    sim
+}
+
+/// Static equilibrium of the hanging triangle's free vertex with springs of compliance α:
+/// `2·(L − L0)/α · (−y/L) = m·g`, solved by bisection.
+fn triangle_equilibrium(alpha: f64, g: f64) -> f64 {
+    let l0 = (0.5f64).hypot(0.5);
+    let f = |y: f64| {
+        let l = (0.5f64).hypot(y);
+        2.0 * (l - l0) / alpha * (-y / l) - g
+    };
+    let (mut lo, mut hi) = (-10.0, -0.5); // f(lo) > 0, f(hi) < 0
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if f(mid) > 0.0 { lo = mid } else { hi = mid }
+    }
+    0.5 * (lo + hi)
+}
+
+fn settle(sim: &mut Simulation, seconds: f32, dt: f32) {
+    for _ in 0..(seconds / dt).round() as usize {
+        sim.step(dt, &Serial);
+    }
+}
+
+#[test]
+fn xpbd_equilibrium_is_independent_of_iterations_and_time_step() {
+    let alpha = 0.01;
+    let expect = triangle_equilibrium(alpha as f64, 9.81) as f32;
+    for (substeps, iterations, dt) in [
+        (1, 1, 1.0 / 60.0),
+        (10, 1, 1.0 / 60.0),
+        (2, 20, 1.0 / 60.0),
+        (5, 3, 1.0 / 240.0),
+    ] {
+        let mut sim = hanging_triangle(SolverParams {
+            solver: Solver::Xpbd {
+                stretch: alpha,
+                shear: alpha,
+                bending: f32::INFINITY,
+            },
+            substeps,
+            iterations,
+            damping: 2.0,
+            ..Default::default()
+        });
+        settle(&mut sim, 20.0, dt);
+        let y = sim.state().position(2).y;
+        let sag = expect + 0.5;
+        assert!(
+            (y - expect).abs() < 0.02 * sag.abs(),
+            "{substeps}×{iterations} dt {dt}: y = {y}, analytic {expect}"
+        );
+    }
+}
+
+#[test]
+fn pbd_stiffness_depends_on_iterations() {
+    // The contrast that makes the XPBD test meaningful: same PBD stiffness, different counts.
+    let run = |iterations| {
+        let mut sim = hanging_triangle(SolverParams {
+            solver: Solver::Pbd {
+                stretch: 0.01,
+                shear: 0.01,
+                bending: 0.0,
+            },
+            substeps: 2,
+            iterations,
+            damping: 2.0,
+            ..Default::default()
+        });
+        settle(&mut sim, 20.0, 1.0 / 60.0);
+        sim.state().position(2).y + 0.5
+    };
+    let (few, many) = (run(1), run(20));
+    assert!(
+        few < 1.5 * many,
+        "sag {few} with 1 iteration, {many} with 20"
+    );
+}
+
+#[test]
+fn free_fall_follows_gravity() {
+    let g = Grid::new(4, 4, 1.0, 1.0);
+    let t = g.topology(TopologyOptions::default()).unwrap();
+    let m = t.masses(1.0, MassDistribution::Area);
+    let mut sim = Simulation::new(
+        t,
+        &m,
+        SolverParams {
+            damping: 0.0,
+            substeps: 20,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    settle(&mut sim, 1.0, 1.0 / 60.0);
+    // Symplectic Euler over n = 1200 substeps of h: y = −g·h²·n(n+1)/2. PBD recovers the
+    // velocity as (x − x_prev)/h, which in f32 loses about ulp(x)/h per substep: allow 0.2 %.
+    let (n, h) = (1200.0f32, 1.0f32 / 1200.0);
+    let expect = -9.81 * h * h * n * (n + 1.0) / 2.0;
+    for i in 0..16 {
+        let y = sim.state().position(i).y;
+        assert!((y - expect).abs() < 2e-3 * expect.abs(), "{y} vs {expect}");
+    }
+    assert!(sim.strain().max < 1e-4);
+}
+
+#[test]
+fn pins_reach_their_targets_and_drag_the_cloth() {
+    let g = Grid::new(8, 8, 1.0, 1.0);
+    let t = g.topology(TopologyOptions::default()).unwrap();
+    let m = t.masses(1.0, MassDistribution::Area);
+    let v = g.index(0, 0);
+    let start = g.positions()[v as usize];
+    let run = |speed: f32| {
+        let mut sim = Simulation::new(t.clone(), &m, SolverParams::default()).unwrap();
+        sim.state_mut()
+            .set_pins([Pin {
+                vertex: v,
+                target: start,
+            }])
+            .unwrap();
+        for k in 1..=30 {
+            let target = start + Vec3::X * speed / 60.0 * k as f32;
+            sim.state_mut().set_pin_targets([target]);
+            sim.step(1.0 / 60.0, &Serial);
+            assert_eq!(sim.state().position(v as usize), target);
+        }
+        sim
+    };
+    let (moving, still) = (run(1.2), run(0.0));
+    // The pin moved at 1.2 m/s along x: it has that velocity, and the cloth followed it.
+    assert!((moving.state().velocity(v as usize).x - 1.2).abs() < 1e-3);
+    let mean_x = |s: &Simulation| (0..64).map(|i| s.state().position(i).x).sum::<f32>() / 64.0;
+    assert!(
+        mean_x(&moving) > mean_x(&still) + 0.3,
+        "{} vs {}",
+        mean_x(&moving),
+        mean_x(&still)
+    );
+}
+
+/// Runs items back to front: any dependence between parts would change the result.
+struct Reversed;
+
+impl Parallel for Reversed {
+    fn for_each_mut<T: Send, F: Fn(&mut T) + Sync>(&self, items: &mut [T], f: F) {
+        items.iter_mut().rev().for_each(f);
+    }
+}
+
+#[test]
+fn parts_are_independent_so_results_do_not_depend_on_scheduling() {
+    let g = Grid::new(40, 40, 1.0, 1.0);
+    let t = g.topology(TopologyOptions::default()).unwrap();
+    let m = t.masses(1.0, MassDistribution::Uniform);
+    let make = || {
+        let mut s = Simulation::new(t.clone(), &m, SolverParams::default()).unwrap();
+        s.set_part_count(5);
+        s.state_mut()
+            .set_pins([0, 39].map(|v| Pin {
+                vertex: v,
+                target: g.positions()[v as usize],
+            }))
+            .unwrap();
+        s
+    };
+    let (mut a, mut b) = (make(), make());
+    for _ in 0..30 {
+        a.step(1.0 / 60.0, &Serial);
+        b.step(1.0 / 60.0, &Reversed);
+    }
+    assert_eq!(a.batches().part_count(), 5);
+    assert!(a.batches().boundary_len() > 0);
+    let bits = |s: &Simulation| -> Vec<u32> {
+        s.state()
+            .positions
+            .iter()
+            .flat_map(|p| p.to_array().map(f32::to_bits))
+            .collect()
+    };
+    assert_eq!(bits(&a), bits(&b));
+}
+
+#[test]
+fn partitioning_changes_little() {
+    // Different part counts reorder Gauss–Seidel sweeps; the drape must stay the same shape.
+    let g = Grid::new(32, 32, 1.0, 1.0);
+    let t = g.topology(TopologyOptions::default()).unwrap();
+    let m = t.masses(1.0, MassDistribution::Uniform);
+    let run = |parts| {
+        let mut s = Simulation::new(t.clone(), &m, SolverParams::default()).unwrap();
+        s.set_part_count(parts);
+        s.state_mut()
+            .set_pins([0, 31].map(|v| Pin {
+                vertex: v,
+                target: g.positions()[v as usize],
+            }))
+            .unwrap();
+        settle(&mut s, 1.0, 1.0 / 60.0);
+        s.state().positions.clone()
+    };
+    let (mean, _) = position_distance(&run(1), &run(8));
+    assert!(mean < 0.02, "mean distance {mean}");
+}
+
+#[test]
+fn bending_resists_folding() {
+    // A strip pinned along one short edge, held horizontal: stiff bending sags less.
+    let g = Grid::new(4, 16, 0.3, 1.0);
+    let t = g.topology(TopologyOptions::default()).unwrap();
+    let m = t.masses(0.1, MassDistribution::Area);
+    let tip = |bending: f32| {
+        let mut s = Simulation::new(
+            t.clone(),
+            &m,
+            SolverParams {
+                solver: Solver::Xpbd {
+                    stretch: 0.0,
+                    shear: 0.0,
+                    bending,
+                },
+                damping: 1.0,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        s.state_mut()
+            .set_pins((0..4).chain(4..8).map(|v| Pin {
+                vertex: v,
+                target: g.positions()[v as usize],
+            }))
+            .unwrap();
+        settle(&mut s, 3.0, 1.0 / 60.0);
+        s.state().position(g.index(2, 15) as usize).y
+    };
+    let (stiff, soft, off) = (tip(1e-5), tip(1.0), tip(f32::INFINITY));
+    assert!(stiff > soft + 0.1, "stiff {stiff} soft {soft}");
+    assert!(soft > off + 0.05, "soft {soft} off {off}");
+}
+
+#[test]
+fn zero_bending_stiffness_skips_the_pass() {
+    let g = Grid::new(6, 6, 1.0, 1.0);
+    let t = g.topology(TopologyOptions::default()).unwrap();
+    let params = SolverParams {
+        solver: Solver::Pbd {
+            stretch: 1.0,
+            shear: 1.0,
+            bending: 0.0,
+        },
+        ..Default::default()
+    };
+    let b = ConstraintBatches::new(&t, &params, 1);
+    assert!(!b.bending);
+    assert!(
+        !Solver::Xpbd {
+            stretch: 0.0,
+            shear: 0.0,
+            bending: f32::INFINITY
+        }
+        .bending_enabled()
+    );
+}
+
+#[test]
+fn coincident_and_degenerate_geometry_stays_finite() {
+    // Every vertex at the same point, and a sliver: the solver must not produce NaN.
+    let g = Grid::new(5, 5, 1.0, 1.0);
+    let uvs = g.uvs();
+    let idx = g.indices();
+    for squash in [0.0f32, 1e-7] {
+        let pos: Vec<Vec3> = g
+            .positions()
+            .iter()
+            .map(|p| *p * Vec3::new(squash, 1.0, 1.0))
+            .collect();
+        let t =
+            Topology::from_triangles(&pos, Some(&uvs), &idx, TopologyOptions::default()).unwrap();
+        for solver in [
+            Solver::LAB,
+            Solver::default(),
+            Solver::Pbd {
+                stretch: 1.0,
+                shear: 1.0,
+                bending: 1.0,
+            },
+        ] {
+            let mut s = Simulation::new(
+                t.clone(),
+                &t.masses(1.0, MassDistribution::Area),
+                SolverParams {
+                    solver,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            s.state_mut().reset(&vec![Vec3::ONE; 25]);
+            settle(&mut s, 0.5, 1.0 / 60.0);
+            s.update_shading();
+            assert_eq!(
+                s.state().non_finite_count(),
+                0,
+                "{solver:?} squash {squash}"
+            );
+            assert!(s.normals().iter().all(|n| n.is_finite()));
+            assert!(s.tangents().iter().all(|t| t.is_finite()));
+        }
+    }
+}
+
+#[test]
+fn simd_and_scalar_projection_agree() {
+    // Project the same perturbed grid through 4-wide batches and one constraint at a time.
+    let g = Grid::new(24, 24, 1.0, 1.0);
+    let t = g.topology(TopologyOptions::default()).unwrap();
+    let params = SolverParams::default();
+    let mut pos: Vec<Vec4> = g
+        .positions()
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let k = i as f32;
+            (*p + Vec3::new((k * 0.37).sin(), (k * 0.11).cos(), (k * 0.73).sin()) * 0.01)
+                .extend(1.0)
+        })
+        .collect();
+    let mut simd = ConstraintBatches::new(&t, &params, 1);
+    let mut scalar = simd.clone();
+    let mode = simd.mode(1.0 / 600.0);
+    let mut pos2 = pos.clone();
+    simd.parts[0].project(&mut pos, mode, true, false);
+    scalar.parts[0].project_scalar(&mut pos2, mode, true);
+    let mut worst = 0.0f32;
+    for (a, b) in pos.iter().zip(&pos2) {
+        worst = worst.max((a.xyz() - b.xyz()).length());
+    }
+    assert!(worst < 1e-5, "{worst}");
+    // And they did something.
+    let (moved, _) = position_distance(
+        &pos,
+        &g.positions()
+            .iter()
+            .map(|p| p.extend(1.0))
+            .collect::<Vec<_>>(),
+    );
+    assert!(moved > 1e-3);
+}

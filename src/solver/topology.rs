@@ -1,0 +1,621 @@
+//! Cloth topology: rest geometry, distance edges, bending pairs, triangles.
+//!
+//! Built once from a rectangular grid ([`Grid`]) or from any indexed triangle mesh
+//! ([`Topology::from_triangles`]). Edges are the unique triangle edges, classified as
+//! *stretch* (warp and weft, aligned with a UV axis) or *shear* (diagonal in UV space); on a
+//! grid this gives the report's six edges per interior vertex. Every interior edge shared by
+//! two triangles gives a dihedral bending pair.
+
+use glam::{Vec2, Vec3};
+
+/// What a distance edge resists.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum EdgeKind {
+    /// Warp/weft edge (axis-aligned in UV space, or any edge when the mesh has no UVs).
+    Stretch,
+    /// Diagonal edge in UV space.
+    Shear,
+}
+
+/// A distance constraint between two vertices.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Edge {
+    /// Vertex indices, `v[0] < v[1]`.
+    pub v: [u32; 2],
+    /// Rest length in metres.
+    pub rest: f32,
+    /// Stretch or shear.
+    pub kind: EdgeKind,
+}
+
+/// A dihedral bending constraint over two triangles `(v0, v1, v2)` and `(v0, v1, v3)` that
+/// share the edge `v0–v1`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bend {
+    /// `[shared0, shared1, opposite0, opposite1]`.
+    pub v: [u32; 4],
+    /// Rest dihedral angle φ0 in radians (π for a flat pair, as in the report).
+    pub rest_angle: f32,
+    /// Index of the shared edge in [`Topology::edges`].
+    pub edge: u32,
+}
+
+/// Rest angle of the bending constraints.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum BendRest {
+    /// φ0 = π: the cloth wants to be flat (the report's choice).
+    #[default]
+    Flat,
+    /// φ0 = the dihedral angle of the rest mesh: the cloth keeps its modelled folds.
+    RestShape,
+}
+
+/// How vertex masses are spread over the cloth.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum MassDistribution {
+    /// Each vertex gets a third of the area of its triangles (lumped mass): physically right.
+    #[default]
+    Area,
+    /// Every vertex gets the same mass.
+    Uniform,
+}
+
+/// Options for building a [`Topology`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TopologyOptions {
+    /// Rest angle of bending pairs.
+    pub bend_rest: BendRest,
+}
+
+/// Why a mesh cannot be simulated.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TopologyError {
+    /// The mesh has no vertices.
+    NoVertices,
+    /// The index count is not a multiple of three (not a triangle list).
+    NotTriangles {
+        /// Number of indices.
+        index_count: usize,
+    },
+    /// An index names a vertex that does not exist.
+    IndexOutOfRange {
+        /// Position in the index buffer.
+        position: usize,
+        /// The index.
+        index: u32,
+        /// Number of vertices.
+        vertex_count: usize,
+    },
+    /// A vertex position is NaN or infinite.
+    NonFinitePosition {
+        /// Vertex index.
+        vertex: usize,
+    },
+    /// The UV array has a different length from the positions.
+    UvCount {
+        /// Number of UVs.
+        uvs: usize,
+        /// Number of positions.
+        positions: usize,
+    },
+    /// No triangle with three distinct vertices is left.
+    NoTriangles,
+    /// A grid needs at least 2×2 vertices and a positive, finite size.
+    BadGrid {
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+impl core::fmt::Display for TopologyError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            TopologyError::NoVertices => write!(f, "the mesh has no vertices"),
+            TopologyError::NotTriangles { index_count } => write!(
+                f,
+                "{index_count} indices is not a multiple of 3: not a triangle list"
+            ),
+            TopologyError::IndexOutOfRange {
+                position,
+                index,
+                vertex_count,
+            } => write!(
+                f,
+                "index {index} at position {position} is out of range for {vertex_count} vertices"
+            ),
+            TopologyError::NonFinitePosition { vertex } => {
+                write!(f, "vertex {vertex} has a NaN or infinite position")
+            }
+            TopologyError::UvCount { uvs, positions } => {
+                write!(f, "{uvs} UVs for {positions} positions")
+            }
+            TopologyError::NoTriangles => {
+                write!(f, "no triangle with three distinct vertices")
+            }
+            TopologyError::BadGrid { reason } => write!(f, "bad grid: {reason}"),
+        }
+    }
+}
+
+impl std::error::Error for TopologyError {}
+
+/// Rest geometry and constraint lists of a cloth.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Topology {
+    rest_positions: Vec<Vec3>,
+    uvs: Option<Vec<Vec2>>,
+    triangles: Vec<[u32; 3]>,
+    edges: Vec<Edge>,
+    bends: Vec<Bend>,
+    skipped_triangles: usize,
+}
+
+/// Index of the dihedral's shared edge endpoints and opposite vertices; see [`Bend`].
+fn dihedral_angle(p: [Vec3; 4]) -> f32 {
+    let [x1, x2, x3, x4] = p;
+    let (p2, p3, p4) = (x2 - x1, x3 - x1, x4 - x1);
+    let n1 = p2.cross(p3).normalize_or_zero();
+    let n2 = p2.cross(p4).normalize_or_zero();
+    n1.dot(n2).clamp(-1.0, 1.0).acos()
+}
+
+impl Topology {
+    /// Builds the topology of an indexed triangle list.
+    ///
+    /// Triangles that repeat a vertex (`[a, a, b]`, as a torn triangle is written) are skipped
+    /// and counted in [`Self::skipped_triangles`]. Edges shared by more than two triangles
+    /// (non-manifold) get distance constraints but no bending.
+    ///
+    /// # Errors
+    /// [`TopologyError`] for an empty mesh, an index count that is not a multiple of three,
+    /// an out-of-range index, a NaN/infinite position, a UV count that does not match, or no
+    /// usable triangle.
+    pub fn from_triangles(
+        positions: &[Vec3],
+        uvs: Option<&[Vec2]>,
+        indices: &[u32],
+        options: TopologyOptions,
+    ) -> Result<Self, TopologyError> {
+        let n = positions.len();
+        if n == 0 {
+            return Err(TopologyError::NoVertices);
+        }
+        if indices.len() % 3 != 0 {
+            return Err(TopologyError::NotTriangles {
+                index_count: indices.len(),
+            });
+        }
+        if let Some(vertex) = positions.iter().position(|p| !p.is_finite()) {
+            return Err(TopologyError::NonFinitePosition { vertex });
+        }
+        if let Some(uvs) = uvs
+            && uvs.len() != n
+        {
+            return Err(TopologyError::UvCount {
+                uvs: uvs.len(),
+                positions: n,
+            });
+        }
+        if let Some((position, &index)) =
+            indices.iter().enumerate().find(|(_, i)| **i as usize >= n)
+        {
+            return Err(TopologyError::IndexOutOfRange {
+                position,
+                index,
+                vertex_count: n,
+            });
+        }
+        let mut triangles = Vec::with_capacity(indices.len() / 3);
+        let mut skipped = 0;
+        for t in indices.chunks_exact(3) {
+            if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+                skipped += 1;
+            } else {
+                triangles.push([t[0], t[1], t[2]]);
+            }
+        }
+        if triangles.is_empty() {
+            return Err(TopologyError::NoTriangles);
+        }
+
+        // (min, max, triangle, opposite vertex) for every triangle edge, sorted: equal keys
+        // are adjacent, and the unique edges come out sorted as in seed 000.
+        let mut half: Vec<(u32, u32, u32)> = Vec::with_capacity(triangles.len() * 3);
+        for t in &triangles {
+            for k in 0..3 {
+                let (a, b, c) = (t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
+                half.push((a.min(b), a.max(b), c));
+            }
+        }
+        half.sort_unstable_by_key(|&(a, b, c)| (a, b, c));
+
+        let uv_kind = |a: u32, b: u32| -> EdgeKind {
+            let Some(uvs) = uvs else {
+                return EdgeKind::Stretch;
+            };
+            let d = (uvs[a as usize] - uvs[b as usize]).abs();
+            if d.min_element() <= 1e-3 * d.max_element() {
+                EdgeKind::Stretch
+            } else {
+                EdgeKind::Shear
+            }
+        };
+
+        let mut edges = Vec::new();
+        let mut bends = Vec::new();
+        let mut i = 0;
+        while i < half.len() {
+            let (a, b, _) = half[i];
+            let mut j = i;
+            while j < half.len() && half[j].0 == a && half[j].1 == b {
+                j += 1;
+            }
+            let edge_index = edges.len() as u32;
+            edges.push(Edge {
+                v: [a, b],
+                rest: positions[a as usize].distance(positions[b as usize]),
+                kind: uv_kind(a, b),
+            });
+            if j - i == 2 {
+                let (c, d) = (half[i].2, half[i + 1].2);
+                if c != d {
+                    let v = [a, b, c, d];
+                    let rest_angle = match options.bend_rest {
+                        BendRest::Flat => core::f32::consts::PI,
+                        BendRest::RestShape => dihedral_angle(v.map(|k| positions[k as usize])),
+                    };
+                    bends.push(Bend {
+                        v,
+                        rest_angle,
+                        edge: edge_index,
+                    });
+                }
+            }
+            i = j;
+        }
+
+        Ok(Self {
+            rest_positions: positions.to_vec(),
+            uvs: uvs.map(<[Vec2]>::to_vec),
+            triangles,
+            edges,
+            bends,
+            skipped_triangles: skipped,
+        })
+    }
+
+    /// Number of vertices.
+    #[must_use]
+    pub fn vertex_count(&self) -> usize {
+        self.rest_positions.len()
+    }
+
+    /// Rest positions, in the mesh's own space.
+    #[must_use]
+    pub fn rest_positions(&self) -> &[Vec3] {
+        &self.rest_positions
+    }
+
+    /// Texture coordinates, when the mesh has them.
+    #[must_use]
+    pub fn uvs(&self) -> Option<&[Vec2]> {
+        self.uvs.as_deref()
+    }
+
+    /// Triangles with three distinct vertices.
+    #[must_use]
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
+    /// Unique triangle edges, sorted by `(v[0], v[1])`.
+    #[must_use]
+    pub fn edges(&self) -> &[Edge] {
+        &self.edges
+    }
+
+    /// Dihedral bending pairs, one per interior manifold edge.
+    #[must_use]
+    pub fn bends(&self) -> &[Bend] {
+        &self.bends
+    }
+
+    /// Triangles dropped because they repeat a vertex.
+    #[must_use]
+    pub fn skipped_triangles(&self) -> usize {
+        self.skipped_triangles
+    }
+
+    /// Per-vertex masses (kg) adding up to `total`.
+    ///
+    /// With [`MassDistribution::Area`], a vertex in no triangle or in only zero-area ones gets
+    /// the mean vertex mass, so every mass is positive and finite for a positive `total`.
+    #[must_use]
+    pub fn masses(&self, total: f32, distribution: MassDistribution) -> Vec<f32> {
+        let n = self.vertex_count();
+        let uniform = total / n as f32;
+        match distribution {
+            MassDistribution::Uniform => vec![uniform; n],
+            MassDistribution::Area => {
+                let mut area = vec![0.0f64; n];
+                for t in &self.triangles {
+                    let [a, b, c] = t.map(|i| self.rest_positions[i as usize]);
+                    let third = f64::from((b - a).cross(c - a).length()) / 6.0;
+                    for &i in t {
+                        area[i as usize] += third;
+                    }
+                }
+                let sum: f64 = area.iter().sum();
+                let with_area = area.iter().filter(|a| **a > 0.0).count();
+                if !(sum > 0.0) || !sum.is_finite() {
+                    return vec![uniform; n];
+                }
+                // Vertices without area get the mean mass; the rest share what is left by area.
+                let orphans = n - with_area;
+                let share = f64::from(total) * (with_area as f64 / n as f64);
+                area.iter()
+                    .map(|&a| {
+                        if a > 0.0 && orphans < n {
+                            (share * a / sum) as f32
+                        } else {
+                            uniform
+                        }
+                    })
+                    .collect()
+            }
+        }
+    }
+}
+
+/// A rectangular grid of `columns × rows` vertices in the XZ plane, centred on the origin,
+/// front face towards +Y.
+///
+/// Vertex `j·columns + i` sits at column `i` (x grows with `i`) and row `j` (z shrinks with
+/// `j`), with UV `(i/(columns−1), j/(rows−1))`. Each quad `a = j·columns + i` is split into the
+/// triangles `(a, a+1, a+columns+1)` and `(a, a+columns+1, a+columns)`, the pattern of seed 000
+/// and of the report (six edges per interior vertex).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Grid {
+    /// Vertices along x (at least 2).
+    pub columns: u32,
+    /// Vertices along z (at least 2).
+    pub rows: u32,
+    /// Extent along x in metres.
+    pub width: f32,
+    /// Extent along z in metres.
+    pub height: f32,
+}
+
+impl Grid {
+    /// A `columns × rows` grid of `width × height` metres.
+    #[must_use]
+    pub fn new(columns: u32, rows: u32, width: f32, height: f32) -> Self {
+        Self {
+            columns,
+            rows,
+            width,
+            height,
+        }
+    }
+
+    /// Checks the grid is at least 2×2 with a positive, finite size and under 2³² vertices.
+    ///
+    /// # Errors
+    /// [`TopologyError::BadGrid`] saying what is wrong.
+    pub fn validate(&self) -> Result<(), TopologyError> {
+        if self.columns < 2 || self.rows < 2 {
+            return Err(TopologyError::BadGrid {
+                reason: format!(
+                    "{}×{} vertices; at least 2×2 are needed",
+                    self.columns, self.rows
+                ),
+            });
+        }
+        if u64::from(self.columns) * u64::from(self.rows) > u64::from(u32::MAX) {
+            return Err(TopologyError::BadGrid {
+                reason: "more than 2³² vertices".into(),
+            });
+        }
+        for (name, v) in [("width", self.width), ("height", self.height)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(TopologyError::BadGrid {
+                    reason: format!("{name} {v} must be finite and positive"),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Vertex index of column `i`, row `j`.
+    #[must_use]
+    pub fn index(&self, i: u32, j: u32) -> u32 {
+        j * self.columns + i
+    }
+
+    /// Number of vertices.
+    #[must_use]
+    pub fn vertex_count(&self) -> usize {
+        self.columns as usize * self.rows as usize
+    }
+
+    /// Vertex positions.
+    #[must_use]
+    pub fn positions(&self) -> Vec<Vec3> {
+        let (c, r) = (self.columns.max(2), self.rows.max(2));
+        let mut out = Vec::with_capacity(self.vertex_count());
+        for j in 0..self.rows {
+            for i in 0..self.columns {
+                let x = self.width * (i as f32 / (c - 1) as f32 - 0.5);
+                let z = self.height * (0.5 - j as f32 / (r - 1) as f32);
+                out.push(Vec3::new(x, 0.0, z));
+            }
+        }
+        out
+    }
+
+    /// Texture coordinates.
+    #[must_use]
+    pub fn uvs(&self) -> Vec<Vec2> {
+        let (c, r) = (self.columns.max(2), self.rows.max(2));
+        let mut out = Vec::with_capacity(self.vertex_count());
+        for j in 0..self.rows {
+            for i in 0..self.columns {
+                out.push(Vec2::new(
+                    i as f32 / (c - 1) as f32,
+                    j as f32 / (r - 1) as f32,
+                ));
+            }
+        }
+        out
+    }
+
+    /// Triangle indices.
+    #[must_use]
+    pub fn indices(&self) -> Vec<u32> {
+        let c = self.columns;
+        let mut out = Vec::with_capacity(
+            6 * (self.columns.max(1) - 1) as usize * (self.rows.max(1) - 1) as usize,
+        );
+        for j in 0..self.rows.saturating_sub(1) {
+            for i in 0..c.saturating_sub(1) {
+                let a = j * c + i;
+                out.extend_from_slice(&[a, a + 1, a + c + 1, a, a + c + 1, a + c]);
+            }
+        }
+        out
+    }
+
+    /// The grid's topology.
+    ///
+    /// # Errors
+    /// [`TopologyError::BadGrid`] if [`Self::validate`] fails.
+    pub fn topology(&self, options: TopologyOptions) -> Result<Topology, TopologyError> {
+        self.validate()?;
+        let uvs = self.uvs();
+        Topology::from_triangles(&self.positions(), Some(&uvs), &self.indices(), options)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_has_six_edges_per_interior_vertex() {
+        let g = Grid::new(5, 4, 1.0, 1.0);
+        let t = g.topology(TopologyOptions::default()).unwrap();
+        let mut degree = vec![0; g.vertex_count()];
+        for e in t.edges() {
+            degree[e.v[0] as usize] += 1;
+            degree[e.v[1] as usize] += 1;
+        }
+        for j in 1..3 {
+            for i in 1..4 {
+                assert_eq!(degree[g.index(i, j) as usize], 6, "vertex ({i},{j})");
+            }
+        }
+        // (c−1)·r horizontal + c·(r−1) vertical stretch, (c−1)(r−1) diagonal shear.
+        let stretch = t
+            .edges()
+            .iter()
+            .filter(|e| e.kind == EdgeKind::Stretch)
+            .count();
+        let shear = t
+            .edges()
+            .iter()
+            .filter(|e| e.kind == EdgeKind::Shear)
+            .count();
+        assert_eq!(stretch, 4 * 4 + 5 * 3);
+        assert_eq!(shear, 4 * 3);
+        for e in t.edges() {
+            let expect = match e.kind {
+                EdgeKind::Stretch
+                    if g.positions()[e.v[0] as usize].z == g.positions()[e.v[1] as usize].z =>
+                {
+                    0.25
+                }
+                EdgeKind::Stretch => 1.0 / 3.0,
+                EdgeKind::Shear => (0.25f32 * 0.25 + 1.0 / 9.0).sqrt(),
+            };
+            assert!((e.rest - expect).abs() < 1e-6, "{e:?}");
+        }
+    }
+
+    #[test]
+    fn every_interior_edge_bends_and_flat_rest_is_pi() {
+        let g = Grid::new(4, 4, 1.0, 1.0);
+        let t = g.topology(TopologyOptions::default()).unwrap();
+        let boundary = 4 * 3;
+        assert_eq!(t.bends().len(), t.edges().len() - boundary);
+        for b in t.bends() {
+            assert_eq!(b.rest_angle, core::f32::consts::PI);
+            let e = t.edges()[b.edge as usize];
+            assert_eq!(e.v, [b.v[0], b.v[1]]);
+        }
+        let rest = g.topology(TopologyOptions {
+            bend_rest: BendRest::RestShape,
+        });
+        for b in rest.unwrap().bends() {
+            assert!((b.rest_angle - core::f32::consts::PI).abs() < 1e-3);
+        }
+    }
+
+    #[test]
+    fn grid_faces_up() {
+        let g = Grid::new(3, 3, 2.0, 2.0);
+        let p = g.positions();
+        for t in g.indices().chunks(3) {
+            let n =
+                (p[t[1] as usize] - p[t[0] as usize]).cross(p[t[2] as usize] - p[t[0] as usize]);
+            assert!(n.y > 0.0 && n.x == 0.0 && n.z == 0.0);
+        }
+    }
+
+    #[test]
+    fn bad_meshes_are_rejected() {
+        let p = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let o = TopologyOptions::default();
+        assert_eq!(
+            Topology::from_triangles(&[], None, &[], o),
+            Err(TopologyError::NoVertices)
+        );
+        assert_eq!(
+            Topology::from_triangles(&p, None, &[0, 1], o),
+            Err(TopologyError::NotTriangles { index_count: 2 })
+        );
+        assert!(matches!(
+            Topology::from_triangles(&p, None, &[0, 1, 3], o),
+            Err(TopologyError::IndexOutOfRange {
+                index: 3,
+                position: 2,
+                ..
+            })
+        ));
+        assert_eq!(
+            Topology::from_triangles(&[Vec3::ZERO, Vec3::NAN, Vec3::Y], None, &[0, 1, 2], o),
+            Err(TopologyError::NonFinitePosition { vertex: 1 })
+        );
+        assert_eq!(
+            Topology::from_triangles(&p, None, &[0, 0, 1], o),
+            Err(TopologyError::NoTriangles)
+        );
+        assert!(Grid::new(1, 5, 1.0, 1.0).validate().is_err());
+        assert!(Grid::new(2, 2, f32::NAN, 1.0).validate().is_err());
+        assert!(Grid::new(2, 2, 1.0, -1.0).validate().is_err());
+    }
+
+    #[test]
+    fn masses_sum_to_total() {
+        let g = Grid::new(6, 5, 2.0, 1.0);
+        let t = g.topology(TopologyOptions::default()).unwrap();
+        for d in [MassDistribution::Area, MassDistribution::Uniform] {
+            let m = t.masses(3.0, d);
+            let sum: f32 = m.iter().sum();
+            assert!((sum - 3.0).abs() < 1e-4, "{d:?} {sum}");
+            assert!(m.iter().all(|&x| x > 0.0));
+        }
+        // Interior vertices carry six triangles' thirds, corners fewer.
+        let m = t.masses(1.0, MassDistribution::Area);
+        assert!(m[g.index(2, 2) as usize] > m[0]);
+    }
+}
