@@ -2,6 +2,11 @@
 //! lab sheet (its own mesh, edge list and update loop; nothing shared with the solver), in f32
 //! like the lab's Unity code.
 
+#![expect(
+    clippy::needless_range_loop,
+    reason = "the reference is written index by index, like the lab sheet"
+)]
+
 use bevy_cloth::solver::{
     Pin, Serial, Simulation, Solver, SolverParams, Topology, TopologyOptions,
 };

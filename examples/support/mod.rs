@@ -1,8 +1,9 @@
 //! Shared by the examples: command-line flags, headless or windowed apps, the final JSON line.
 //!
 //! Every example accepts `--headless` (no window, no GPU: `MinimalPlugins`, frames of the fixed
-//! time step) and `--frames N` (stop after N frames; windowed runs otherwise go on until closed),
-//! and ends by printing one JSON line of measurements.
+//! time step), `--frames N` (stop after N frames; windowed runs otherwise go on until closed)
+//! and, windowed, `--screenshot FILE.png` (save the window after `--frames` frames, default 240,
+//! then exit); it ends by printing one JSON line of measurements.
 
 #![allow(dead_code, reason = "each example uses a different part")]
 
@@ -12,6 +13,7 @@ use std::time::{Duration, Instant};
 use bevy::app::AppExit;
 use bevy::mesh::MeshPlugin;
 use bevy::prelude::*;
+use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured, save_to_disk};
 use bevy::time::TimeUpdateStrategy;
 use bevy_cloth::prelude::*;
 
@@ -210,18 +212,51 @@ pub fn run(mut app: App, args: &Args, report: fn(&mut World) -> Json) {
         return;
     }
     #[derive(Resource)]
-    struct Limit(Option<u32>, fn(&mut World) -> Json);
+    struct Limit {
+        frames: Option<u32>,
+        report: fn(&mut World) -> Json,
+        screenshot: Option<String>,
+        requested: bool,
+    }
+    #[derive(Resource, Default)]
+    struct ShotSaved(bool);
     fn stop(world: &mut World) {
         let frames = world.resource::<ClothTiming>().per_frame.len() as u32;
         let limit = world.resource::<Limit>();
-        let (max, report) = (limit.0, limit.1);
-        if max.is_some_and(|m| frames >= m) {
-            println!("{}", report(world));
-            world.write_message(AppExit::Success);
+        let due = limit.frames.is_some_and(|m| frames >= m);
+        let (report, shot, requested) = (limit.report, limit.screenshot.clone(), limit.requested);
+        if !due {
+            return;
         }
+        if let Some(path) = shot {
+            // Shoot once, then wait for the file before leaving.
+            if !requested {
+                world.resource_mut::<Limit>().requested = true;
+                world
+                    .spawn(Screenshot::primary_window())
+                    .observe(save_to_disk(path))
+                    .observe(|_: On<ScreenshotCaptured>, mut saved: ResMut<ShotSaved>| {
+                        saved.0 = true;
+                    });
+                return;
+            }
+            if !world.resource::<ShotSaved>().0 {
+                return;
+            }
+        }
+        println!("{}", report(world));
+        world.write_message(AppExit::Success);
     }
-    app.insert_resource(Limit(args.frames, report))
-        .add_systems(Last, stop.after(timing_frame));
+    let screenshot = args.rest.get("screenshot").cloned();
+    let frames = args.frames.or(screenshot.as_ref().map(|_| 240));
+    app.insert_resource(Limit {
+        frames,
+        report,
+        screenshot,
+        requested: false,
+    })
+    .init_resource::<ShotSaved>()
+    .add_systems(Last, stop.after(timing_frame));
     app.run();
 }
 

@@ -1,6 +1,6 @@
 //! The Bevy side of a cloth: components, plugin, systems, mesh write-back.
 //!
-//! Data flow: a [`Cloth`] entity's [`Mesh3d`] is read once into a solver
+//! Data flow: a [`Cloth`] entity's [`Mesh3d`](bevy::prelude::Mesh3d) is read once into a solver
 //! [`Simulation`](crate::solver::Simulation), stored in a [`ClothSim`] component. Each fixed step
 //! ([`ClothSystems::Prepare`], [`ClothSystems::Simulate`]) applies config and pin changes, moves
 //! pins to their anchors and steps the solver; each frame [`ClothSystems::Writeback`] copies

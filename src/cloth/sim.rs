@@ -296,6 +296,7 @@ pub(crate) fn retry_cloths(
 }
 
 /// Applies changed [`ClothConfig`]s and [`ClothPins`], and moves pin targets to their anchors.
+#[expect(clippy::type_complexity, reason = "a query, read once")]
 pub(crate) fn sync_cloths(
     mut commands: Commands,
     mut cloths: Query<

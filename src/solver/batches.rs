@@ -222,8 +222,8 @@ impl BendSet {
         };
         for i in order {
             let b = bends[i];
-            for k in 0..4 {
-                s.v[k].push(local[i][k]);
+            for (column, &v) in s.v.iter_mut().zip(&local[i]) {
+                column.push(v);
             }
             s.rest.push(topology.bends()[b as usize].rest_angle);
             s.bend.push(b);
@@ -367,8 +367,8 @@ pub fn default_part_count(n: usize) -> usize {
 
 /// All constraints of a cloth, partitioned and coloured for projection.
 ///
-/// Build it with [`ConstraintBatches::new`] and keep it beside the [`ClothState`]
-/// (crate::solver::ClothState); call [`ConstraintBatches::set_params`] when the material
+/// Build it with [`ConstraintBatches::new`] and keep it beside the
+/// [`ClothState`](crate::solver::ClothState); call [`ConstraintBatches::set_params`] when the material
 /// changes.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ConstraintBatches {

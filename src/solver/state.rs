@@ -114,7 +114,7 @@ impl ClothState {
         }
         let mut inv_mass = Vec::with_capacity(masses.len());
         for (vertex, (&m, p)) in masses.iter().zip(positions).enumerate() {
-            if !(m.is_finite() && m > 0.0) || !(1.0 / m).is_finite() {
+            if !(m.is_finite() && m > 0.0 && (1.0 / m).is_finite()) {
                 return Err(StateError::BadMass { vertex, mass: m });
             }
             if !p.is_finite() {

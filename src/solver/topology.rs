@@ -180,7 +180,7 @@ impl Topology {
         if n == 0 {
             return Err(TopologyError::NoVertices);
         }
-        if indices.len() % 3 != 0 {
+        if !indices.len().is_multiple_of(3) {
             return Err(TopologyError::NotTriangles {
                 index_count: indices.len(),
             });
@@ -347,7 +347,7 @@ impl Topology {
                 }
                 let sum: f64 = area.iter().sum();
                 let with_area = area.iter().filter(|a| **a > 0.0).count();
-                if !(sum > 0.0) || !sum.is_finite() {
+                if sum.is_nan() || sum <= 0.0 || !sum.is_finite() {
                     return vec![uniform; n];
                 }
                 // Vertices without area get the mean mass; the rest share what is left by area.
