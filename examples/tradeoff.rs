@@ -18,6 +18,12 @@
 //! cargo run --release --example tradeoff -- --quick          # a handful of cases
 //! cargo run --release --example tradeoff -- --sizes 64 --solvers xpbd --substeps 10 --iterations 1
 //! ```
+//! `--scene-costs` instead measures what each scene feature costs on the 64² and 256² scenes
+//! (XPBD 10 × 1): nothing, a sphere collider under the cloth, wind, self-collision, tethers,
+//! tearing (threshold never reached), and everything at once; with a feature off, its code
+//! does not run, so `plain` is the cost of every scene without it. Tethers also report their
+//! effect on `max_strain`.
+//!
 //! Other flags: `--frames N`, `--threads N` (default: all cores), `--repeat N` (runs per case, the
 //! fastest median counts; default 3), `--reference-substeps N`, `--markdown` (also print a
 //! table on stderr).
@@ -30,7 +36,8 @@ use std::time::Instant;
 use bevy::tasks::TaskPoolBuilder;
 use bevy_cloth::cloth::TaskPoolParallel;
 use bevy_cloth::solver::{
-    Grid, MassDistribution, Pin, Simulation, Solver, SolverParams, TopologyOptions,
+    Collider, Environment, Features, Grid, MassDistribution, Pin, Pose, SelfCollision, Shape,
+    Simulation, Solver, SolverParams, TetherParams, TopologyOptions, WindField, WindParams,
     position_distance,
 };
 use glam::Vec4;
@@ -149,6 +156,125 @@ fn simulate(
     }
 }
 
+/// One scene variant: which features are on.
+#[derive(Clone, Copy)]
+struct Variant {
+    name: &'static str,
+    collider: bool,
+    wind: bool,
+    self_collision: bool,
+    tethers: bool,
+    tearing: bool,
+}
+
+fn scene_costs(args: &Args, par: &TaskPoolParallel, threads: usize) {
+    let off = Variant {
+        name: "plain",
+        collider: false,
+        wind: false,
+        self_collision: false,
+        tethers: false,
+        tearing: false,
+    };
+    let variants = [
+        off,
+        Variant {
+            name: "collider",
+            collider: true,
+            ..off
+        },
+        Variant {
+            name: "wind",
+            wind: true,
+            ..off
+        },
+        Variant {
+            name: "self_collision",
+            self_collision: true,
+            ..off
+        },
+        Variant {
+            name: "tethers",
+            tethers: true,
+            ..off
+        },
+        Variant {
+            name: "tearing",
+            tearing: true,
+            ..off
+        },
+        Variant {
+            name: "everything",
+            collider: true,
+            wind: true,
+            self_collision: true,
+            tethers: true,
+            tearing: true,
+        },
+    ];
+    let frames = args.frames.unwrap_or(60) as usize;
+    let repeat: usize = args.get("repeat", 3);
+    let sphere = [Collider::fixed(
+        Shape::Sphere { radius: 0.25 },
+        Pose::at(glam::Vec3::new(0.0, -0.6, 0.3)),
+        0.01,
+        0.4,
+    )];
+    let wind = WindField::new([(WindParams::default(), None)]);
+    for n in list(args, "sizes", &[64u32, 256]) {
+        for v in variants {
+            let make = || {
+                let mut sim = scene(n, "xpbd", 10, 1);
+                let spacing = 1.0 / (n - 1) as f32;
+                sim.set_features(Features {
+                    self_collision: v.self_collision.then_some(SelfCollision {
+                        thickness: spacing,
+                        friction: 0.2,
+                    }),
+                    tethers: v.tethers.then(TetherParams::default),
+                    tear_threshold: v.tearing.then_some(1000.0),
+                })
+                .unwrap();
+                sim
+            };
+            let env = Environment {
+                colliders: if v.collider { &sphere } else { &[] },
+                wind: v.wind.then_some(&wind),
+                time: 0.0,
+            };
+            let mut best = f64::INFINITY;
+            let mut sim = make();
+            for r in 0..repeat.max(1) {
+                if r > 0 && best > 20.0 {
+                    break;
+                }
+                sim = make();
+                let mut times = Vec::with_capacity(frames);
+                for _ in 0..frames {
+                    let t = Instant::now();
+                    sim.step_in(DT, &env, par);
+                    times.push(t.elapsed().as_secs_f64() * 1e3);
+                }
+                let mut m: Vec<f64> = times.iter().skip(WARMUP.min(frames / 2)).copied().collect();
+                m.sort_by(f64::total_cmp);
+                best = best.min(m[m.len() / 2]);
+            }
+            println!(
+                "{}",
+                Json::default()
+                    .str("scene_cost", v.name)
+                    .num("n", n)
+                    .num("substeps", 10)
+                    .num("iterations", 1)
+                    .num("ms_per_frame", (best * 1e4).round() / 1e4)
+                    .num("max_strain", sim.strain().max)
+                    .num("nan_count", sim.state().non_finite_count() as f64)
+                    .num("threads", threads as f64)
+            );
+        }
+    }
+}
+
 fn main() {
     let args = Args::parse();
     let quick = args.rest.contains_key("quick");
@@ -187,6 +313,10 @@ fn main() {
         .num_threads(threads.saturating_sub(1))
         .build();
     let par = TaskPoolParallel(&pool);
+    if args.rest.contains_key("scene-costs") {
+        scene_costs(&args, &par, threads);
+        return;
+    }
     let mut rows: Vec<(String, u32, u32, u32, Outcome)> = Vec::new();
 
     for &n in &sizes {

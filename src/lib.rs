@@ -25,8 +25,12 @@
 //! ```
 //!
 //! # Modules
-//! - [`solver`]: the pure solver (no Bevy): topology, constraints, the step, shading data.
+//! - [`solver`]: the pure solver (no Bevy): topology, constraints, collisions, wind, tearing,
+//!   the step, shading data.
 //! - [`cloth`]: components, plugin and systems.
+//! - [`collider`]: shapes cloth collides with; with the `rapier` feature, the bevy_rapier3d
+//!   bridge and two-way coupling.
+//! - [`wind`]: global and local wind.
 //!
 //! # Headless
 //! A [`MinimalPlugins`](bevy::prelude::MinimalPlugins) app simulates cloth with no window and
@@ -34,13 +38,20 @@
 //! See the README and `tests/headless.rs`.
 
 pub mod cloth;
+pub mod collider;
 pub mod solver;
+pub mod wind;
 
 /// The types most apps need.
 pub mod prelude {
     pub use crate::cloth::{
         Cloth, ClothConfig, ClothError, ClothInvalid, ClothPin, ClothPins, ClothPlugin,
-        ClothPlugins, ClothSim, ClothSystems, PinAnchor, grid_mesh,
+        ClothPlugins, ClothSelfCollision, ClothSim, ClothSystems, ClothTearing, ClothTethers,
+        ClothTorn, PinAnchor, grid_mesh,
     };
-    pub use crate::solver::{BendRest, Grid, MassDistribution, Solver};
+    #[cfg(feature = "rapier")]
+    pub use crate::collider::rapier::ClothRapierPlugin;
+    pub use crate::collider::{ClothCollider, ClothContactImpulse, ColliderShape};
+    pub use crate::solver::{BendRest, Grid, MassDistribution, Solver, WindParams};
+    pub use crate::wind::{Wind, WindZone};
 }

@@ -290,6 +290,26 @@ pub fn stage(
     ));
 }
 
+/// Deepest penetration (metres) of any cloth vertex below any collider's surface this step.
+pub fn max_penetration(world: &mut World) -> f32 {
+    let colliders = world
+        .resource::<bevy_cloth::collider::ClothColliders>()
+        .clone();
+    let mut q = world.query::<&ClothSim>();
+    let mut worst = 0.0f32;
+    for c in q.iter(world) {
+        let s = c.simulation().state();
+        for collider in &colliders.colliders {
+            for i in 0..s.len() {
+                let local = collider.end.inverse_apply(s.position(i));
+                let d = collider.shape.distance(local).0 * collider.end.scale;
+                worst = worst.max(-d);
+            }
+        }
+    }
+    worst
+}
+
 /// A double-sided cloth material.
 pub fn cloth_material(color: Color) -> StandardMaterial {
     StandardMaterial {

@@ -50,17 +50,77 @@ pub struct Cloth {
     pub mass_distribution: MassDistribution,
     /// Rest angle of the bending constraints: flat, or the mesh's modelled folds.
     pub bend_rest: BendRest,
+    /// When a pin's anchor jumps farther than this in one step (metres), the whole cloth is
+    /// moved with it instead of being dragged (a teleported character keeps its cape).
+    pub teleport_distance: f32,
 }
 
 impl Default for Cloth {
-    /// 0.2 kg (a 1 m² cotton sheet), area-weighted, flat at rest.
+    /// 0.2 kg (a 1 m² cotton sheet), area-weighted, flat at rest, teleport beyond 2 m.
     fn default() -> Self {
         Self {
             mass: 0.2,
             mass_distribution: MassDistribution::Area,
             bend_rest: BendRest::Flat,
+            teleport_distance: 2.0,
         }
     }
+}
+
+/// Keeps a cloth from passing through itself (opt-in: add it to the cloth entity).
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq)]
+#[reflect(Component, Default, Clone, PartialEq)]
+pub struct ClothSelfCollision {
+    /// Distance kept between any two vertices; `None` uses the mean rest edge length, which
+    /// stops edges slipping between vertices.
+    pub thickness: Option<f32>,
+    /// Friction between touching parts of the cloth.
+    pub friction: f32,
+}
+
+/// Long-range attachments: no vertex gets farther from its nearest pin than its rest distance
+/// along the cloth (plus `slack`), so capes and banners do not stretch like rubber at few
+/// iterations (opt-in).
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Default, Clone, PartialEq)]
+pub struct ClothTethers {
+    /// Allowed stretch beyond the rest distance to a pin (0.02 = 2 %).
+    pub slack: f32,
+    /// Pins each vertex is tethered to (its nearest ones along the cloth; at least 1).
+    pub pins_per_vertex: usize,
+}
+
+impl Default for ClothTethers {
+    fn default() -> Self {
+        Self {
+            slack: 0.0,
+            pins_per_vertex: 2,
+        }
+    }
+}
+
+/// Lets a cloth tear: an edge stretched past `threshold ×` its rest length breaks, its
+/// triangles disappear, and a [`ClothTorn`] message says which (opt-in).
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Default, Clone, PartialEq)]
+pub struct ClothTearing {
+    /// Stretch factor at which an edge breaks (> 1).
+    pub threshold: f32,
+}
+
+impl Default for ClothTearing {
+    fn default() -> Self {
+        Self { threshold: 1.6 }
+    }
+}
+
+/// Sent when edges of a cloth tear.
+#[derive(Message, Clone, Debug, PartialEq)]
+pub struct ClothTorn {
+    /// The cloth entity.
+    pub cloth: Entity,
+    /// The torn edges, as pairs of mesh vertex indices.
+    pub edges: Vec<[u32; 2]>,
 }
 
 /// How a cloth is solved: solver and material, substeps, iterations, gravity, damping.

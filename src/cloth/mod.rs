@@ -12,7 +12,10 @@ mod plugin;
 mod sim;
 mod writeback;
 
-pub use components::{Cloth, ClothConfig, ClothPin, ClothPins, PinAnchor};
+pub use components::{
+    Cloth, ClothConfig, ClothPin, ClothPins, ClothSelfCollision, ClothTearing, ClothTethers,
+    ClothTorn, PinAnchor,
+};
 pub use mesh::{MeshData, grid_mesh, read_mesh};
 pub use plugin::{ClothPlugin, ClothPlugins, ClothSystems};
 pub use sim::{ClothError, ClothInvalid, ClothSim, TaskPoolParallel};

@@ -7,7 +7,12 @@ use bevy::transform::TransformSystems;
 
 use super::sim::{init_cloths, retry_cloths, step_cloths, sync_cloths};
 use super::writeback::write_back;
-use super::{Cloth, ClothConfig, ClothPin, ClothPins, PinAnchor};
+use super::{
+    Cloth, ClothConfig, ClothPin, ClothPins, ClothSelfCollision, ClothTearing, ClothTethers,
+    ClothTorn, PinAnchor,
+};
+use crate::collider::ClothColliderPlugin;
+use crate::wind::ClothWindPlugin;
 
 /// The phases of cloth simulation, in order.
 ///
@@ -59,6 +64,10 @@ impl Plugin for ClothPlugin {
             .register_type::<ClothPins>()
             .register_type::<ClothPin>()
             .register_type::<PinAnchor>()
+            .register_type::<ClothSelfCollision>()
+            .register_type::<ClothTethers>()
+            .register_type::<ClothTearing>()
+            .add_message::<ClothTorn>()
             .configure_sets(
                 self.schedule,
                 (ClothSystems::Prepare, ClothSystems::Simulate).chain(),
@@ -94,6 +103,11 @@ impl Plugin for ClothPlugin {
 /// | plugin | what it does |
 /// |---|---|
 /// | [`ClothPlugin`] | creates, steps and writes back every [`Cloth`] on the CPU |
+/// | [`ClothColliderPlugin`] | [`ClothCollider`](crate::collider::ClothCollider)s: shapes, mesh SDFs, contact impulses |
+/// | [`ClothWindPlugin`] | the [`Wind`](crate::wind::Wind) resource and [`WindZone`](crate::wind::WindZone)s |
+///
+/// The rapier bridge (`ClothRapierPlugin`, cargo feature `rapier`) is not in the group: add it
+/// to opt in.
 ///
 /// Replace a part with `ClothPlugins::default().build().disable::<X>().add(Custom)`; simulate
 /// in another schedule with [`ClothPlugins::new`].
@@ -118,8 +132,15 @@ impl Default for ClothPlugins {
 
 impl PluginGroup for ClothPlugins {
     fn build(self) -> PluginGroupBuilder {
-        PluginGroupBuilder::start::<Self>().add(ClothPlugin {
-            schedule: self.schedule,
-        })
+        PluginGroupBuilder::start::<Self>()
+            .add(ClothPlugin {
+                schedule: self.schedule,
+            })
+            .add(ClothColliderPlugin {
+                schedule: self.schedule,
+            })
+            .add(ClothWindPlugin {
+                schedule: self.schedule,
+            })
     }
 }

@@ -3,12 +3,18 @@
 use bevy::prelude::*;
 use bevy::tasks::{ComputeTaskPool, TaskPool};
 
+use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
 use crate::solver::{
-    Parallel, Pin, Serial, Simulation, SolverError, SolverParams, Topology, TopologyOptions,
+    Environment, Features, Parallel, Pin, SelfCollision, Serial, Simulation, SolverError,
+    SolverParams, TetherParams, Topology, TopologyOptions,
 };
+use crate::wind::ClothWindField;
 
 use super::mesh::{cloth_mesh, read_mesh};
-use super::{Cloth, ClothConfig, ClothPins, PinAnchor};
+use super::{
+    Cloth, ClothConfig, ClothPins, ClothSelfCollision, ClothTearing, ClothTethers, ClothTorn,
+    PinAnchor,
+};
 
 /// Why a cloth is not simulated. Logged once (naming the entity) and stored in
 /// [`ClothInvalid`]; every other cloth keeps running.
@@ -75,8 +81,13 @@ pub struct ClothInvalid(pub ClothError);
 pub struct ClothSim {
     pub(crate) sim: Simulation,
     pub(crate) mesh: Handle<Mesh>,
+    /// Mesh-space rest positions (for pins that follow the cloth entity).
+    rest_local: Vec<Vec3>,
     steps: u64,
     pub(crate) dirty: bool,
+    /// The triangles changed (tearing): the index buffer must be rewritten.
+    pub(crate) indices_dirty: bool,
+    torn_edges: usize,
 }
 
 impl ClothSim {
@@ -103,6 +114,12 @@ impl ClothSim {
     #[must_use]
     pub fn steps(&self) -> u64 {
         self.steps
+    }
+
+    /// Edges torn so far.
+    #[must_use]
+    pub fn torn_edges(&self) -> usize {
+        self.torn_edges
     }
 }
 
@@ -142,6 +159,8 @@ fn pin_targets<'a>(
     })
 }
 
+type Built = (Simulation, Vec<Vec3>, Mesh);
+
 fn build(
     cloth: &Cloth,
     config: &ClothConfig,
@@ -149,13 +168,20 @@ fn build(
     mesh: &Mesh,
     own: &GlobalTransform,
     transforms: &Query<&GlobalTransform>,
-) -> Result<(Simulation, Mesh), ClothError> {
+) -> Result<Built, ClothError> {
     if !(cloth.mass.is_finite() && cloth.mass > 0.0) {
         return Err(ClothError::BadMass(cloth.mass));
     }
     let data = read_mesh(mesh)?;
+    // The rest shape is the mesh placed by the entity's transform, so a scaled entity gets a
+    // scaled cloth (rest lengths in world units).
+    let world: Vec<Vec3> = data
+        .positions
+        .iter()
+        .map(|p| own.transform_point(*p))
+        .collect();
     let topology = Topology::from_triangles(
-        &data.positions,
+        &world,
         data.uvs.as_deref(),
         &data.indices,
         TopologyOptions {
@@ -164,25 +190,43 @@ fn build(
     )
     .map_err(SolverError::from)?;
     let masses = topology.masses(cloth.mass, cloth.mass_distribution);
-    let world: Vec<Vec3> = data
-        .positions
-        .iter()
-        .map(|p| own.transform_point(*p))
-        .collect();
-    let mut sim = Simulation::with_positions(topology, &world, &masses, (*config).into())?;
-    set_pins(&mut sim, pins, own, transforms)?;
+    let mut sim = Simulation::new(topology, &masses, (*config).into())?;
+    set_pins(&mut sim, pins, &data.positions, own, transforms)?;
     sim.state_mut().snap_pins();
     sim.update_shading();
-    Ok((sim, cloth_mesh(mesh, &data)))
+    Ok((sim, data.positions.clone(), cloth_mesh(mesh, &data)))
+}
+
+/// The solver features a cloth's opt-in components ask for.
+fn features(
+    sim: &Simulation,
+    self_collision: Option<&ClothSelfCollision>,
+    tethers: Option<&ClothTethers>,
+    tearing: Option<&ClothTearing>,
+) -> Features {
+    Features {
+        self_collision: self_collision.map(|sc| SelfCollision {
+            thickness: sc.thickness.unwrap_or_else(|| {
+                let e = sim.topology().edges();
+                e.iter().map(|e| e.rest).sum::<f32>() / e.len().max(1) as f32
+            }),
+            friction: sc.friction,
+        }),
+        tethers: tethers.map(|t| TetherParams {
+            slack: t.slack,
+            pins_per_vertex: t.pins_per_vertex,
+        }),
+        tear_threshold: tearing.map(|t| t.threshold),
+    }
 }
 
 fn set_pins(
     sim: &mut Simulation,
     pins: &ClothPins,
+    rest: &[Vec3],
     own: &GlobalTransform,
     transforms: &Query<&GlobalTransform>,
 ) -> Result<(), SolverError> {
-    let rest = sim.topology().rest_positions().to_vec();
     let current: Vec<Vec3> = pins
         .0
         .iter()
@@ -196,7 +240,7 @@ fn set_pins(
     let list: Vec<Pin> = pins
         .0
         .iter()
-        .zip(pin_targets(pins, &rest, own, transforms))
+        .zip(pin_targets(pins, rest, own, transforms))
         .zip(current)
         .map(|((p, target), here)| Pin {
             vertex: p.vertex,
@@ -249,15 +293,18 @@ pub(crate) fn init_cloths(
             continue;
         };
         match build(cloth, config, pins, mesh, own, &transforms) {
-            Ok((sim, mesh)) => {
+            Ok((sim, rest_local, mesh)) => {
                 let handle = meshes.add(mesh);
                 commands.entity(entity).try_insert((
                     Mesh3d(handle.clone()),
                     ClothSim {
                         sim,
                         mesh: handle,
+                        rest_local,
                         steps: 0,
                         dirty: true,
+                        indices_dirty: false,
+                        torn_edges: 0,
                     },
                 ));
             }
@@ -280,6 +327,9 @@ pub(crate) fn retry_cloths(
                 Changed<ClothConfig>,
                 Changed<ClothPins>,
                 Changed<Mesh3d>,
+                Changed<ClothSelfCollision>,
+                Changed<ClothTethers>,
+                Changed<ClothTearing>,
             )>,
         ),
     >,
@@ -295,65 +345,116 @@ pub(crate) fn retry_cloths(
     }
 }
 
-/// Applies changed [`ClothConfig`]s and [`ClothPins`], and moves pin targets to their anchors.
+/// The optional components of a cloth entity.
+type FeatureQuery = (
+    Option<&'static ClothSelfCollision>,
+    Option<&'static ClothTethers>,
+    Option<&'static ClothTearing>,
+);
+
+/// Applies changed configs, pins and features, and moves pin targets to their anchors
+/// (moving the whole cloth along when an anchor teleports).
 #[expect(clippy::type_complexity, reason = "a query, read once")]
 pub(crate) fn sync_cloths(
     mut commands: Commands,
     mut cloths: Query<
         (
             Entity,
+            &Cloth,
             &mut ClothSim,
             Ref<ClothConfig>,
             Ref<ClothPins>,
             &GlobalTransform,
+            FeatureQuery,
         ),
         Without<ClothInvalid>,
     >,
     transforms: Query<&GlobalTransform>,
 ) {
-    for (entity, mut cloth, config, pins, own) in &mut cloths {
-        let cloth = &mut *cloth;
+    for (entity, cloth, mut sim, config, pins, own, (sc, tethers, tearing)) in &mut cloths {
+        let cs = &mut *sim;
         if config.is_changed()
-            && *cloth.sim.params() != SolverParams::from(*config)
-            && let Err(e) = cloth.sim.set_params((*config).into())
+            && *cs.sim.params() != SolverParams::from(*config)
+            && let Err(e) = cs.sim.set_params((*config).into())
+        {
+            report(&mut commands, entity, SolverError::Params(e).into());
+            continue;
+        }
+        let wanted = features(&cs.sim, sc, tethers, tearing);
+        if wanted != *cs.sim.features()
+            && let Err(e) = cs.sim.set_features(wanted)
         {
             report(&mut commands, entity, SolverError::Params(e).into());
             continue;
         }
         if pins.is_changed() {
-            if let Err(e) = set_pins(&mut cloth.sim, &pins, own, &transforms) {
+            if let Err(e) = set_pins(&mut cs.sim, &pins, &cs.rest_local, own, &transforms) {
                 report(&mut commands, entity, e.into());
-                continue;
             }
-        } else {
-            let rest = cloth.sim.topology().rest_positions();
-            let targets: Vec<Option<Vec3>> = pin_targets(&pins, rest, own, &transforms).collect();
-            let current: Vec<Vec3> = cloth.sim.state().pins().iter().map(|p| p.target).collect();
-            cloth.sim.state_mut().set_pin_targets(
-                targets
-                    .into_iter()
-                    .zip(current)
-                    .map(|(t, c)| t.unwrap_or(c)),
-            );
+            continue;
+        }
+        let targets: Vec<Option<Vec3>> =
+            pin_targets(&pins, &cs.rest_local, own, &transforms).collect();
+        let current: Vec<Vec3> = cs.sim.state().pins().iter().map(|p| p.target).collect();
+        // A jump past the teleport distance moves the whole cloth by the pins' mean jump.
+        let jumps: Vec<Vec3> = targets
+            .iter()
+            .zip(&current)
+            .filter_map(|(t, c)| t.map(|t| t - *c))
+            .filter(|d| d.length() > cloth.teleport_distance)
+            .collect();
+        if !jumps.is_empty() {
+            let offset = jumps.iter().sum::<Vec3>() / jumps.len() as f32;
+            cs.sim.state_mut().translate(offset);
+            cs.dirty = true;
+        }
+        cs.sim.state_mut().set_pin_targets(
+            targets
+                .into_iter()
+                .zip(current)
+                .map(|(t, c)| t.unwrap_or(c)),
+        );
+        if !jumps.is_empty() {
+            cs.sim.state_mut().snap_pins();
         }
     }
 }
 
-/// Advances every valid cloth by one fixed step.
+/// Advances every valid cloth by one fixed step among the colliders and the wind.
 pub(crate) fn step_cloths(
     time: Res<Time>,
-    mut cloths: Query<&mut ClothSim, Without<ClothInvalid>>,
+    colliders: Option<Res<ClothColliders>>,
+    wind: Option<Res<ClothWindField>>,
+    mut cloths: Query<(Entity, &mut ClothSim), Without<ClothInvalid>>,
+    mut impulses: Query<&mut ClothContactImpulse>,
+    mut torn: MessageWriter<ClothTorn>,
 ) {
     let dt = time.delta_secs();
     if dt <= 0.0 {
         return;
     }
+    let no_colliders = ClothColliders::default();
+    let colliders = colliders.as_deref().unwrap_or(&no_colliders);
+    let env = Environment {
+        colliders: &colliders.colliders,
+        wind: wind.as_deref().map(|w| &w.field),
+        time: wind.as_deref().map_or(0.0, |w| w.time),
+    };
     let pool = ComputeTaskPool::try_get();
-    for mut cloth in &mut cloths {
+    for (entity, mut cloth) in &mut cloths {
         let cloth = &mut *cloth;
-        match pool {
-            Some(pool) => cloth.sim.step(dt, &TaskPoolParallel(pool)),
-            None => cloth.sim.step(dt, &Serial),
+        let report = match pool {
+            Some(pool) => cloth.sim.step_in(dt, &env, &TaskPoolParallel(pool)),
+            None => cloth.sim.step_in(dt, &env, &Serial),
+        };
+        add_impulses(colliders, cloth.sim.impulses(), &mut impulses);
+        if !report.torn.is_empty() {
+            cloth.torn_edges += report.torn.len();
+            cloth.indices_dirty = true;
+            torn.write(ClothTorn {
+                cloth: entity,
+                edges: report.torn,
+            });
         }
         cloth.steps += 1;
         cloth.dirty = true;

@@ -5,7 +5,7 @@
 //! space, so positions go through the inverse of its [`GlobalTransform`], normals through its
 //! transpose (inverse-transpose of world-to-local) and tangents through its inverse.
 
-use bevy::mesh::VertexAttributeValues;
+use bevy::mesh::{Indices, VertexAttributeValues};
 use bevy::prelude::*;
 
 use super::ClothSim;
@@ -28,6 +28,17 @@ pub(crate) fn write_back(
         let Some(mut mesh) = meshes.get_mut(&cloth.mesh) else {
             continue;
         };
+        if core::mem::take(&mut cloth.indices_dirty) {
+            // Torn triangles leave the index buffer; the vertex buffer keeps its size.
+            let indices: Vec<u32> = sim
+                .topology()
+                .triangles()
+                .iter()
+                .flatten()
+                .copied()
+                .collect();
+            mesh.insert_indices(Indices::U32(indices));
+        }
         let affine = gt.affine();
         let to_local = affine.inverse();
         let linear = affine.matrix3;

@@ -32,30 +32,42 @@
 
 mod batches;
 mod bending;
+mod collide;
 mod distance;
 mod lab;
 mod lanes;
 mod metrics;
 mod parallel;
 mod params;
+mod sdf;
+mod self_collision;
 mod shading;
 mod state;
 mod step;
+mod tear;
+mod tether;
 mod topology;
+mod wind;
 
 pub use batches::{ConstraintBatches, default_part_count};
 pub use bending::dihedral_angle;
+pub use collide::{Collider, ContactImpulse, Pose, Shape};
 pub use lab::{LabScratch, lab_step};
 pub use metrics::{StrainStats, edge_strain, position_distance};
 pub use parallel::{Parallel, Serial};
 pub use params::{LAB_WEIGHT, ParamError, Solver, SolverParams};
+pub use sdf::{SdfError, SdfGrid, point_triangle_distance};
+pub use self_collision::{SelfCollision, SelfCollisionScratch, count_self_crossings};
 pub use shading::{vertex_normals, vertex_tangents};
 pub use state::{ClothState, Pin, StateError};
-pub use step::{StepScratch, step};
+pub use step::{StepInput, StepScratch, step};
+pub use tear::overstretched_edges;
+pub use tether::{TetherParams, Tethers};
 pub use topology::{
     Bend, BendRest, Edge, EdgeKind, Grid, MassDistribution, Topology, TopologyError,
     TopologyOptions,
 };
+pub use wind::{WindField, WindParams, WindRegion, triangle_wind_force, wind_accelerations};
 
 use glam::{Vec3, Vec4};
 
@@ -82,6 +94,48 @@ impl core::fmt::Display for SolverError {
 
 impl std::error::Error for SolverError {}
 
+impl Features {
+    /// Checks every setting.
+    ///
+    /// # Errors
+    /// [`ParamError`] naming the first setting out of range: a self-collision thickness that
+    /// is not finite and positive, a negative or NaN friction or slack, a tear threshold not
+    /// above 1.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let bad = |name: &'static str, v: f32, want: &str| ParamError {
+            name,
+            reason: format!("{v} must be {want}"),
+        };
+        if let Some(sc) = self.self_collision {
+            if !(sc.thickness.is_finite() && sc.thickness > 0.0) {
+                return Err(bad(
+                    "self_collision.thickness",
+                    sc.thickness,
+                    "finite and > 0",
+                ));
+            }
+            if !(sc.friction.is_finite() && sc.friction >= 0.0) {
+                return Err(bad(
+                    "self_collision.friction",
+                    sc.friction,
+                    "finite and ≥ 0",
+                ));
+            }
+        }
+        if let Some(t) = self.tethers
+            && !(t.slack.is_finite() && t.slack >= 0.0)
+        {
+            return Err(bad("tethers.slack", t.slack, "finite and ≥ 0"));
+        }
+        if let Some(t) = self.tear_threshold
+            && !(t.is_finite() && t > 1.0)
+        {
+            return Err(bad("tear_threshold", t, "finite and > 1"));
+        }
+        Ok(())
+    }
+}
+
 impl From<TopologyError> for SolverError {
     fn from(e: TopologyError) -> Self {
         SolverError::Topology(e)
@@ -107,9 +161,42 @@ pub struct Simulation {
     state: ClothState,
     batches: ConstraintBatches,
     params: SolverParams,
+    features: Features,
+    tethers: Option<(Vec<u32>, Tethers)>,
     scratch: StepScratch,
+    wind_air: Vec<Vec3>,
+    wind_acc: Vec<Vec4>,
     normals: Vec<Vec3>,
     tangents: Vec<Vec4>,
+}
+
+/// Optional per-cloth capabilities; each costs nothing while `None`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Features {
+    /// Keep the cloth from passing through itself.
+    pub self_collision: Option<SelfCollision>,
+    /// Long-range attachments from every vertex to its nearest pin.
+    pub tethers: Option<TetherParams>,
+    /// Tear edges stretched past this factor of their rest length (> 1).
+    pub tear_threshold: Option<f32>,
+}
+
+/// The world a step happens in.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Environment<'a> {
+    /// Shapes the cloth collides with.
+    pub colliders: &'a [Collider],
+    /// Wind, if any.
+    pub wind: Option<&'a WindField>,
+    /// Time in seconds (drives gusts).
+    pub time: f32,
+}
+
+/// What a step did that the caller may want to act on.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StepReport {
+    /// Edges (vertex pairs) that tore during the step.
+    pub torn: Vec<[u32; 2]>,
 }
 
 impl Simulation {
@@ -155,7 +242,11 @@ impl Simulation {
             state,
             batches,
             params,
+            features: Features::default(),
+            tethers: None,
             scratch: StepScratch::default(),
+            wind_air: Vec::new(),
+            wind_acc: Vec::new(),
             normals: Vec::new(),
             tangents: Vec::new(),
         };
@@ -168,17 +259,90 @@ impl Simulation {
         self.batches = ConstraintBatches::new(&self.topology, &self.params, parts);
     }
 
-    /// Advances by `dt` seconds.
-    pub fn step(&mut self, dt: f32, par: &impl Parallel) {
+    /// Advances by `dt` seconds, alone in the world (no colliders, no wind).
+    pub fn step(&mut self, dt: f32, par: &impl Parallel) -> StepReport {
+        self.step_in(dt, &Environment::default(), par)
+    }
+
+    /// Advances by `dt` seconds among `env`'s colliders and wind, with this cloth's
+    /// [`Features`]; tears edges afterwards if tearing is on.
+    pub fn step_in(&mut self, dt: f32, env: &Environment<'_>, par: &impl Parallel) -> StepReport {
+        // Tethers follow the pins: rebuild when the pinned vertices changed.
+        match self.features.tethers {
+            Some(params) => {
+                let pins: Vec<u32> = self.state.pins().iter().map(|p| p.vertex).collect();
+                if self.tethers.as_ref().is_none_or(|(p, _)| *p != pins) {
+                    let t = Tethers::build(&self.topology, &pins, params);
+                    self.tethers = Some((pins, t));
+                }
+            }
+            None => self.tethers = None,
+        }
+        let wind = env.wind.filter(|w| !w.is_empty());
+        if let Some(field) = wind {
+            wind_accelerations(
+                &self.state.positions,
+                &self.state.velocities,
+                self.topology.triangles(),
+                field,
+                env.time,
+                dt,
+                &mut self.wind_air,
+                &mut self.wind_acc,
+            );
+        }
         step(
             &mut self.state,
             &self.topology,
             &mut self.batches,
             &self.params,
             dt,
+            StepInput {
+                colliders: env.colliders,
+                accelerations: if wind.is_some() { &self.wind_acc } else { &[] },
+                self_collision: self.features.self_collision,
+                tethers: self.tethers.as_ref().map(|(_, t)| t),
+            },
             &mut self.scratch,
             par,
         );
+        let mut report = StepReport::default();
+        if let Some(threshold) = self.features.tear_threshold {
+            report.torn =
+                overstretched_edges(&self.state.positions, self.topology.edges(), threshold);
+            if !report.torn.is_empty() {
+                self.topology = self.topology.without_edges(&report.torn);
+                self.batches =
+                    ConstraintBatches::new(&self.topology, &self.params, self.batches.part_count());
+                self.tethers = None;
+            }
+        }
+        report
+    }
+
+    /// Sets the optional capabilities (cheap; tethers are rebuilt on the next step).
+    ///
+    /// # Errors
+    /// [`ParamError`] if a thickness, friction, slack or tear threshold is out of range.
+    pub fn set_features(&mut self, features: Features) -> Result<(), ParamError> {
+        features.validate()?;
+        if features.tethers != self.features.tethers {
+            self.tethers = None;
+        }
+        self.features = features;
+        Ok(())
+    }
+
+    /// The optional capabilities in use.
+    #[must_use]
+    pub fn features(&self) -> &Features {
+        &self.features
+    }
+
+    /// Impulse the cloth gave each collider of the last [`Self::step_in`], in N·s.
+    #[must_use]
+    pub fn impulses(&self) -> &[ContactImpulse] {
+        self.scratch.impulses()
     }
 
     /// Changes the solver parameters (cheap: no rebuild).

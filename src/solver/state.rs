@@ -227,6 +227,22 @@ impl ClothState {
         }
     }
 
+    /// Moves the whole cloth by `offset`, keeping its velocities (a teleport of everything the
+    /// cloth hangs from). Pin targets move too.
+    pub fn translate(&mut self, offset: Vec3) {
+        if !offset.is_finite() {
+            return;
+        }
+        let o = offset.extend(0.0);
+        for (p, q) in self.positions.iter_mut().zip(&mut self.prev) {
+            *p += o;
+            *q += o;
+        }
+        for pin in &mut self.pins {
+            pin.target += offset;
+        }
+    }
+
     /// Moves every vertex to `positions` with zero velocity (pins keep their targets).
     ///
     /// # Panics

@@ -1,14 +1,19 @@
-//! One simulation step: integrate, project, update velocities, over substeps.
+//! One simulation step: integrate, project, collide, update velocities, over substeps.
 //!
 //! For PBD and XPBD, each of the `S` substeps of length `h = Δt/S` does:
 //!
 //! 1. pins move to their interpolated targets;
-//! 2. every unpinned vertex: `x_prev ← x`, `v ← v/(1 + damping·h) + g·h`, `x ← x + v·h`;
+//! 2. every unpinned vertex: `x_prev ← x`, `v ← v/(1 + damping·h) + (g + a)·h`, `x ← x + v·h`
+//!    (`a`: extra per-vertex acceleration such as wind);
 //! 3. `iterations` times: each part's constraints (in parallel), then the boundary's;
-//! 4. `v ← (x − x_prev)/h` (done at the start of the next substep, or at the end).
+//! 4. tethers, then self-collision (if on; one pass each);
+//! 5. colliders (if any), each part in parallel;
+//! 6. `v ← (x − x_prev)/h` (done at the start of the next substep, or at the end).
 //!
 //! Step 2 and the first iteration of step 3 share one parallel region, so a substep with one
-//! iteration costs one fork–join.
+//! iteration and no colliders costs one fork–join. Everything a scene does not use costs
+//! nothing: no collider pass without colliders, no tether or self-collision pass unless set,
+//! no wind term without accelerations, no bending pass at zero bending stiffness.
 //!
 //! Bending is projected in every substep, together with the distances. Solving it less often
 //! (every `k` substeps, as an impulse or as a positional correction over the window) was tried
@@ -17,17 +22,50 @@
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
 use super::batches::{ConstraintBatches, Mode, Part};
+use super::collide::{Collider, ContactImpulse, SubstepPose, collide_vertex, substep_poses};
 use super::lab::{LabScratch, lab_step};
 use super::parallel::Parallel;
 use super::params::{Solver, SolverParams};
+use super::self_collision::{
+    SelfCollision, SelfCollisionScratch, find_self_collision_pairs, self_collide,
+};
 use super::state::ClothState;
+use super::tether::Tethers;
 use super::topology::Topology;
 
-/// Scratch memory a step reuses (no allocation per step after the first).
-#[derive(Clone, Debug, Default, PartialEq)]
+/// What a step includes besides the cloth's own constraints. `StepInput::default()` is a
+/// cloth alone in the world.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StepInput<'a> {
+    /// Shapes the cloth collides with.
+    pub colliders: &'a [Collider],
+    /// Extra acceleration per vertex (m/s², `w` ignored), e.g. from wind; empty for none.
+    pub accelerations: &'a [Vec4],
+    /// Self-collision, if on.
+    pub self_collision: Option<SelfCollision>,
+    /// Long-range attachments to the pins, if any.
+    pub tethers: Option<&'a Tethers>,
+}
+
+/// Scratch memory a step reuses (no allocation per step after the first), and what a step
+/// reports back.
+#[derive(Clone, Debug, Default)]
 pub struct StepScratch {
     pin_start: Vec<Vec3>,
     lab: LabScratch,
+    poses: Vec<SubstepPose>,
+    part_impulses: Vec<Vec<ContactImpulse>>,
+    impulses: Vec<ContactImpulse>,
+    self_collision: SelfCollisionScratch,
+}
+
+impl StepScratch {
+    /// Impulse the cloth gave each collider during the last step, in the order of
+    /// [`StepInput::colliders`].
+    #[must_use]
+    pub fn impulses(&self) -> &[ContactImpulse] {
+        &self.impulses
+    }
 }
 
 /// A part's constraints and its slice of the vertex arrays.
@@ -36,6 +74,8 @@ struct Work<'a> {
     pos: &'a mut [Vec4],
     prev: &'a mut [Vec4],
     vel: &'a mut [Vec4],
+    acc: &'a [Vec4],
+    impulses: &'a mut Vec<ContactImpulse>,
 }
 
 fn split<'a>(
@@ -43,21 +83,27 @@ fn split<'a>(
     mut pos: &'a mut [Vec4],
     mut prev: &'a mut [Vec4],
     mut vel: &'a mut [Vec4],
+    mut acc: &'a [Vec4],
+    impulses: &'a mut [Vec<ContactImpulse>],
 ) -> Vec<Work<'a>> {
     let mut out = Vec::with_capacity(parts.len());
-    for part in parts {
+    for (part, impulses) in parts.iter_mut().zip(impulses) {
         let n = part.range.len();
         let (p, rest_p) = pos.split_at_mut(n);
         let (q, rest_q) = prev.split_at_mut(n);
         let (v, rest_v) = vel.split_at_mut(n);
+        let (a, rest_a) = acc.split_at(n.min(acc.len()));
         pos = rest_p;
         prev = rest_q;
         vel = rest_v;
+        acc = rest_a;
         out.push(Work {
             part,
             pos: p,
             prev: q,
             vel: v,
+            acc: a,
+            impulses,
         });
     }
     out
@@ -72,6 +118,8 @@ struct Phase {
     integrate: bool,
     /// Project the part's constraints once.
     project: bool,
+    /// Push vertices out of the colliders.
+    collide: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -86,7 +134,13 @@ struct Consts {
     accumulate: bool,
 }
 
-fn run_part(w: &mut Work<'_>, phase: Phase, c: Consts) {
+fn run_part(
+    w: &mut Work<'_>,
+    phase: Phase,
+    c: Consts,
+    colliders: &[Collider],
+    poses: &[SubstepPose],
+) {
     if phase.finish_velocity {
         for ((v, x), p) in w.vel.iter_mut().zip(w.pos.iter()).zip(w.prev.iter()) {
             // Unpinned vertices have the same inverse mass in x and x_prev: w − w = 0.
@@ -97,16 +151,27 @@ fn run_part(w: &mut Work<'_>, phase: Phase, c: Consts) {
     }
     if phase.integrate {
         let gh = c.gravity.extend(0.0) * c.h;
-        for ((v, x), p) in w
+        let vertices = w
             .vel
             .iter_mut()
             .zip(w.pos.iter_mut())
-            .zip(w.prev.iter_mut())
-        {
-            if x.w > 0.0 {
-                *p = *x;
-                *v = *v * c.damp + gh;
-                *x += *v * c.h;
+            .zip(w.prev.iter_mut());
+        if w.acc.is_empty() {
+            for ((v, x), p) in vertices {
+                if x.w > 0.0 {
+                    *p = *x;
+                    *v = *v * c.damp + gh;
+                    *x += *v * c.h;
+                }
+            }
+        } else {
+            for (((v, x), p), a) in vertices.zip(w.acc) {
+                if x.w > 0.0 {
+                    *p = *x;
+                    let extra = Vec4::new(a.x, a.y, a.z, 0.0) * c.h;
+                    *v = *v * c.damp + gh + extra;
+                    *x += *v * c.h;
+                }
             }
         }
         if c.accumulate {
@@ -116,21 +181,37 @@ fn run_part(w: &mut Work<'_>, phase: Phase, c: Consts) {
     if phase.project {
         w.part.project(w.pos, c.mode, c.bending, c.accumulate);
     }
+    if phase.collide {
+        for (x, p) in w.pos.iter_mut().zip(w.prev.iter()) {
+            collide_vertex(x, *p, colliders, poses, w.impulses);
+        }
+    }
 }
 
 /// Advances the cloth by `dt` seconds.
 ///
 /// `batches` must have been built from `topology`, and `params` validated
-/// ([`SolverParams::validate`]); a non-positive or non-finite `dt` does nothing.
+/// ([`SolverParams::validate`]); a non-positive or non-finite `dt` does nothing. The lab
+/// solver reproduces seed 000 and ignores `input`. Impulses on the colliders are left in
+/// [`StepScratch::impulses`].
+#[expect(
+    clippy::too_many_arguments,
+    reason = "a step takes all it needs explicitly"
+)]
 pub fn step(
     state: &mut ClothState,
     topology: &Topology,
     batches: &mut ConstraintBatches,
     params: &SolverParams,
     dt: f32,
+    input: StepInput<'_>,
     scratch: &mut StepScratch,
     par: &impl Parallel,
 ) {
+    scratch.impulses.clear();
+    scratch
+        .impulses
+        .resize(input.colliders.len(), ContactImpulse::default());
     if !(dt.is_finite() && dt > 0.0) || state.is_empty() {
         return;
     }
@@ -167,6 +248,29 @@ pub fn step(
         bending: batches.bending,
         accumulate: batches.mode_is_xpbd && params.iterations > 1,
     };
+    let acc = if input.accelerations.len() == state.len() {
+        input.accelerations
+    } else {
+        &[]
+    };
+    if let Some(sc) = input.self_collision {
+        find_self_collision_pairs(
+            &state.positions,
+            &state.velocities,
+            topology.rest_positions(),
+            sc,
+            dt,
+            &mut scratch.self_collision,
+        );
+    }
+    let colliders = input.colliders;
+    scratch
+        .part_impulses
+        .resize(batches.parts.len(), Vec::new());
+    for p in &mut scratch.part_impulses {
+        p.clear();
+        p.resize(colliders.len(), ContactImpulse::default());
+    }
     for s in 0..substeps {
         // Pins: finish their velocity for the previous substep, then move.
         for pin in &state.pins {
@@ -178,26 +282,57 @@ pub fn step(
             state.prev[i] = state.positions[i];
         }
         state.place_pins(&scratch.pin_start, s, substeps);
+        substep_poses(colliders, s, substeps, &mut scratch.poses);
+        let poses = &scratch.poses;
 
         for it in 0..params.iterations.max(1) {
             let phase = Phase {
                 finish_velocity: it == 0 && s > 0,
                 integrate: it == 0,
                 project: true,
+                collide: false,
             };
             let mut work = split(
                 &mut batches.parts,
                 &mut state.positions,
                 &mut state.prev,
                 &mut state.velocities,
+                acc,
+                &mut scratch.part_impulses,
             );
-            par.for_each_mut(&mut work, |w| run_part(w, phase, c));
+            par.for_each_mut(&mut work, |w| run_part(w, phase, c, colliders, poses));
             if it == 0 && c.accumulate {
                 batches.boundary.reset_lambda();
             }
             batches
                 .boundary
                 .project(&mut state.positions, c.mode, c.bending, c.accumulate);
+        }
+        if let Some(tethers) = input.tethers {
+            tethers.project(&mut state.positions);
+        }
+        if let Some(sc) = input.self_collision {
+            self_collide(
+                &mut state.positions,
+                &state.prev,
+                sc,
+                &scratch.self_collision,
+            );
+        }
+        if !colliders.is_empty() {
+            let phase = Phase {
+                collide: true,
+                ..Default::default()
+            };
+            let mut work = split(
+                &mut batches.parts,
+                &mut state.positions,
+                &mut state.prev,
+                &mut state.velocities,
+                acc,
+                &mut scratch.part_impulses,
+            );
+            par.for_each_mut(&mut work, |w| run_part(w, phase, c, colliders, poses));
         }
     }
     let phase = Phase {
@@ -209,11 +344,22 @@ pub fn step(
         &mut state.positions,
         &mut state.prev,
         &mut state.velocities,
+        acc,
+        &mut scratch.part_impulses,
     );
-    par.for_each_mut(&mut work, |w| run_part(w, phase, c));
+    par.for_each_mut(&mut work, |w| {
+        run_part(w, phase, c, colliders, &scratch.poses)
+    });
     for pin in &state.pins {
         let i = pin.vertex as usize;
         state.velocities[i] =
             ((state.positions[i].xyz() - state.prev[i].xyz()) * c.inv_h).extend(0.0);
+    }
+    // Momentum per collider: the per-part sums of −m·Δx, over h.
+    for part in &scratch.part_impulses {
+        for (total, p) in scratch.impulses.iter_mut().zip(part) {
+            total.linear += p.linear * c.inv_h;
+            total.angular += p.angular * c.inv_h;
+        }
     }
 }

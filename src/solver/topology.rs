@@ -8,6 +8,8 @@
 
 use glam::{Vec2, Vec3};
 
+use super::bending::dihedral_angle;
+
 /// What a distance edge resists.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum EdgeKind {
@@ -148,15 +150,7 @@ pub struct Topology {
     edges: Vec<Edge>,
     bends: Vec<Bend>,
     skipped_triangles: usize,
-}
-
-/// Index of the dihedral's shared edge endpoints and opposite vertices; see [`Bend`].
-fn dihedral_angle(p: [Vec3; 4]) -> f32 {
-    let [x1, x2, x3, x4] = p;
-    let (p2, p3, p4) = (x2 - x1, x3 - x1, x4 - x1);
-    let n1 = p2.cross(p3).normalize_or_zero();
-    let n2 = p2.cross(p4).normalize_or_zero();
-    n1.dot(n2).clamp(-1.0, 1.0).acos()
+    options: TopologyOptions,
 }
 
 impl Topology {
@@ -217,7 +211,23 @@ impl Topology {
         if triangles.is_empty() {
             return Err(TopologyError::NoTriangles);
         }
+        let mut t = Self::build(
+            positions.to_vec(),
+            uvs.map(<[Vec2]>::to_vec),
+            triangles,
+            options,
+        );
+        t.skipped_triangles = skipped;
+        Ok(t)
+    }
 
+    /// Edges and bending pairs of valid triangles (which may be none, after tearing).
+    fn build(
+        positions: Vec<Vec3>,
+        uvs: Option<Vec<Vec2>>,
+        triangles: Vec<[u32; 3]>,
+        options: TopologyOptions,
+    ) -> Self {
         // (min, max, triangle, opposite vertex) for every triangle edge, sorted: equal keys
         // are adjacent, and the unique edges come out sorted as in seed 000.
         let mut half: Vec<(u32, u32, u32)> = Vec::with_capacity(triangles.len() * 3);
@@ -230,7 +240,7 @@ impl Topology {
         half.sort_unstable_by_key(|&(a, b, c)| (a, b, c));
 
         let uv_kind = |a: u32, b: u32| -> EdgeKind {
-            let Some(uvs) = uvs else {
+            let Some(uvs) = &uvs else {
                 return EdgeKind::Stretch;
             };
             let d = (uvs[a as usize] - uvs[b as usize]).abs();
@@ -274,14 +284,42 @@ impl Topology {
             i = j;
         }
 
-        Ok(Self {
-            rest_positions: positions.to_vec(),
-            uvs: uvs.map(<[Vec2]>::to_vec),
+        Self {
+            rest_positions: positions,
+            uvs,
             triangles,
             edges,
             bends,
-            skipped_triangles: skipped,
-        })
+            skipped_triangles: 0,
+            options,
+        }
+    }
+
+    /// The topology left after tearing `torn` edges (vertex pairs, either order): every
+    /// triangle that uses a torn edge is removed, and with it every edge and bending pair that
+    /// no remaining triangle supports. Vertices stay (a fully torn cloth is free particles).
+    #[must_use]
+    pub fn without_edges(&self, torn: &[[u32; 2]]) -> Self {
+        let mut cut: Vec<(u32, u32)> = torn
+            .iter()
+            .map(|e| (e[0].min(e[1]), e[0].max(e[1])))
+            .collect();
+        cut.sort_unstable();
+        let is_cut = |a: u32, b: u32| cut.binary_search(&(a.min(b), a.max(b))).is_ok();
+        let triangles = self
+            .triangles
+            .iter()
+            .filter(|t| !(is_cut(t[0], t[1]) || is_cut(t[1], t[2]) || is_cut(t[2], t[0])))
+            .copied()
+            .collect();
+        let mut t = Self::build(
+            self.rest_positions.clone(),
+            self.uvs.clone(),
+            triangles,
+            self.options,
+        );
+        t.skipped_triangles = self.skipped_triangles;
+        t
     }
 
     /// Number of vertices.

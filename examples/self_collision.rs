@@ -1,0 +1,105 @@
+//! Self-collision: a long strip dropped end-first onto the floor folds and piles up on itself
+//! without passing through itself (`ClothSelfCollision`).
+//!
+//! ```text
+//! cargo run --release --example self_collision
+//! cargo run --release --example self_collision -- --headless --frames 240
+//! cargo run --release --example self_collision -- --headless --frames 240 --off   # for comparison
+//! ```
+//! The JSON line adds `crossings` (edge–triangle pairs of the strip that cross at the end) and
+//! `max_crossings` over the run.
+
+#[path = "support/mod.rs"]
+mod support;
+
+use bevy::prelude::*;
+use bevy_cloth::prelude::*;
+use bevy_cloth::solver::count_self_crossings;
+use support::Args;
+
+#[derive(Resource, Default)]
+struct Crossings {
+    now: usize,
+    max: usize,
+}
+
+#[derive(Resource)]
+struct Off(bool);
+
+fn setup(
+    mut commands: Commands,
+    off: Res<Off>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    materials: Option<ResMut<Assets<StandardMaterial>>>,
+) {
+    let grid = Grid::new(12, 60, 0.5, 3.0);
+    let mut strip = commands.spawn((
+        Mesh3d(meshes.add(grid_mesh(&grid))),
+        // Stood almost upright, its lower end just above the floor.
+        Transform::from_xyz(0.0, 1.56, 0.0)
+            .with_rotation(Quat::from_rotation_x(core::f32::consts::FRAC_PI_2 * 0.96)),
+        Cloth {
+            mass: 0.3,
+            ..default()
+        },
+        ClothConfig {
+            substeps: 12,
+            ..default()
+        },
+    ));
+    if !off.0 {
+        strip.insert(ClothSelfCollision {
+            thickness: None,
+            friction: 0.2,
+        });
+    }
+    if let Some(mut m) = materials {
+        strip.insert(MeshMaterial3d(
+            m.add(support::cloth_material(Color::srgb(0.3, 0.3, 0.75))),
+        ));
+        support::stage(
+            &mut commands,
+            &mut meshes,
+            &mut m,
+            Vec3::new(2.5, 1.5, 2.5),
+            Vec3::new(0.0, 0.2, 0.0),
+        );
+    }
+    commands.spawn(
+        ClothCollider::plane()
+            .with_thickness(0.005)
+            .with_friction(0.6),
+    );
+}
+
+fn measure(cloths: Query<&ClothSim>, mut c: ResMut<Crossings>) {
+    for sim in &cloths {
+        let s = sim.simulation();
+        let edges: Vec<[u32; 2]> = s.topology().edges().iter().map(|e| e.v).collect();
+        c.now = count_self_crossings(&s.state().positions, s.topology().triangles(), &edges);
+        c.max = c.max.max(c.now);
+    }
+}
+
+fn report(world: &mut World) -> support::Json {
+    let (now, max) = {
+        let c = world.resource::<Crossings>();
+        (c.now, c.max)
+    };
+    let on = !world.resource::<Off>().0;
+    support::cloth_report(world)
+        .str("example", "self_collision")
+        .num("self_collision", if on { 1.0 } else { 0.0 })
+        .num("crossings", now as f64)
+        .num("max_crossings", max as f64)
+}
+
+fn main() {
+    let args = Args::parse();
+    let mut app = support::app(&args, "bevy_cloth: self-collision", 1.0 / 60.0);
+    app.insert_resource(Off(args.rest.contains_key("off")))
+        .init_resource::<Crossings>()
+        .add_systems(Startup, setup)
+        .add_systems(FixedPostUpdate, measure.after(ClothSystems::Simulate));
+    support::run(app, &args, report);
+}

@@ -1,0 +1,360 @@
+//! Self-collision: vertices of one cloth keep a minimum distance from each other.
+//!
+//! Once per step, vertices go into a dense spatial hash (cells of the query distance, counting
+//! sort into a table of twice the vertex count; Müller, "Ten Minute Physics" 11) and every
+//! vertex collects the vertices in the (at most 8) cells its query ball touches that are closer than `thickness`
+//! plus a margin for the motion during the step (twice the fastest vertex's travel, at most
+//! 1.5 thicknesses). Topological neighbours, vertices that rest closer than 2.5 thicknesses,
+//! are skipped: their distance and bending constraints keep them apart, and touching would
+//! need a fold tighter than bending allows. Each substep then walks only the candidate pairs:
+//! each pair closer than `thickness` is pushed apart along its axis, mass-weighted, with
+//! friction on the pair's relative sliding. Cost is
+//! linear in the vertex count for a given density.
+
+use glam::{IVec3, Vec3, Vec4, Vec4Swizzles};
+
+/// Self-collision settings of one cloth.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SelfCollision {
+    /// Distance kept between any two vertices, in metres. About the edge length works well:
+    /// smaller lets edges slip between vertices.
+    pub thickness: f32,
+    /// Coulomb friction between touching parts of the cloth.
+    pub friction: f32,
+}
+
+/// Hash table and candidate pairs, reused between substeps.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SelfCollisionScratch {
+    start: Vec<u32>,
+    entries: Vec<u32>,
+    /// Cell of each vertex, to tell it from other cells sharing its bucket.
+    cells: Vec<IVec3>,
+    pairs: Vec<(u32, u32)>,
+}
+
+#[inline]
+fn cell_of(p: Vec3, inv_cell: f32) -> IVec3 {
+    // floor() without a libm call (x86-64's baseline has no rounding instruction):
+    // truncate, then step down for negative non-integers.
+    let v = p * inv_cell;
+    let t = v.as_ivec3();
+    t - IVec3::select(t.as_vec3().cmpgt(v), IVec3::ONE, IVec3::ZERO)
+}
+
+#[inline]
+fn hash(c: IVec3, size: usize) -> usize {
+    let h = (c.x.wrapping_mul(92_837_111))
+        ^ (c.y.wrapping_mul(689_287_499))
+        ^ (c.z.wrapping_mul(283_923_481));
+    (h.unsigned_abs() as usize) % size
+}
+
+impl SelfCollisionScratch {
+    /// Fills the hash with the current positions and collects the pairs closer than `reach`,
+    /// leaving out neighbours that rest closer than `skip` (their distance constraints keep
+    /// them apart).
+    fn find_pairs(&mut self, pos: &[Vec4], rest: &[Vec3], reach: f32, skip: f32) {
+        let n = pos.len();
+        let size = (2 * n).max(1);
+        let inv = 1.0 / reach;
+        self.start.clear();
+        self.start.resize(size + 1, 0);
+        self.entries.resize(n, 0);
+        self.cells.clear();
+        self.cells.extend(pos.iter().map(|p| cell_of(p.xyz(), inv)));
+        for (p, c) in pos.iter().zip(&self.cells) {
+            if p.xyz().is_finite() {
+                self.start[hash(*c, size)] += 1;
+            }
+        }
+        let mut acc = 0;
+        for s in &mut self.start {
+            acc += *s;
+            *s = acc;
+        }
+        for (i, p) in pos.iter().enumerate() {
+            if p.xyz().is_finite() {
+                let h = hash(self.cells[i], size);
+                self.start[h] -= 1;
+                self.entries[self.start[h] as usize] = i as u32;
+            }
+        }
+        self.pairs.clear();
+        let r2 = reach * reach;
+        let skip2 = skip * skip;
+        for (i, p) in pos.iter().enumerate() {
+            let p = p.xyz();
+            if !p.is_finite() {
+                continue;
+            }
+            // Cells are `reach` wide: the query ball touches at most 2 of them per axis.
+            let lo = cell_of(p - Vec3::splat(reach), inv);
+            let hi = cell_of(p + Vec3::splat(reach), inv);
+            for z in lo.z..=hi.z {
+                for y in lo.y..=hi.y {
+                    for x in lo.x..=hi.x {
+                        let cell = IVec3::new(x, y, z);
+                        let h = hash(cell, size);
+                        for &j in &self.entries[self.start[h] as usize..self.start[h + 1] as usize]
+                        {
+                            let j = j as usize;
+                            // Other cells hashed into this bucket are visited through their
+                            // own coordinates: counting each vertex once needs no dedup.
+                            if j > i
+                                && self.cells[j] == cell
+                                && pos[j].xyz().distance_squared(p) < r2
+                                && rest[i].distance_squared(rest[j]) > skip2
+                            {
+                                self.pairs.push((i as u32, j as u32));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Collects the candidate pairs for this step: vertices closer than `thickness` plus a margin
+/// for how far they can move in `dt` (see the module docs).
+pub(crate) fn find_self_collision_pairs(
+    pos: &[Vec4],
+    vel: &[Vec4],
+    rest: &[Vec3],
+    params: SelfCollision,
+    dt: f32,
+    scratch: &mut SelfCollisionScratch,
+) {
+    let thickness = params.thickness;
+    if !(thickness.is_finite() && thickness > 0.0) {
+        scratch.pairs.clear();
+        return;
+    }
+    let fastest = vel
+        .iter()
+        .map(|v| v.xyz().length_squared())
+        .filter(|s| s.is_finite())
+        .fold(0.0f32, f32::max)
+        .sqrt();
+    let margin = (2.0 * fastest * dt).min(1.5 * thickness);
+    scratch.find_pairs(pos, rest, thickness + margin, 2.5 * thickness);
+}
+
+/// One self-collision pass over the candidate pairs (`prev`: positions at the substep's
+/// start).
+pub(crate) fn self_collide(
+    pos: &mut [Vec4],
+    prev: &[Vec4],
+    params: SelfCollision,
+    scratch: &SelfCollisionScratch,
+) {
+    let thickness = params.thickness;
+    if !(thickness.is_finite() && thickness > 0.0) {
+        return;
+    }
+    for &(i, j) in &scratch.pairs {
+        let (i, j) = (i as usize, j as usize);
+        let limit = thickness;
+        let (a, b) = (pos[i], pos[j]);
+        let (wa, wb) = (a.w, b.w);
+        let w = wa + wb;
+        if w <= 0.0 {
+            continue;
+        }
+        let d = a.xyz() - b.xyz();
+        let len = d.length();
+        if len >= limit || len <= 1e-9 {
+            continue;
+        }
+        let n = d / len;
+        let push = limit - len;
+        let mut da = n * (push * wa / w);
+        let mut db = -n * (push * wb / w);
+        // Friction on the relative sliding of the pair during the substep.
+        let slide = (a.xyz() + da - prev[i].xyz()) - (b.xyz() + db - prev[j].xyz());
+        let tangential = slide - n * n.dot(slide);
+        let t_len = tangential.length();
+        if t_len > 0.0 {
+            let keep = (params.friction * push / t_len).min(1.0);
+            da -= tangential * (keep * wa / w);
+            db += tangential * (keep * wb / w);
+        }
+        if da.is_finite() && db.is_finite() {
+            pos[i] += da.extend(0.0);
+            pos[j] += db.extend(0.0);
+        }
+    }
+}
+
+/// Number of (edge, triangle) pairs of a mesh that cross each other, the edge sharing no vertex
+/// with the triangle: 0 for a cloth that never passed through itself.
+#[must_use]
+pub fn count_self_crossings(
+    positions: &[Vec4],
+    triangles: &[[u32; 3]],
+    edges: &[[u32; 2]],
+) -> usize {
+    if triangles.is_empty() || edges.is_empty() {
+        return 0;
+    }
+    let p = |i: u32| positions[i as usize].xyz();
+    // Uniform grid over triangle bounding boxes, cells of about the mean edge length.
+    let mean_edge =
+        edges.iter().map(|e| p(e[0]).distance(p(e[1]))).sum::<f32>() / edges.len() as f32;
+    let cell = mean_edge.max(1e-6) * 2.0;
+    let inv = 1.0 / cell;
+    let size = triangles.len() * 4;
+    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); size];
+    for (t, tri) in triangles.iter().enumerate() {
+        let [a, b, c] = tri.map(p);
+        if !(a.is_finite() && b.is_finite() && c.is_finite()) {
+            continue;
+        }
+        let lo = cell_of(a.min(b).min(c), inv);
+        let hi = cell_of(a.max(b).max(c), inv);
+        for z in lo.z..=hi.z {
+            for y in lo.y..=hi.y {
+                for x in lo.x..=hi.x {
+                    buckets[hash(IVec3::new(x, y, z), size)].push(t as u32);
+                }
+            }
+        }
+    }
+    let mut count = 0;
+    let mut seen = Vec::new();
+    for e in edges {
+        let (a, b) = (p(e[0]), p(e[1]));
+        if !(a.is_finite() && b.is_finite()) {
+            continue;
+        }
+        let lo = cell_of(a.min(b), inv);
+        let hi = cell_of(a.max(b), inv);
+        seen.clear();
+        for z in lo.z..=hi.z {
+            for y in lo.y..=hi.y {
+                for x in lo.x..=hi.x {
+                    seen.extend_from_slice(&buckets[hash(IVec3::new(x, y, z), size)]);
+                }
+            }
+        }
+        seen.sort_unstable();
+        seen.dedup();
+        for &t in &seen {
+            let tri = triangles[t as usize];
+            if tri.contains(&e[0]) || tri.contains(&e[1]) {
+                continue;
+            }
+            if segment_crosses_triangle(a, b, tri.map(p)) {
+                count += 1;
+            }
+        }
+    }
+    count
+}
+
+/// Möller–Trumbore segment–triangle intersection (strictly inside both).
+fn segment_crosses_triangle(a: Vec3, b: Vec3, [v0, v1, v2]: [Vec3; 3]) -> bool {
+    let dir = b - a;
+    let (e1, e2) = (v1 - v0, v2 - v0);
+    let h = dir.cross(e2);
+    let det = e1.dot(h);
+    if det.abs() < 1e-12 {
+        return false;
+    }
+    let f = 1.0 / det;
+    let s = a - v0;
+    let u = f * s.dot(h);
+    if !(0.0..=1.0).contains(&u) {
+        return false;
+    }
+    let q = s.cross(e1);
+    let v = f * dir.dot(q);
+    if v < 0.0 || u + v > 1.0 {
+        return false;
+    }
+    let t = f * e2.dot(q);
+    t > 0.0 && t < 1.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn close_vertices_are_pushed_apart_to_thickness() {
+        let mut pos = vec![
+            Vec4::new(0.0, 0.0, 0.0, 1.0),
+            Vec4::new(0.0, 0.01, 0.0, 1.0),
+            Vec4::new(5.0, 0.0, 0.0, 1.0),
+        ];
+        let prev = pos.clone();
+        let rest = [Vec3::ZERO, Vec3::X, Vec3::X * 2.0];
+        let mut s = SelfCollisionScratch::default();
+        let params = SelfCollision {
+            thickness: 0.1,
+            friction: 0.0,
+        };
+        find_self_collision_pairs(&pos, &[Vec4::ZERO; 3], &rest, params, 1.0 / 60.0, &mut s);
+        self_collide(&mut pos, &prev, params, &s);
+        assert!((pos[0].xyz().distance(pos[1].xyz()) - 0.1).abs() < 1e-6);
+        assert_eq!(pos[2], prev[2]);
+        // Equal masses: symmetric push.
+        assert!((pos[0].y + 0.045).abs() < 1e-6 && (pos[1].y - 0.055).abs() < 1e-6);
+    }
+
+    #[test]
+    fn neighbours_resting_within_two_thicknesses_are_left_to_their_constraints() {
+        let mut pos = vec![
+            Vec4::new(0.0, 0.0, 0.0, 1.0),
+            Vec4::new(0.05, 0.0, 0.0, 1.0),
+        ];
+        let prev = pos.clone();
+        let rest = [Vec3::ZERO, Vec3::X * 0.05];
+        let mut s = SelfCollisionScratch::default();
+        let params = SelfCollision {
+            thickness: 0.1,
+            friction: 0.0,
+        };
+        find_self_collision_pairs(&pos, &[Vec4::ZERO; 2], &rest, params, 1.0 / 60.0, &mut s);
+        self_collide(&mut pos, &prev, params, &s);
+        assert_eq!(pos, prev);
+    }
+
+    #[test]
+    fn cell_of_is_floor() {
+        for x in [-2.5f32, -1.0, -0.5, 0.0, 0.5, 1.0, 2.5, -0.0001] {
+            let c = cell_of(Vec3::new(x, -x, x * 3.0), 1.0);
+            assert_eq!(
+                c,
+                IVec3::new(
+                    x.floor() as i32,
+                    (-x).floor() as i32,
+                    (x * 3.0).floor() as i32
+                ),
+                "{x}"
+            );
+        }
+    }
+
+    #[test]
+    fn crossings_are_counted() {
+        // A triangle in the XY plane and an edge through it along z, and one beside it.
+        let pos: Vec<Vec4> = [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.2, 0.2, -1.0),
+            Vec3::new(0.2, 0.2, 1.0),
+            Vec3::new(2.0, 2.0, -1.0),
+            Vec3::new(2.0, 2.0, 1.0),
+        ]
+        .iter()
+        .map(|p| p.extend(1.0))
+        .collect();
+        let tris = [[0, 1, 2]];
+        assert_eq!(count_self_crossings(&pos, &tris, &[[3, 4], [5, 6]]), 1);
+        // Edges touching the triangle's own vertices never count.
+        assert_eq!(count_self_crossings(&pos, &tris, &[[0, 4]]), 0);
+    }
+}

@@ -1,0 +1,96 @@
+//! Wind for cloth: a global [`Wind`] resource and local [`WindZone`]s.
+//!
+//! Each fixed step, [`ClothWindPlugin`] turns them into a
+//! [`WindField`](crate::solver::WindField) (noise generators included) stored in
+//! [`ClothWindField`]; every cloth samples it once per step for per-triangle drag and lift
+//! (see [`solver::wind_accelerations`](crate::solver::wind_accelerations)). No wind resource
+//! and no zones: no wind work at all.
+
+use bevy::prelude::*;
+use bevy::reflect::impl_reflect_opaque;
+
+use crate::cloth::ClothSystems;
+use crate::solver::{Pose, WindField, WindParams, WindRegion};
+
+impl_reflect_opaque!((in bevy_cloth::solver) WindParams(Debug, Clone, PartialEq, Default));
+
+/// Wind blowing everywhere.
+///
+/// ```
+/// use bevy::prelude::*;
+/// use bevy_cloth::prelude::*;
+///
+/// App::new().insert_resource(Wind(WindParams {
+///     velocity: Vec3::new(8.0, 0.0, 2.0),
+///     gust_amplitude: 0.4,
+///     ..default()
+/// }));
+/// ```
+#[derive(Resource, Reflect, Clone, Copy, Debug, Default, PartialEq, Deref, DerefMut)]
+#[reflect(Resource, Default, Clone, PartialEq)]
+pub struct Wind(pub WindParams);
+
+/// Wind blowing inside a box around the entity (its transform places and turns the box),
+/// fading out over `falloff` metres outside it: a fan, a doorway draught, a vent.
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Clone, PartialEq)]
+#[require(Transform)]
+pub struct WindZone {
+    /// The wind inside the zone (velocity in world space).
+    pub wind: WindParams,
+    /// Half size of the box.
+    pub half_extents: Vec3,
+    /// Fade-out distance outside the box.
+    pub falloff: f32,
+}
+
+/// The wind field of this step, with the time that drives its gusts.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct ClothWindField {
+    /// The field; empty when there is no wind.
+    pub field: WindField,
+    /// Seconds of fixed time elapsed.
+    pub time: f32,
+}
+
+/// Adds [`Wind`] and [`WindZone`] support.
+pub struct ClothWindPlugin {
+    pub(crate) schedule: bevy::ecs::schedule::InternedScheduleLabel,
+}
+
+impl Plugin for ClothWindPlugin {
+    fn build(&self, app: &mut App) {
+        app.register_type::<Wind>()
+            .register_type::<WindZone>()
+            .init_resource::<ClothWindField>()
+            .add_systems(self.schedule, gather_wind.in_set(ClothSystems::Prepare));
+    }
+}
+
+fn gather_wind(
+    time: Res<Time>,
+    global: Option<Res<Wind>>,
+    zones: Query<(&WindZone, &GlobalTransform)>,
+    mut out: ResMut<ClothWindField>,
+) {
+    out.time = time.elapsed_secs_wrapped();
+    let sources = global
+        .map(|w| (w.0, None))
+        .into_iter()
+        .chain(zones.iter().map(|(z, gt)| {
+            let (scale, rotation, translation) = gt.to_scale_rotation_translation();
+            (
+                z.wind,
+                Some(WindRegion {
+                    pose: Pose {
+                        translation,
+                        rotation,
+                        scale: 1.0,
+                    },
+                    half_extents: z.half_extents * scale.abs(),
+                    falloff: z.falloff,
+                }),
+            )
+        }));
+    out.field = WindField::new(sources);
+}

@@ -1,0 +1,291 @@
+//! Colliders, wind, tearing, teleports and (with `rapier`) two-way coupling, through the
+//! plugin in a headless app.
+
+use std::time::Duration;
+
+use bevy::mesh::MeshPlugin;
+use bevy::prelude::*;
+use bevy::time::TimeUpdateStrategy;
+use bevy_cloth::prelude::*;
+
+fn app() -> App {
+    let mut app = App::new();
+    app.add_plugins((
+        MinimalPlugins,
+        TransformPlugin,
+        AssetPlugin::default(),
+        MeshPlugin,
+        ClothPlugins::default(),
+    ))
+    .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+        1.0 / 60.0,
+    )))
+    .insert_resource(Time::<Fixed>::from_hz(60.0));
+    app
+}
+
+fn spawn_sheet(app: &mut App, n: u32, transform: Transform, extra: impl Bundle) -> Entity {
+    let grid = Grid::new(n, n, 1.0, 1.0);
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    app.world_mut()
+        .spawn((Mesh3d(mesh), transform, Cloth::default(), extra))
+        .id()
+}
+
+fn sim(app: &App, e: Entity) -> &ClothSim {
+    app.world().get::<ClothSim>(e).expect("cloth not created")
+}
+
+fn run(app: &mut App, frames: usize) {
+    for _ in 0..frames {
+        app.update();
+    }
+}
+
+#[test]
+fn a_cloth_drapes_over_a_sphere_and_the_sphere_feels_its_weight() {
+    let mut app = app();
+    let ball = app
+        .world_mut()
+        .spawn((
+            ClothCollider::sphere(0.3).with_thickness(0.02),
+            Transform::default(),
+        ))
+        .id();
+    let cloth = spawn_sheet(&mut app, 20, Transform::from_xyz(0.0, 0.5, 0.0), ());
+    run(&mut app, 240);
+    let s = sim(&app, cloth).simulation().state();
+    let lowest_inside = (0..s.len())
+        .map(|i| s.position(i).length() - 0.3)
+        .fold(f32::MAX, f32::min);
+    assert!(
+        lowest_inside > 0.0,
+        "a vertex is inside the sphere: {lowest_inside}"
+    );
+    // The draped cloth rests on the sphere: per step, the sphere receives about the weight of
+    // the part of the cloth it carries, pointing down.
+    let impulse = app.world().get::<ClothContactImpulse>(ball).unwrap().linear;
+    let weight_per_step = 0.2 * 9.81 / 60.0;
+    assert!(impulse.y < -0.2 * weight_per_step, "{impulse}");
+    assert!(impulse.y > -1.5 * weight_per_step, "{impulse}");
+}
+
+#[test]
+fn mesh_colliders_are_baked_from_the_entity_mesh() {
+    let mut app = app();
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(Cuboid::new(1.0, 0.4, 1.0).mesh().build());
+    app.world_mut().spawn((
+        Mesh3d(mesh),
+        ClothCollider::mesh(24).with_thickness(0.02),
+        Transform::default(),
+    ));
+    let cloth = spawn_sheet(&mut app, 16, Transform::from_xyz(0.0, 0.6, 0.0), ());
+    run(&mut app, 120);
+    let s = sim(&app, cloth).simulation().state();
+    // The middle of the sheet rests on the top face (y = 0.2 + thickness), not below it.
+    let middle = s.position(8 * 16 + 8);
+    assert!(middle.y > 0.2 && middle.y < 0.3, "{middle}");
+}
+
+#[test]
+fn wind_resource_pushes_the_cloth_and_zones_only_act_inside() {
+    let mut calm = app();
+    let mut windy = app();
+    windy.insert_resource(Wind(WindParams {
+        velocity: Vec3::new(0.0, 0.0, -10.0),
+        ..default()
+    }));
+    let mut zoned = app();
+    zoned.world_mut().spawn((
+        WindZone {
+            wind: WindParams {
+                velocity: Vec3::new(0.0, 0.0, -10.0),
+                ..default()
+            },
+            half_extents: Vec3::splat(0.5),
+            falloff: 0.0,
+        },
+        Transform::from_xyz(50.0, 0.0, 0.0),
+    ));
+    let pins = ClothPins::rest(0..16);
+    let upright = Transform::from_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
+    let c = spawn_sheet(&mut calm, 16, upright, pins.clone());
+    let w = spawn_sheet(&mut windy, 16, upright, pins.clone());
+    let z = spawn_sheet(&mut zoned, 16, upright, pins);
+    run(&mut calm, 90);
+    run(&mut windy, 90);
+    run(&mut zoned, 90);
+    let mean_z = |app: &App, e| {
+        let s = sim(app, e).simulation().state();
+        (0..s.len()).map(|i| s.position(i).z).sum::<f32>() / s.len() as f32
+    };
+    assert!(mean_z(&windy, w) < mean_z(&calm, c) - 0.1);
+    // The zone is 50 m away: the cloth there behaves as if calm.
+    assert!((mean_z(&zoned, z) - mean_z(&calm, c)).abs() < 1e-4);
+}
+
+#[test]
+fn tearing_sends_messages_and_shrinks_the_index_buffer() {
+    let mut app = app();
+    let grid = Grid::new(10, 10, 1.0, 1.0);
+    let left = app.world_mut().spawn(Transform::default()).id();
+    let right = app.world_mut().spawn(Transform::default()).id();
+    let rest = grid.positions();
+    let mut pins = ClothPins::default();
+    for j in 0..10 {
+        for (i, hand) in [(0, left), (9, right)] {
+            let v = grid.index(i, j);
+            pins = pins.with(
+                v,
+                PinAnchor::Entity {
+                    entity: hand,
+                    offset: rest[v as usize],
+                },
+            );
+        }
+    }
+    let cloth = spawn_sheet(
+        &mut app,
+        10,
+        Transform::default(),
+        (pins, ClothTearing { threshold: 1.4 }),
+    );
+    run(&mut app, 5);
+    let triangles_before = 2 * 9 * 9 * 3;
+    for f in 0..90 {
+        let x = 0.01 * f as f32;
+        app.world_mut()
+            .get_mut::<Transform>(left)
+            .unwrap()
+            .translation
+            .x = -x;
+        app.world_mut()
+            .get_mut::<Transform>(right)
+            .unwrap()
+            .translation
+            .x = x;
+        app.update();
+    }
+    let torn: usize = app
+        .world()
+        .resource::<Messages<ClothTorn>>()
+        .iter_current_update_messages()
+        .count()
+        + sim(&app, cloth).torn_edges();
+    assert!(torn > 0, "nothing tore");
+    let mesh_handle = &app.world().get::<Mesh3d>(cloth).unwrap().0;
+    let mesh = app
+        .world()
+        .resource::<Assets<Mesh>>()
+        .get(mesh_handle)
+        .unwrap();
+    let indices = mesh.indices().unwrap();
+    assert!(indices.len() < triangles_before);
+    assert!(indices.iter().all(|i| i < 100));
+    assert_eq!(
+        indices.len(),
+        3 * sim(&app, cloth).simulation().topology().triangles().len()
+    );
+}
+
+#[test]
+fn teleporting_the_anchor_moves_the_cloth_instead_of_tearing_it_apart() {
+    let mut app = app();
+    let hand = app.world_mut().spawn(Transform::default()).id();
+    let pins = ClothPins(vec![ClothPin {
+        vertex: 0,
+        anchor: PinAnchor::Entity {
+            entity: hand,
+            offset: Grid::new(12, 12, 1.0, 1.0).positions()[0],
+        },
+    }]);
+    let cloth = spawn_sheet(&mut app, 12, Transform::default(), pins);
+    run(&mut app, 60);
+    app.world_mut()
+        .get_mut::<Transform>(hand)
+        .unwrap()
+        .translation = Vec3::new(1000.0, 0.0, 0.0);
+    run(&mut app, 3);
+    let s = sim(&app, cloth).simulation();
+    assert_eq!(s.state().non_finite_count(), 0);
+    assert!(s.strain().max < 0.5, "strain {}", s.strain().max);
+    let centre = (0..s.state().len())
+        .map(|i| s.state().position(i))
+        .sum::<Vec3>()
+        / 144.0;
+    assert!(centre.x > 990.0, "{centre}");
+    // No explosion: vertices move at ordinary speeds after the jump.
+    let fastest = (0..144)
+        .map(|i| s.state().velocity(i).length())
+        .fold(0.0, f32::max);
+    assert!(fastest < 20.0, "{fastest} m/s");
+}
+
+#[cfg(feature = "rapier")]
+mod rapier {
+    use super::*;
+    use bevy_rapier3d::prelude::*;
+
+    #[test]
+    fn cloth_pushes_a_rapier_ball_back_with_the_opposite_impulse() {
+        let mut app = app();
+        app.add_plugins((
+            RapierPhysicsPlugin::<NoUserData>::default(),
+            ClothRapierPlugin::default(),
+        ));
+        // A curtain pinned along its top, a ball flying into it with gravity off.
+        let grid = Grid::new(20, 20, 2.0, 2.0);
+        let upright = Transform::from_xyz(0.0, 1.0, 0.0)
+            .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
+        let curtain = spawn_sheet(
+            &mut app,
+            20,
+            upright,
+            ClothPins::rest((0..20).map(|i| grid.index(i, 0))),
+        );
+        let speed = 5.0;
+        let ball = app
+            .world_mut()
+            .spawn((
+                RigidBody::Dynamic,
+                Collider::ball(0.2),
+                ColliderMassProperties::Mass(0.5),
+                GravityScale(0.0),
+                Velocity::linear(Vec3::new(0.0, 0.0, -speed)),
+                Transform::from_xyz(0.0, 1.0, 1.0),
+            ))
+            .id();
+        let mut total = Vec3::ZERO;
+        let mut bulge = 0.0f32;
+        for _ in 0..60 {
+            app.update();
+            if let Some(i) = app.world().get::<ClothContactImpulse>(ball) {
+                total += i.linear;
+            }
+            if let Some(c) = app.world().get::<ClothSim>(curtain) {
+                let s = c.simulation().state();
+                bulge = (0..s.len()).map(|i| s.position(i).z).fold(bulge, f32::min);
+            }
+        }
+        // The bridge mirrored the rapier ball as a cloth collider.
+        assert!(app.world().get::<ClothCollider>(ball).is_some());
+        // The curtain bulged, and the ball slowed down.
+        assert!(bulge < -0.2, "curtain did not bulge: {bulge}");
+        let v = app.world().get::<Velocity>(ball).unwrap().linear;
+        assert!(v.z > -speed * 0.95, "ball not slowed: {v}");
+        // Equal and opposite: what the cloth pushed on the ball (it points +z, against the
+        // motion) matches the ball's momentum change within rapier's integration error.
+        assert!(total.z > 0.0, "{total}");
+        let dp = 0.5 * (v.z - (-speed));
+        assert!(
+            (dp - total.z).abs() < 0.25 * total.z.abs().max(0.05),
+            "Δp {dp} vs impulse {total}"
+        );
+    }
+}
