@@ -55,3 +55,8 @@ pub mod prelude {
     pub use crate::solver::{BendRest, Grid, MassDistribution, Solver, WindParams};
     pub use crate::wind::{Wind, WindZone};
 }
+
+/// The README's code blocks, compiled as doc tests so they cannot go stale.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

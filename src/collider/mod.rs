@@ -308,17 +308,20 @@ fn bake_mesh_colliders(
     }
 }
 
+/// What [`gather_colliders`] reads of each collider entity.
+type ColliderQueryData = (
+    Entity,
+    &'static ClothCollider,
+    &'static GlobalTransform,
+    Option<&'static mut ColliderRuntime>,
+    Option<&'static mut ClothContactImpulse>,
+);
+
 /// Collects every collider's shape and its poses at the start and end of this step.
 fn gather_colliders(
     mut commands: Commands,
     mut out: ResMut<ClothColliders>,
-    mut colliders: Query<(
-        Entity,
-        &ClothCollider,
-        &GlobalTransform,
-        Option<&mut ColliderRuntime>,
-        Option<&mut ClothContactImpulse>,
-    )>,
+    mut colliders: Query<ColliderQueryData>,
 ) {
     out.colliders.clear();
     out.entities.clear();

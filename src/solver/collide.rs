@@ -249,7 +249,8 @@ pub(crate) fn collide_vertex(
         let local = pose.to.inverse_apply(p);
         let (d_local, n_local) = c.shape.distance(local);
         let d = d_local * pose.to.scale;
-        if !(d < c.thickness) {
+        // NaN distances (a degenerate shape) count as "no contact".
+        if d.is_nan() || d >= c.thickness {
             continue;
         }
         let n = pose.to.rotation * n_local;

@@ -186,7 +186,7 @@ pub fn wind_accelerations(
 ) {
     out.clear();
     out.resize(positions.len(), Vec4::ZERO);
-    if field.is_empty() || !(dt > 0.0) {
+    if field.is_empty() || dt.is_nan() || dt <= 0.0 {
         return;
     }
     air.clear();

@@ -1,7 +1,7 @@
 //! Wind for cloth: a global [`Wind`] resource and local [`WindZone`]s.
 //!
 //! Each fixed step, [`ClothWindPlugin`] turns them into a
-//! [`WindField`](crate::solver::WindField) (noise generators included) stored in
+//! [`WindField`] (noise generators included) stored in
 //! [`ClothWindField`]; every cloth samples it once per step for per-triangle drag and lift
 //! (see [`solver::wind_accelerations`](crate::solver::wind_accelerations)). No wind resource
 //! and no zones: no wind work at all.
