@@ -69,6 +69,7 @@ fn setup(
             iterations: 32,
             gravity: Vec3::new(0.0, -9.8, 0.0),
             damping: 0.0,
+            ..default()
         },
         ClothPins::rest([0, 20]),
     ));

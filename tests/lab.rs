@@ -131,6 +131,7 @@ fn solver() -> Simulation {
             iterations: 32,
             gravity: Vec3::new(0.0, -9.8, 0.0),
             damping: 0.0,
+            ..Default::default()
         },
     )
     .unwrap();
@@ -185,6 +186,7 @@ fn lab_update_rule_for_one_iteration_by_hand() {
             iterations: 1,
             gravity: Vec3::ZERO,
             damping: 0.0,
+            ..Default::default()
         },
     )
     .unwrap();

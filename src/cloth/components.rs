@@ -139,6 +139,9 @@ pub struct ClothConfig {
     pub gravity: Vec3,
     /// Linear velocity damping in 1/s (not used by the lab solver).
     pub damping: f32,
+    /// Speed limit for free vertices in m/s; bounds the kinetic energy (see
+    /// [`SolverParams::max_speed`]).
+    pub max_speed: f32,
 }
 
 impl Default for ClothConfig {
@@ -155,6 +158,7 @@ impl From<SolverParams> for ClothConfig {
             iterations: p.iterations,
             gravity: p.gravity,
             damping: p.damping,
+            max_speed: p.max_speed,
         }
     }
 }
@@ -167,6 +171,7 @@ impl From<ClothConfig> for SolverParams {
             iterations: c.iterations,
             gravity: c.gravity,
             damping: c.damping,
+            max_speed: c.max_speed,
         }
     }
 }

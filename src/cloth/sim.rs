@@ -88,6 +88,7 @@ pub struct ClothSim {
     /// The triangles changed (tearing): the index buffer must be rewritten.
     pub(crate) indices_dirty: bool,
     torn_edges: usize,
+    recoveries: u32,
 }
 
 impl ClothSim {
@@ -120,6 +121,13 @@ impl ClothSim {
     #[must_use]
     pub fn torn_edges(&self) -> usize {
         self.torn_edges
+    }
+
+    /// Times the state went NaN or infinite and was reset to the rest pose (each one is
+    /// logged as a warning).
+    #[must_use]
+    pub fn recoveries(&self) -> u32 {
+        self.recoveries
     }
 }
 
@@ -305,6 +313,7 @@ pub(crate) fn init_cloths(
                         dirty: true,
                         indices_dirty: false,
                         torn_edges: 0,
+                        recoveries: 0,
                     },
                 ));
             }
@@ -425,7 +434,7 @@ pub(crate) fn step_cloths(
     time: Res<Time>,
     colliders: Option<Res<ClothColliders>>,
     wind: Option<Res<ClothWindField>>,
-    mut cloths: Query<(Entity, &mut ClothSim), Without<ClothInvalid>>,
+    mut cloths: Query<(Entity, &mut ClothSim, Option<&GlobalTransform>), Without<ClothInvalid>>,
     mut impulses: Query<&mut ClothContactImpulse>,
     mut torn: MessageWriter<ClothTorn>,
 ) {
@@ -441,12 +450,31 @@ pub(crate) fn step_cloths(
         time: wind.as_deref().map_or(0.0, |w| w.time),
     };
     let pool = ComputeTaskPool::try_get();
-    for (entity, mut cloth) in &mut cloths {
+    for (entity, mut cloth, transform) in &mut cloths {
         let cloth = &mut *cloth;
         let report = match pool {
             Some(pool) => cloth.sim.step_in(dt, &env, &TaskPoolParallel(pool)),
             None => cloth.sim.step_in(dt, &env, &Serial),
         };
+        if report.recovered {
+            // The solver already reset to its rest shape where the cloth was created; place
+            // the rest shape where the entity is now.
+            if let Some(t) = transform {
+                let placed: Vec<Vec3> = cloth
+                    .rest_local
+                    .iter()
+                    .map(|p| t.transform_point(*p))
+                    .collect();
+                cloth.sim.reset_to(&placed);
+            }
+            cloth.recoveries += 1;
+            cloth.indices_dirty = true;
+            warn!(
+                "cloth {entity}: its state became NaN or infinite at step {}; reset to the rest \
+                 pose (recovery {})",
+                cloth.steps, cloth.recoveries
+            );
+        }
         add_impulses(colliders, cloth.sim.impulses(), &mut impulses);
         if !report.torn.is_empty() {
             cloth.torn_edges += report.torn.len();

@@ -11,7 +11,9 @@
 //! C  = arccos(d) − φ0
 //! ```
 //!
-//! The `q_i` are `−∂d/∂p_i`, so `∇_i C = q_i/√(1−d²)`. The report's PBD update
+//! The `q_i` are `−∂d/∂p_i`, so `∇_i C = q_i/√(1−d²)`. The code takes the angle as
+//! `atan2(|n1×n2|, d)` and `√(1−d²)` as `|n1×n2|`: the same values, without the rounding
+//! noise of `arccos` and `√(1−d²)` near a flat pair (d → −1), which made resting cloth jitter. The report's PBD update
 //! `Δp_i = −w_i √(1−d²)(arccos d − φ0)/Σ_j w_j|q_j|² · q_i` is the `α̃ = 0` case of the XPBD
 //! update used here, written so that it stays finite as `d → ±1`:
 //! `f = k·√(1−d²)(−C − α̃λ)/(Σ w_j|q_j|² + α̃(1−d²))`, `Δp_i = w_i q_i f`, `Δλ = √(1−d²) f`.
@@ -54,9 +56,12 @@ pub(crate) fn bend_correction<T: Real>(
     let q2 = -(p3.cross(n2) + n1.cross(p3).scale(d)).scale(inv23)
         - (p4.cross(n1) + n2.cross(p4).scale(d)).scale(inv24);
     let q1 = -(q2 + q3 + q4);
-    let c = d.acos() - rest;
-    let s2 = (one - d * d).max(zero);
-    let s = s2.sqrt();
+    // sin of the angle from |n1×n2|, not √(1−d²): near flat, d ≈ −1 carries a rounding error
+    // of ~1e-7 that √(1−d²) and arccos(d) turn into ~5e-4 rad of noise, enough to make a
+    // resting cloth jitter forever. |n1×n2| and atan2 stay accurate there.
+    let s = n1.cross(n2).length_squared().sqrt();
+    let s2 = s * s;
+    let c = s.atan2(d) - rest;
     let g = w[0] * q1.length_squared()
         + w[1] * q2.length_squared()
         + w[2] * q3.length_squared()
@@ -85,7 +90,7 @@ pub fn dihedral_angle(x: [glam::Vec3; 4]) -> f32 {
     let (p2, p3, p4) = (x[1] - x[0], x[2] - x[0], x[3] - x[0]);
     let n1 = p2.cross(p3).normalize_or_zero();
     let n2 = p2.cross(p4).normalize_or_zero();
-    n1.dot(n2).clamp(-1.0, 1.0).acos()
+    n1.cross(n2).length().atan2(n1.dot(n2))
 }
 
 #[cfg(test)]

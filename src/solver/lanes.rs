@@ -3,7 +3,7 @@
 //! Each kernel's math is written once over [`Real`] and [`V3`]. With `f32` it is the scalar
 //! reference (and handles batch tails); with [`wide::f32x4`] it projects four independent
 //! constraints of one colour at once. Both share every formula, so they agree up to the
-//! rounding of `sqrt`/`acos`.
+//! rounding of `sqrt`/`atan2`.
 
 use bytemuck::cast;
 use core::ops::{Add, Div, Mul, Neg, Sub};
@@ -21,7 +21,8 @@ pub(crate) trait Real:
 {
     fn splat(v: f32) -> Self;
     fn sqrt(self) -> Self;
-    fn acos(self) -> Self;
+    /// `atan2(self, x)`: the angle of `(x, self)`.
+    fn atan2(self, x: Self) -> Self;
     fn min(self, o: Self) -> Self;
     fn max(self, o: Self) -> Self;
     /// Per lane: `if self > limit { a } else { b }`.
@@ -38,8 +39,8 @@ impl Real for f32 {
         f32::sqrt(self)
     }
     #[inline(always)]
-    fn acos(self) -> Self {
-        f32::acos(self)
+    fn atan2(self, x: Self) -> Self {
+        f32::atan2(self, x)
     }
     #[inline(always)]
     fn min(self, o: Self) -> Self {
@@ -65,8 +66,8 @@ impl Real for f32x4 {
         f32x4::sqrt(self)
     }
     #[inline(always)]
-    fn acos(self) -> Self {
-        f32x4::acos(self)
+    fn atan2(self, x: Self) -> Self {
+        f32x4::atan2(self, x)
     }
     #[inline(always)]
     fn min(self, o: Self) -> Self {

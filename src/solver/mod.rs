@@ -197,6 +197,10 @@ pub struct Environment<'a> {
 pub struct StepReport {
     /// Edges (vertex pairs) that tore during the step.
     pub torn: Vec<[u32; 2]>,
+    /// The state went bad (a NaN or infinite position or velocity, e.g. from a collider or
+    /// wind with non-finite input) and was reset to the rest pose, at rest, pins on their
+    /// targets. The caller should warn; nothing non-finite is left in the state.
+    pub recovered: bool,
 }
 
 impl Simulation {
@@ -317,7 +321,34 @@ impl Simulation {
                 self.tethers = None;
             }
         }
+        if !self.state.is_finite() {
+            self.reset_to_rest();
+            report.recovered = true;
+        }
         report
+    }
+
+    /// Puts every vertex back at its rest position with zero velocity, pins on their targets,
+    /// and forgets accumulated multipliers: a clean start.
+    pub fn reset_to_rest(&mut self) {
+        let rest = self.topology.rest_positions().to_vec();
+        self.reset_to(&rest);
+    }
+
+    /// Like [`Self::reset_to_rest`] at the given positions (e.g. the rest shape placed where
+    /// the cloth's entity is now). Non-finite entries fall back to the rest position.
+    ///
+    /// # Panics
+    /// If `positions` has a different length from the cloth.
+    pub fn reset_to(&mut self, positions: &[Vec3]) {
+        let rest = self.topology.rest_positions();
+        let clean: Vec<Vec3> = positions
+            .iter()
+            .zip(rest)
+            .map(|(p, r)| if p.is_finite() { *p } else { *r })
+            .collect();
+        self.state.reset(&clean);
+        self.state.snap_pins();
     }
 
     /// Sets the optional capabilities (cheap; tethers are rebuilt on the next step).

@@ -96,6 +96,11 @@ pub struct SolverParams {
     pub gravity: Vec3,
     /// Linear velocity damping in 1/s (PBD and XPBD): `v ← v / (1 + damping·h)` each substep.
     pub damping: f32,
+    /// Speed limit for free vertices in m/s (default 100): a vertex's velocity is clamped to
+    /// it at the end of each substep, so the kinetic energy of a cloth of mass `M` never
+    /// exceeds `½·M·max_speed²`, whatever a hitch, a collider or the wind does to it. Pins are
+    /// kinematic and not limited.
+    pub max_speed: f32,
 }
 
 impl Default for SolverParams {
@@ -106,6 +111,7 @@ impl Default for SolverParams {
             iterations: 1,
             gravity: Vec3::new(0.0, -9.81, 0.0),
             damping: 0.1,
+            max_speed: 100.0,
         }
     }
 }
@@ -152,7 +158,7 @@ impl SolverParams {
     /// of zero or over
     /// [`Self::MAX_COUNT`], non-finite gravity, negative or NaN damping, stiffness outside
     /// `[0, 1]`, negative or NaN compliance (infinite bending compliance is allowed: it means
-    /// no bending).
+    /// no bending), a `max_speed` that is not finite and positive.
     pub fn validate(&self) -> Result<(), ParamError> {
         for (name, n) in [("substeps", self.substeps), ("iterations", self.iterations)] {
             if n == 0 || n > Self::MAX_COUNT {
@@ -169,6 +175,12 @@ impl SolverParams {
             });
         }
         check_range("damping", self.damping, 0.0, f32::MAX)?;
+        if !(self.max_speed.is_finite() && self.max_speed > 0.0) {
+            return Err(ParamError {
+                name: "max_speed",
+                reason: format!("{} must be finite and > 0", self.max_speed),
+            });
+        }
         match self.solver {
             Solver::Lab { velocity_keep } => check_range("velocity_keep", velocity_keep, 0.0, 1.0),
             Solver::Pbd {

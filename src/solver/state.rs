@@ -279,6 +279,15 @@ impl ClothState {
             .collect()
     }
 
+    /// Whether every position and velocity is finite (cheap: one pass, no counting).
+    #[must_use]
+    pub fn is_finite(&self) -> bool {
+        self.positions
+            .iter()
+            .chain(&self.velocities)
+            .all(|v| v.is_finite())
+    }
+
     /// Number of position or velocity components that are NaN or infinite.
     #[must_use]
     pub fn non_finite_count(&self) -> usize {

@@ -126,12 +126,24 @@ struct Phase {
 struct Consts {
     h: f32,
     inv_h: f32,
+    max_speed: f32,
     damp: f32,
     gravity: Vec3,
     mode: Mode,
     bending: bool,
     /// XPBD with several iterations: multipliers carry over between iterations.
     accumulate: bool,
+}
+
+/// `v` shortened to at most `max` (w stays 0).
+#[inline]
+fn clamp_speed(v: Vec4, max: f32) -> Vec4 {
+    let s2 = v.length_squared();
+    if s2 > max * max {
+        v * (max / s2.sqrt())
+    } else {
+        v
+    }
 }
 
 fn run_part(
@@ -145,7 +157,7 @@ fn run_part(
         for ((v, x), p) in w.vel.iter_mut().zip(w.pos.iter()).zip(w.prev.iter()) {
             // Unpinned vertices have the same inverse mass in x and x_prev: w − w = 0.
             if x.w > 0.0 {
-                *v = (*x - *p) * c.inv_h;
+                *v = clamp_speed((*x - *p) * c.inv_h, c.max_speed);
             }
         }
     }
@@ -235,6 +247,11 @@ pub fn step(
                 h,
                 params.iterations.max(1),
             );
+            for (v, x) in state.velocities.iter_mut().zip(&state.positions) {
+                if x.w > 0.0 {
+                    *v = clamp_speed(*v, params.max_speed);
+                }
+            }
         }
         return;
     }
@@ -242,6 +259,7 @@ pub fn step(
     let c = Consts {
         h,
         inv_h: 1.0 / h,
+        max_speed: params.max_speed,
         damp: 1.0 / (1.0 + params.damping * h),
         gravity: params.gravity,
         mode: batches.mode(h),

@@ -1,0 +1,750 @@
+//! Stability at the extremes: every solver, with collisions, wind, tearing and self-collision,
+//! across time steps, counts, stiffnesses, masses, scales, broken meshes and violent
+//! disturbances. Nothing non-finite may leave the solver, the kinetic energy stays under its
+//! bound `½·M·max_speed²` (M: total free mass), and the cloth settles when the disturbance
+//! stops.
+//!
+//! Property tests sample the ranges; named tests pin the corners and every case the property
+//! tests ever found (see `regression_*`).
+
+use std::sync::Arc;
+
+use bevy_cloth::solver::{
+    Collider, Environment, Features, Pin, Pose, SdfGrid, SelfCollision, Serial, Shape, Simulation,
+    Solver, SolverParams, TetherParams, Topology, TopologyError, TopologyOptions, WindField,
+    WindParams,
+};
+use glam::{Quat, Vec2, Vec3};
+use proptest::prelude::*;
+
+/// Which solver, with a stiffness knob `s` in [0, 1] (0 = softest, 1 = rigid).
+#[derive(Clone, Copy, Debug)]
+enum Kind {
+    Lab,
+    Pbd,
+    Xpbd,
+}
+
+fn solver(kind: Kind, s: f32, compliance: f32, soft_bending: bool) -> Solver {
+    match kind {
+        Kind::Lab => Solver::Lab { velocity_keep: s },
+        Kind::Pbd => Solver::Pbd {
+            stretch: s,
+            shear: s,
+            bending: if soft_bending { 0.1 } else { s },
+        },
+        Kind::Xpbd => Solver::Xpbd {
+            stretch: compliance,
+            shear: compliance,
+            bending: if soft_bending { 1e-3 } else { compliance },
+        },
+    }
+}
+
+/// How the cloth is held.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Pins {
+    None,
+    TwoCorners,
+    All,
+}
+
+/// A disturbance applied during the first part of the run, then stopped.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Disturbance {
+    Nothing,
+    /// A ball moving through the cloth at this speed (m/s).
+    FastCollider(f32),
+    /// A ball of 20× the cloth's size around it.
+    SwallowingCollider,
+    /// Wind at this speed (m/s) with gusts and turbulence.
+    Wind(f32),
+    /// One pin jumps this far (m) once.
+    PinTeleport(f32),
+}
+
+#[derive(Clone, Debug)]
+struct Scenario {
+    kind: Kind,
+    stiffness: f32,
+    compliance: f32,
+    /// A cloth-like bending stiffness instead of `stiffness`/`compliance`.
+    soft_bending: bool,
+    dt: f32,
+    substeps: u32,
+    iterations: u32,
+    damping: f32,
+    /// Heaviest / lightest vertex.
+    mass_ratio: f32,
+    /// Cloth side in metres.
+    size: f32,
+    /// Vertices per side.
+    n: u32,
+    pins: Pins,
+    disturbance: Disturbance,
+    self_collision: bool,
+    tethers: bool,
+    /// Tear threshold (`Some(1.0001)` tears nearly everything).
+    tear: Option<f32>,
+    /// A floor collider under the cloth.
+    floor: bool,
+    /// Steps with the disturbance on, then steps without it.
+    steps: (usize, usize),
+}
+
+impl Default for Scenario {
+    fn default() -> Self {
+        Self {
+            kind: Kind::Xpbd,
+            stiffness: 1.0,
+            compliance: 0.0,
+            soft_bending: false,
+            dt: 1.0 / 60.0,
+            substeps: 10,
+            iterations: 1,
+            damping: 0.1,
+            mass_ratio: 1.0,
+            size: 1.0,
+            n: 8,
+            pins: Pins::TwoCorners,
+            disturbance: Disturbance::Nothing,
+            self_collision: false,
+            tethers: false,
+            tear: None,
+            floor: false,
+            steps: (30, 30),
+        }
+    }
+}
+
+#[derive(Debug)]
+struct Outcome {
+    /// Highest kinetic energy seen (J).
+    max_energy: f64,
+    /// The bound `½·M·max_speed²` (J).
+    bound: f64,
+    /// Kinetic energy right after the disturbance stopped, and at the end (J).
+    energy_after_disturbance: f64,
+    final_energy: f64,
+    /// Steps whose state had to be reset (a NaN was produced inside the solver).
+    recoveries: usize,
+    /// Non-finite components ever seen in positions, velocities, normals or tangents.
+    non_finite: usize,
+    /// Largest distance of any vertex from the cloth's start (m).
+    max_travel: f32,
+}
+
+/// A `n × n` grid in the xz plane of side `size` at height `size`.
+fn grid_mesh(n: u32, size: f32) -> (Vec<Vec3>, Vec<Vec2>, Vec<u32>) {
+    let mut pos = Vec::new();
+    let mut uvs = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let (u, v) = (i as f32 / (n - 1) as f32, j as f32 / (n - 1) as f32);
+            pos.push(Vec3::new(u * size, size, v * size));
+            uvs.push(Vec2::new(u, v));
+        }
+    }
+    let mut idx = Vec::new();
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            let a = j * n + i;
+            idx.extend([a, a + 1, a + n + 1, a, a + n + 1, a + n]);
+        }
+    }
+    (pos, uvs, idx)
+}
+
+fn simulation(s: &Scenario, pos: &[Vec3], uvs: Option<&[Vec2]>, idx: &[u32]) -> Simulation {
+    let topology = Topology::from_triangles(pos, uvs, idx, TopologyOptions::default())
+        .expect("the scenario's mesh is valid");
+    let count = pos.len();
+    // Masses from 1 to `mass_ratio`, spread geometrically over the vertices, 1 kg in all.
+    let raw: Vec<f32> = (0..count)
+        .map(|i| s.mass_ratio.powf(i as f32 / (count.max(2) - 1) as f32))
+        .collect();
+    let sum: f32 = raw.iter().sum();
+    let masses: Vec<f32> = raw.iter().map(|m| m / sum).collect();
+    let params = SolverParams {
+        solver: solver(s.kind, s.stiffness, s.compliance, s.soft_bending),
+        substeps: s.substeps,
+        iterations: s.iterations,
+        damping: s.damping,
+        ..Default::default()
+    };
+    let mut sim = Simulation::new(topology, &masses, params).expect("valid parameters");
+    sim.set_features(Features {
+        self_collision: s.self_collision.then_some(SelfCollision {
+            thickness: s.size / s.n as f32,
+            friction: 0.3,
+        }),
+        tethers: s.tethers.then(TetherParams::default),
+        tear_threshold: s.tear,
+    })
+    .expect("valid features");
+    let pinned: Vec<u32> = match s.pins {
+        Pins::None => vec![],
+        Pins::TwoCorners => vec![0, s.n - 1],
+        Pins::All => (0..count as u32).collect(),
+    };
+    let pinned: Vec<u32> = pinned
+        .into_iter()
+        .filter(|&v| (v as usize) < count)
+        .collect();
+    sim.state_mut()
+        .set_pins(pinned.iter().map(|&v| Pin {
+            vertex: v,
+            target: pos[v as usize],
+        }))
+        .unwrap();
+    sim
+}
+
+fn run(s: &Scenario) -> Outcome {
+    let (pos, uvs, idx) = grid_mesh(s.n, s.size);
+    run_mesh(s, &pos, Some(&uvs), &idx)
+}
+
+fn run_mesh(s: &Scenario, pos: &[Vec3], uvs: Option<&[Vec2]>, idx: &[u32]) -> Outcome {
+    let mut sim = simulation(s, pos, uvs, idx);
+    let start: Vec<Vec3> = pos.to_vec();
+    let centre = start.iter().copied().sum::<Vec3>() / start.len() as f32;
+    let free_mass: f64 = (0..sim.state().len())
+        .filter(|&i| sim.state().positions[i].w > 0.0)
+        .map(|i| 1.0 / f64::from(sim.state().positions[i].w))
+        .sum();
+    let max_speed = f64::from(sim.params().max_speed);
+    let bound = 0.5 * free_mass * max_speed * max_speed;
+    let floor = Collider::fixed(
+        Shape::Plane,
+        Pose::at(Vec3::new(0.0, -0.5 * s.size, 0.0)),
+        0.01 * s.size,
+        0.5,
+    );
+    let wind_field = match s.disturbance {
+        Disturbance::Wind(speed) => Some(WindField::new([(
+            WindParams {
+                velocity: Vec3::new(speed, 0.2 * speed, 0.1 * speed),
+                gust_amplitude: 0.5,
+                turbulence: 0.5,
+                ..Default::default()
+            },
+            None,
+        )])),
+        _ => None,
+    };
+    let mut out = Outcome {
+        max_energy: 0.0,
+        bound,
+        energy_after_disturbance: 0.0,
+        final_energy: 0.0,
+        recoveries: 0,
+        non_finite: 0,
+        max_travel: 0.0,
+    };
+    let (on, off) = s.steps;
+    let mut time = 0.0f32;
+    for step in 0..on + off {
+        let disturbing = step < on;
+        let mut colliders = Vec::new();
+        if s.floor {
+            colliders.push(floor.clone());
+        }
+        if disturbing {
+            match s.disturbance {
+                Disturbance::FastCollider(speed) => {
+                    // Along x through the cloth's centre, from one side to the other.
+                    let x0 = -s.size + speed * time;
+                    let ball = Collider {
+                        shape: Shape::Sphere {
+                            radius: 0.2 * s.size,
+                        },
+                        start: Pose::at(Vec3::new(x0, s.size, centre.z)),
+                        end: Pose::at(Vec3::new(x0 + speed * s.dt, s.size, centre.z)),
+                        thickness: 0.01 * s.size,
+                        friction: 0.5,
+                    };
+                    colliders.push(ball);
+                }
+                Disturbance::SwallowingCollider => colliders.push(Collider::fixed(
+                    Shape::Sphere {
+                        radius: 20.0 * s.size,
+                    },
+                    Pose::at(centre),
+                    0.01 * s.size,
+                    0.5,
+                )),
+                Disturbance::PinTeleport(d) if step == 1 => {
+                    let targets: Vec<Vec3> = sim
+                        .state()
+                        .pins()
+                        .iter()
+                        .enumerate()
+                        .map(|(k, p)| p.target + if k == 0 { Vec3::X * d } else { Vec3::ZERO })
+                        .collect();
+                    sim.state_mut().set_pin_targets(targets);
+                }
+                Disturbance::PinTeleport(_) if step == on - 1 => {
+                    // The pin comes back home: the disturbance stops.
+                    let targets: Vec<Vec3> = sim
+                        .state()
+                        .pins()
+                        .iter()
+                        .map(|p| start[p.vertex as usize])
+                        .collect();
+                    sim.state_mut().set_pin_targets(targets);
+                }
+                _ => {}
+            }
+        }
+        let env = Environment {
+            colliders: &colliders,
+            wind: if disturbing {
+                wind_field.as_ref()
+            } else {
+                None
+            },
+            time,
+        };
+        let report = sim.step_in(s.dt, &env, &Serial);
+        time += s.dt;
+        sim.update_shading();
+        out.recoveries += usize::from(report.recovered);
+        out.non_finite += sim.state().non_finite_count();
+        out.non_finite += sim.normals().iter().filter(|n| !n.is_finite()).count();
+        out.non_finite += sim.tangents().iter().filter(|t| !t.is_finite()).count();
+        let e = sim.state().kinetic_energy();
+        out.max_energy = out.max_energy.max(e);
+        if step + 1 == on {
+            out.energy_after_disturbance = e;
+        }
+        out.final_energy = e;
+        for (p, s0) in sim.state().positions.iter().zip(&start) {
+            out.max_travel = out.max_travel.max(p.truncate().distance(*s0));
+        }
+    }
+    out
+}
+
+/// The invariants every run keeps, whatever it was given.
+fn check(s: &Scenario, o: &Outcome) {
+    assert_eq!(
+        o.non_finite, 0,
+        "non-finite values left the solver: {s:?} {o:?}"
+    );
+    assert_eq!(
+        o.recoveries, 0,
+        "the solver produced a NaN and had to reset: {s:?} {o:?}"
+    );
+    assert!(
+        o.max_energy <= o.bound * (1.0 + 1e-4),
+        "kinetic energy over its bound: {s:?} {o:?}"
+    );
+}
+
+fn kind() -> impl Strategy<Value = Kind> {
+    prop_oneof![Just(Kind::Lab), Just(Kind::Pbd), Just(Kind::Xpbd)]
+}
+
+/// Log-uniform in `[lo, hi]`.
+fn log_range(lo: f32, hi: f32) -> impl Strategy<Value = f32> {
+    (0.0f32..=1.0).prop_map(move |t| lo * (hi / lo).powf(t))
+}
+
+fn disturbance() -> impl Strategy<Value = Disturbance> {
+    prop_oneof![
+        Just(Disturbance::Nothing),
+        log_range(1.0, 100.0).prop_map(Disturbance::FastCollider),
+        Just(Disturbance::SwallowingCollider),
+        log_range(1.0, 100.0).prop_map(Disturbance::Wind),
+        log_range(1.0, 1000.0).prop_map(Disturbance::PinTeleport),
+    ]
+}
+
+fn scenario() -> impl Strategy<Value = Scenario> {
+    (
+        (
+            kind(),
+            0.0f32..=1.0,
+            prop_oneof![Just(0.0f32), log_range(1e-9, 1e3)],
+            log_range(1e-4, 0.1),
+            1u32..=64,
+            log_range(1.0, 500.0),
+            0.0f32..=1.0,
+        ),
+        (
+            log_range(1.0, 1e4),
+            log_range(1e-3, 100.0),
+            3u32..=10,
+            prop_oneof![Just(Pins::None), Just(Pins::TwoCorners), Just(Pins::All)],
+            disturbance(),
+        ),
+        (
+            any::<bool>(),
+            any::<bool>(),
+            prop_oneof![
+                Just(None),
+                Just(Some(1.0001f32)),
+                (1.01f32..3.0).prop_map(Some)
+            ],
+            any::<bool>(),
+        ),
+    )
+        .prop_map(
+            |(
+                (kind, stiffness, compliance, dt, substeps, iterations, damping),
+                (mass_ratio, size, n, pins, disturbance),
+                (self_collision, tethers, tear, floor),
+            )| {
+                // Keep a case under about 3·10⁵ projections a step so the suite stays quick;
+                // the named tests below take the full counts.
+                let iterations = (iterations as u32).clamp(1, (2000 / substeps).max(1));
+                Scenario {
+                    kind,
+                    stiffness,
+                    compliance,
+                    soft_bending: false,
+                    dt,
+                    substeps,
+                    iterations,
+                    damping,
+                    mass_ratio,
+                    size,
+                    n,
+                    pins,
+                    disturbance,
+                    self_collision,
+                    tethers,
+                    tear,
+                    floor,
+                    steps: (20, 10),
+                }
+            },
+        )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 192, ..ProptestConfig::default() })]
+
+    /// Any combination of the ranges: finite, bounded energy, no internal resets.
+    #[test]
+    fn any_scenario_stays_finite_and_bounded(s in scenario()) {
+        let o = run(&s);
+        check(&s, &o);
+    }
+}
+
+// ---- corners of the ranges, one at a time ----
+
+fn each_solver(base: Scenario) {
+    for (kind, stiffness, compliance) in [
+        (Kind::Lab, 0.99, 0.0),
+        (Kind::Pbd, 1.0, 0.0),
+        (Kind::Pbd, 0.0, 0.0),
+        (Kind::Xpbd, 1.0, 0.0),
+        (Kind::Xpbd, 1.0, 1e3),
+    ] {
+        let s = Scenario {
+            kind,
+            stiffness,
+            compliance,
+            ..base.clone()
+        };
+        let o = run(&s);
+        check(&s, &o);
+    }
+}
+
+#[test]
+fn time_steps_from_tenth_of_a_millisecond_to_a_tenth_of_a_second() {
+    for dt in [1e-4, 1e-3, 1.0 / 60.0, 0.05, 0.1] {
+        each_solver(Scenario {
+            dt,
+            ..Default::default()
+        });
+    }
+}
+
+#[test]
+fn counts_up_to_64_substeps_and_500_iterations() {
+    for (substeps, iterations) in [(1, 1), (64, 1), (1, 500), (64, 500)] {
+        each_solver(Scenario {
+            substeps,
+            iterations,
+            n: 5,
+            steps: (5, 5),
+            ..Default::default()
+        });
+    }
+}
+
+#[test]
+fn damping_from_none_to_one() {
+    for damping in [0.0, 0.5, 1.0] {
+        each_solver(Scenario {
+            damping,
+            ..Default::default()
+        });
+    }
+}
+
+#[test]
+fn mass_ratio_of_ten_thousand() {
+    each_solver(Scenario {
+        mass_ratio: 1e4,
+        floor: true,
+        ..Default::default()
+    });
+}
+
+#[test]
+fn cloth_from_a_millimetre_to_a_hundred_metres() {
+    for size in [1e-3, 1.0, 100.0] {
+        each_solver(Scenario {
+            size,
+            floor: true,
+            ..Default::default()
+        });
+    }
+}
+
+#[test]
+fn all_pinned_and_none_pinned() {
+    for pins in [Pins::All, Pins::None] {
+        each_solver(Scenario {
+            pins,
+            floor: true,
+            ..Default::default()
+        });
+    }
+}
+
+#[test]
+fn every_feature_on_under_every_disturbance() {
+    for disturbance in [
+        Disturbance::FastCollider(100.0),
+        Disturbance::SwallowingCollider,
+        Disturbance::Wind(100.0),
+        Disturbance::PinTeleport(1000.0),
+    ] {
+        each_solver(Scenario {
+            disturbance,
+            self_collision: true,
+            tethers: true,
+            tear: Some(3.0),
+            floor: true,
+            ..Default::default()
+        });
+    }
+}
+
+#[test]
+fn every_edge_torn() {
+    for kind in [Kind::Lab, Kind::Pbd, Kind::Xpbd] {
+        let s = Scenario {
+            kind,
+            stiffness: if matches!(kind, Kind::Lab) { 0.99 } else { 1.0 },
+            tear: Some(1.0001),
+            disturbance: Disturbance::Wind(100.0),
+            floor: true,
+            ..Default::default()
+        };
+        let (pos, uvs, idx) = grid_mesh(s.n, s.size);
+        let mut sim = simulation(&s, &pos, Some(&uvs), &idx);
+        // Pull the free corner far away: the edges on the way tear, and the rest follow as
+        // the pieces fall; keep going until nothing is left to tear.
+        let far = sim.state().len() - 1;
+        let mut torn = 0;
+        for _ in 0..400 {
+            sim.state_mut().positions[far] += glam::Vec4::new(0.0, -1.0, 0.0, 0.0);
+            torn += sim.step(s.dt, &Serial).torn.len();
+            sim.update_shading();
+            assert_eq!(sim.state().non_finite_count(), 0);
+            assert!(sim.normals().iter().all(|n| n.is_finite()));
+        }
+        assert!(torn > 0, "{kind:?}: nothing tore");
+        for t in sim.topology().triangles() {
+            assert!(t.iter().all(|&v| (v as usize) < sim.state().len()));
+        }
+        let o = run(&s);
+        check(&s, &o);
+    }
+}
+
+// ---- broken geometry ----
+
+/// A mesh with a zero-length edge, coincident vertices, a zero-area triangle and a sliver.
+fn broken_mesh() -> (Vec<Vec3>, Vec<u32>) {
+    let pos = vec![
+        Vec3::new(0.0, 1.0, 0.0),
+        Vec3::new(1.0, 1.0, 0.0),
+        Vec3::new(0.0, 1.0, 1.0),
+        Vec3::new(1.0, 1.0, 1.0),
+        Vec3::new(1.0, 1.0, 1.0), // coincident with 3
+        Vec3::new(2.0, 1.0, 0.0),
+        Vec3::new(3.0, 1.0, 0.0), // 5, 6, 7 collinear: a zero-area triangle
+        Vec3::new(4.0, 1.0, 0.0),
+        Vec3::new(2.0, 1.0, 1e-6), // a sliver with 5 and 6
+    ];
+    let idx = vec![
+        0, 2, 1, //
+        1, 2, 3, //
+        1, 3, 4, // zero-length edge 3–4
+        1, 4, 5, //
+        5, 6, 7, // zero area
+        5, 8, 6, // sliver
+        3, 3, 4, // repeated index
+    ];
+    (pos, idx)
+}
+
+#[test]
+fn zero_length_edges_coincident_vertices_zero_area_triangles_and_slivers() {
+    let (pos, idx) = broken_mesh();
+    for disturbance in [
+        Disturbance::Nothing,
+        Disturbance::Wind(100.0),
+        Disturbance::FastCollider(100.0),
+    ] {
+        for (kind, stiffness, compliance) in [
+            (Kind::Lab, 0.99, 0.0),
+            (Kind::Pbd, 1.0, 0.0),
+            (Kind::Xpbd, 0.0, 0.0),
+            (Kind::Xpbd, 0.0, 1e-3),
+        ] {
+            let s = Scenario {
+                kind,
+                stiffness,
+                compliance,
+                disturbance,
+                self_collision: true,
+                tethers: true,
+                floor: true,
+                ..Default::default()
+            };
+            let o = run_mesh(&s, &pos, None, &idx);
+            check(&s, &o);
+        }
+    }
+}
+
+/// Random vertex soups: positions snapped to a coarse lattice so that coincident vertices,
+/// zero-length edges and degenerate triangles are common.
+fn soup() -> impl Strategy<Value = (Vec<Vec3>, Vec<u32>)> {
+    (3usize..24).prop_flat_map(|n| {
+        (
+            prop::collection::vec((0i8..4, 0i8..2, 0i8..4), n),
+            prop::collection::vec(0..n as u32, 3..60),
+        )
+            .prop_map(|(p, mut idx)| {
+                idx.truncate(idx.len() / 3 * 3);
+                let pos = p
+                    .into_iter()
+                    .map(|(x, y, z)| Vec3::new(f32::from(x), f32::from(y), f32::from(z)) * 0.25)
+                    .collect();
+                (pos, idx)
+            })
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 128, ..ProptestConfig::default() })]
+
+    /// Broken meshes: the solver accepts any triangle soup with in-range indices and stays sane.
+    #[test]
+    fn any_triangle_soup_stays_finite((pos, idx) in soup(), k in kind(), d in disturbance()) {
+        let s = Scenario {
+            kind: k,
+            stiffness: 0.9,
+            disturbance: d,
+            self_collision: true,
+            tethers: true,
+            tear: Some(2.0),
+            floor: true,
+            steps: (15, 5),
+            ..Default::default()
+        };
+        match Topology::from_triangles(&pos, None, &idx, TopologyOptions::default()) {
+            // A soup whose triangles are all degenerate (or that has none) is refused with a
+            // typed error; anything else must simulate.
+            Err(e) => prop_assert!(matches!(e, TopologyError::NoTriangles), "{e}"),
+            Ok(_) => check(&s, &run_mesh(&s, &pos, None, &idx)),
+        }
+    }
+}
+
+/// Found by `any_triangle_soup_stays_finite`: three coincident vertices and the single
+/// triangle `(1, 0, 0)`. Nothing is left to simulate; the mesh is refused, not simulated.
+#[test]
+fn regression_soup_of_only_degenerate_triangles_is_refused() {
+    let pos = [Vec3::ZERO; 3];
+    let err = Topology::from_triangles(&pos, None, &[1, 0, 0], TopologyOptions::default())
+        .expect_err("no triangle with an area");
+    assert_eq!(err, TopologyError::NoTriangles);
+    assert!(err.to_string().contains("triangle"), "{err}");
+}
+
+// ---- coming back to rest ----
+
+/// After each disturbance stops, the cloth calms down: its kinetic energy falls far below
+/// what the disturbance gave it.
+#[test]
+fn cloth_comes_back_to_rest_after_each_disturbance() {
+    for disturbance in [
+        Disturbance::FastCollider(100.0),
+        Disturbance::Wind(100.0),
+        Disturbance::PinTeleport(1000.0),
+        Disturbance::SwallowingCollider,
+    ] {
+        for kind in [Kind::Pbd, Kind::Xpbd] {
+            let s = Scenario {
+                kind,
+                disturbance,
+                damping: 1.0,
+                tethers: true,
+                // One second of disturbance, then twenty of calm.
+                steps: (60, 1200),
+                ..Default::default()
+            };
+            let o = run(&s);
+            check(&s, &o);
+            assert!(
+                o.final_energy < 1e-3 && o.final_energy < 0.01 * o.max_energy.max(1e-9),
+                "did not settle: {s:?} {o:?}"
+            );
+        }
+    }
+}
+
+// ---- colliders given as SDFs of broken meshes ----
+
+#[test]
+fn sdf_of_a_broken_mesh_is_finite_and_safe_to_collide_with() {
+    let (pos, idx) = broken_mesh();
+    let grid = SdfGrid::from_mesh(&pos, &idx, 16).expect("bakes");
+    let s = Scenario::default();
+    let (cpos, uvs, cidx) = grid_mesh(s.n, s.size);
+    let mut sim = simulation(&s, &cpos, Some(&uvs), &cidx);
+    let colliders = [Collider::fixed(
+        Shape::Sdf(Arc::new(grid)),
+        Pose {
+            translation: Vec3::new(0.0, 0.5, 0.0),
+            rotation: Quat::from_rotation_y(0.3),
+            scale: 1.0,
+        },
+        0.01,
+        0.5,
+    )];
+    for _ in 0..60 {
+        let r = sim.step_in(
+            1.0 / 60.0,
+            &Environment {
+                colliders: &colliders,
+                ..Default::default()
+            },
+            &Serial,
+        );
+        assert!(!r.recovered);
+        assert_eq!(sim.state().non_finite_count(), 0);
+    }
+}
