@@ -45,9 +45,9 @@ pub mod wind;
 /// The types most apps need.
 pub mod prelude {
     pub use crate::cloth::{
-        Cloth, ClothConfig, ClothError, ClothInvalid, ClothPin, ClothPins, ClothPlugin,
-        ClothPlugins, ClothSelfCollision, ClothSim, ClothSystems, ClothTearing, ClothTethers,
-        ClothTorn, PinAnchor, grid_mesh,
+        Cloth, ClothConfig, ClothError, ClothFailed, ClothInvalid, ClothPin, ClothPins,
+        ClothPlugin, ClothPlugins, ClothSelfCollision, ClothSim, ClothSystems, ClothTearing,
+        ClothTethers, ClothTorn, PinAnchor, grid_mesh,
     };
     #[cfg(feature = "rapier")]
     pub use crate::collider::rapier::ClothRapierPlugin;

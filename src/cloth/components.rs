@@ -33,6 +33,9 @@ impl_reflect_opaque!((in bevy_cloth::solver) MassDistribution(Debug, Clone, Part
 /// }
 /// # bevy::ecs::system::assert_is_system(spawn);
 /// ```
+///
+/// Changing a `Cloth` at runtime rebuilds the simulation, which starts again from the rest
+/// shape; [`ClothConfig`] and [`ClothPins`] change without a rebuild.
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component, Default, Clone, PartialEq)]
 #[require(

@@ -18,4 +18,4 @@ pub use components::{
 };
 pub use mesh::{MeshData, grid_mesh, read_mesh};
 pub use plugin::{ClothPlugin, ClothPlugins, ClothSystems};
-pub use sim::{ClothError, ClothInvalid, ClothSim, TaskPoolParallel};
+pub use sim::{ClothError, ClothFailed, ClothInvalid, ClothSim, ClothSource, TaskPoolParallel};

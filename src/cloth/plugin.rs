@@ -5,7 +5,7 @@ use bevy::ecs::schedule::{InternedScheduleLabel, ScheduleLabel};
 use bevy::prelude::*;
 use bevy::transform::TransformSystems;
 
-use super::sim::{init_cloths, retry_cloths, step_cloths, sync_cloths};
+use super::sim::{ClothFailed, init_cloths, retry_cloths, step_cloths, sync_cloths};
 use super::writeback::write_back;
 use super::{
     Cloth, ClothConfig, ClothPin, ClothPins, ClothSelfCollision, ClothTearing, ClothTethers,
@@ -68,6 +68,7 @@ impl Plugin for ClothPlugin {
             .register_type::<ClothTethers>()
             .register_type::<ClothTearing>()
             .add_message::<ClothTorn>()
+            .add_message::<ClothFailed>()
             .configure_sets(
                 self.schedule,
                 (ClothSystems::Prepare, ClothSystems::Simulate).chain(),

@@ -35,6 +35,8 @@ pub enum ClothError {
     MeshMissing,
     /// The cloth's total mass is not finite and positive.
     BadMass(f32),
+    /// [`Cloth::teleport_distance`] is NaN or not positive.
+    BadTeleportDistance(f32),
     /// The solver rejected the mesh, masses, pins or parameters.
     Solver(SolverError),
 }
@@ -54,6 +56,12 @@ impl core::fmt::Display for ClothError {
             ),
             ClothError::MeshMissing => write!(f, "the Mesh3d handle points at no mesh asset"),
             ClothError::BadMass(m) => write!(f, "cloth mass {m} must be finite and > 0"),
+            ClothError::BadTeleportDistance(d) => {
+                write!(
+                    f,
+                    "teleport distance {d} must be > 0 (infinity turns it off)"
+                )
+            }
             ClothError::Solver(e) => e.fmt(f),
         }
     }
@@ -65,6 +73,16 @@ impl From<SolverError> for ClothError {
     fn from(e: SolverError) -> Self {
         ClothError::Solver(e)
     }
+}
+
+/// Sent once when a cloth is found invalid (the same moment the error is logged), so gameplay
+/// or tools can react; the cloth then carries [`ClothInvalid`].
+#[derive(Message, Clone, Debug, PartialEq)]
+pub struct ClothFailed {
+    /// The cloth entity.
+    pub cloth: Entity,
+    /// What is wrong with it.
+    pub error: ClothError,
 }
 
 /// Present on a cloth entity that cannot be simulated, with the reason.
@@ -131,6 +149,17 @@ impl ClothSim {
     }
 }
 
+/// The mesh a cloth was built from and the cloth's own copy of it (which its [`Mesh3d`] shows
+/// and the simulation rewrites). Inserted by the plugin; rebuilding the cloth starts again from
+/// `source` as long as the entity still shows `copy`.
+#[derive(Component, Clone, Debug, PartialEq)]
+pub struct ClothSource {
+    /// The mesh the user gave.
+    pub source: Handle<Mesh>,
+    /// The cloth's own copy.
+    pub copy: Handle<Mesh>,
+}
+
 /// Runs solver work items on Bevy's [`ComputeTaskPool`].
 #[derive(Clone, Copy)]
 pub struct TaskPoolParallel<'a>(pub &'a TaskPool);
@@ -179,6 +208,9 @@ fn build(
 ) -> Result<Built, ClothError> {
     if !(cloth.mass.is_finite() && cloth.mass > 0.0) {
         return Err(ClothError::BadMass(cloth.mass));
+    }
+    if cloth.teleport_distance.is_nan() || cloth.teleport_distance <= 0.0 {
+        return Err(ClothError::BadTeleportDistance(cloth.teleport_distance));
     }
     let data = read_mesh(mesh)?;
     // The rest shape is the mesh placed by the entity's transform, so a scaled entity gets a
@@ -261,7 +293,16 @@ fn set_pins(
 
 fn report(commands: &mut Commands, entity: Entity, error: ClothError) {
     error!("cloth {entity}: {error}; it is not simulated");
-    commands.entity(entity).try_insert(ClothInvalid(error));
+    commands.write_message(ClothFailed {
+        cloth: entity,
+        error: error.clone(),
+    });
+    // Drop any running simulation too: an invalid cloth is not simulated, and fixing it
+    // rebuilds it from scratch.
+    commands
+        .entity(entity)
+        .try_remove::<ClothSim>()
+        .try_insert(ClothInvalid(error));
 }
 
 /// Creates the simulation of cloths that have none yet (waiting while their mesh loads).
@@ -278,6 +319,8 @@ pub(crate) fn init_cloths(
             &ClothPins,
             &Mesh3d,
             &GlobalTransform,
+            Option<&ClothSource>,
+            FeatureQuery,
         ),
         (Without<ClothSim>, Without<ClothInvalid>),
     >,
@@ -286,12 +329,18 @@ pub(crate) fn init_cloths(
     let Some(meshes) = meshes.as_deref_mut() else {
         return;
     };
-    for (entity, cloth, config, pins, mesh3d, own) in &new {
-        let Some(mesh) = meshes.get(&mesh3d.0) else {
+    for (entity, cloth, config, pins, mesh3d, own, source, (sc, tethers, tearing)) in &new {
+        // Rebuilding (after a change to `Cloth` or a fix): start from the mesh the user gave,
+        // not from the cloth's own, deformed copy — unless the user has put another mesh in.
+        let source_handle = match source {
+            Some(s) if s.copy == mesh3d.0 => s.source.clone(),
+            _ => mesh3d.0.clone(),
+        };
+        let Some(mesh) = meshes.get(&source_handle) else {
             // Not loaded yet: wait. Failed to load: say so once.
             let failed = asset_server.as_ref().is_some_and(|s| {
                 matches!(
-                    s.get_load_state(&mesh3d.0),
+                    s.get_load_state(&source_handle),
                     Some(bevy::asset::LoadState::Failed(_))
                 )
             });
@@ -300,11 +349,22 @@ pub(crate) fn init_cloths(
             }
             continue;
         };
-        match build(cloth, config, pins, mesh, own, &transforms) {
+        let built = build(cloth, config, pins, mesh, own, &transforms).and_then(|b| {
+            // Features are checked before the cloth starts, so a bad one never runs a step.
+            let mut b = b;
+            let wanted = features(&b.0, sc, tethers, tearing);
+            b.0.set_features(wanted).map_err(SolverError::Params)?;
+            Ok(b)
+        });
+        match built {
             Ok((sim, rest_local, mesh)) => {
                 let handle = meshes.add(mesh);
                 commands.entity(entity).try_insert((
                     Mesh3d(handle.clone()),
+                    ClothSource {
+                        source: source_handle,
+                        copy: handle.clone(),
+                    },
                     ClothSim {
                         sim,
                         mesh: handle,
@@ -323,7 +383,8 @@ pub(crate) fn init_cloths(
 }
 
 /// Clears [`ClothInvalid`] when the user changes what made the cloth invalid, so it is tried
-/// again; drops the simulation when the entity's mesh is replaced by another one.
+/// again; drops the simulation (to rebuild it) when the entity's mesh is replaced by another
+/// one or its [`Cloth`] changes.
 #[expect(clippy::type_complexity, reason = "a query filter, read once")]
 pub(crate) fn retry_cloths(
     mut commands: Commands,
@@ -343,7 +404,13 @@ pub(crate) fn retry_cloths(
         ),
     >,
     swapped: Query<(Entity, &Mesh3d, &ClothSim), Changed<Mesh3d>>,
+    rebuilt: Query<Entity, (Changed<Cloth>, With<ClothSim>)>,
 ) {
+    // Mass, mass distribution and bend rest are baked into the simulation: rebuild it (the
+    // cloth starts again from its rest shape).
+    for entity in &rebuilt {
+        commands.entity(entity).remove::<ClothSim>();
+    }
     for entity in &invalid {
         commands.entity(entity).remove::<(ClothInvalid, ClothSim)>();
     }

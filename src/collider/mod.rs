@@ -317,11 +317,44 @@ type ColliderQueryData = (
     Option<&'static mut ClothContactImpulse>,
 );
 
+/// What is wrong with a collider, if anything: sizes, thickness or friction negative or not
+/// finite, or a transform that is not finite.
+fn collider_problem(c: &ClothCollider, gt: &GlobalTransform) -> Option<String> {
+    let ok = |v: f32| v.is_finite() && v >= 0.0;
+    if !ok(c.thickness) {
+        return Some(format!("thickness {} must be finite and ≥ 0", c.thickness));
+    }
+    if !ok(c.friction) {
+        return Some(format!("friction {} must be finite and ≥ 0", c.friction));
+    }
+    let sizes_ok = match &c.shape {
+        ColliderShape::Sphere { radius } => ok(*radius),
+        ColliderShape::Cuboid { half_extents } => half_extents.to_array().into_iter().all(ok),
+        ColliderShape::Capsule {
+            half_height,
+            radius,
+        } => ok(*half_height) && ok(*radius),
+        ColliderShape::Plane | ColliderShape::Baked(_) => true,
+        ColliderShape::Mesh { resolution, .. } => *resolution >= 4,
+    };
+    if !sizes_ok {
+        return Some(format!(
+            "shape {:?} has a size that is negative or not finite (or a mesh resolution below 4)",
+            c.shape
+        ));
+    }
+    if !gt.affine().is_finite() {
+        return Some("its transform is not finite".to_string());
+    }
+    None
+}
+
 /// Collects every collider's shape and its poses at the start and end of this step.
 fn gather_colliders(
     mut commands: Commands,
     mut out: ResMut<ClothColliders>,
     mut colliders: Query<ColliderQueryData>,
+    mut reported: Local<bevy::platform::collections::HashSet<Entity>>,
 ) {
     out.colliders.clear();
     out.entities.clear();
@@ -333,11 +366,19 @@ fn gather_colliders(
                 .entity(entity)
                 .insert(ClothContactImpulse::default());
         }
-        if !(collider.thickness.is_finite()
-            && collider.thickness >= 0.0
-            && collider.friction.is_finite()
-            && collider.friction >= 0.0)
-        {
+        // An invalid collider is left out, and said once (again after it was fixed).
+        let problem = collider_problem(collider, gt);
+        match (&problem, reported.contains(&entity)) {
+            (Some(p), false) => {
+                error!("cloth collider {entity}: {p}; it is ignored");
+                reported.insert(entity);
+            }
+            (None, true) => {
+                reported.remove(&entity);
+            }
+            _ => {}
+        }
+        if problem.is_some() {
             continue;
         }
         let baked = runtime.as_ref().and_then(|r| r.baked.as_ref());

@@ -102,6 +102,9 @@ pub enum TopologyError {
     },
     /// No triangle with three distinct vertices is left.
     NoTriangles,
+    /// Every triangle has zero area: the mesh has no size (all vertices on one point or one
+    /// line).
+    ZeroArea,
     /// A grid needs at least 2×2 vertices and a positive, finite size.
     BadGrid {
         /// What is wrong.
@@ -133,6 +136,9 @@ impl core::fmt::Display for TopologyError {
             }
             TopologyError::NoTriangles => {
                 write!(f, "no triangle with three distinct vertices")
+            }
+            TopologyError::ZeroArea => {
+                write!(f, "every triangle has zero area (the mesh has no size)")
             }
             TopologyError::BadGrid { reason } => write!(f, "bad grid: {reason}"),
         }
@@ -210,6 +216,13 @@ impl Topology {
         }
         if triangles.is_empty() {
             return Err(TopologyError::NoTriangles);
+        }
+        let has_area = triangles.iter().any(|t| {
+            let [a, b, c] = t.map(|v| positions[v as usize]);
+            (b - a).cross(c - a).length_squared() > 0.0
+        });
+        if !has_area {
+            return Err(TopologyError::ZeroArea);
         }
         let mut t = Self::build(
             positions.to_vec(),

@@ -23,6 +23,7 @@ use glam::{Quat, Vec3, Vec4, Vec4Swizzles};
 use noise::{NoiseFn, Perlin};
 
 use super::collide::Pose;
+use super::params::ParamError;
 
 /// A wind: base velocity, aerodynamic coefficients, gusts and turbulence.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -43,6 +44,48 @@ pub struct WindParams {
     pub turbulence_scale: f32,
     /// Noise seed.
     pub seed: u32,
+}
+
+impl WindParams {
+    /// Checks that the wind can be sampled: a finite velocity, finite non-negative drag,
+    /// lift magnitude, gust amplitude, frequency and turbulence, and a positive eddy size.
+    ///
+    /// # Errors
+    /// A [`ParamError`] naming the first field out of range.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        if !self.velocity.is_finite() {
+            return Err(ParamError {
+                name: "wind.velocity",
+                reason: format!("{} is not finite", self.velocity),
+            });
+        }
+        for (name, v) in [
+            ("wind.drag", self.drag),
+            ("wind.gust_amplitude", self.gust_amplitude),
+            ("wind.gust_frequency", self.gust_frequency),
+            ("wind.turbulence", self.turbulence),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(ParamError {
+                    name,
+                    reason: format!("{v} must be finite and ≥ 0"),
+                });
+            }
+        }
+        if !self.lift.is_finite() {
+            return Err(ParamError {
+                name: "wind.lift",
+                reason: format!("{} is not finite", self.lift),
+            });
+        }
+        if !(self.turbulence_scale.is_finite() && self.turbulence_scale > 0.0) {
+            return Err(ParamError {
+                name: "wind.turbulence_scale",
+                reason: format!("{} must be finite and > 0", self.turbulence_scale),
+            });
+        }
+        Ok(())
+    }
 }
 
 impl Default for WindParams {

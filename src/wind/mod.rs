@@ -70,14 +70,37 @@ impl Plugin for ClothWindPlugin {
 fn gather_wind(
     time: Res<Time>,
     global: Option<Res<Wind>>,
-    zones: Query<(&WindZone, &GlobalTransform)>,
+    zones: Query<(Entity, &WindZone, &GlobalTransform)>,
     mut out: ResMut<ClothWindField>,
+    mut reported: Local<bevy::platform::collections::HashSet<Option<Entity>>>,
 ) {
     out.time = time.elapsed_secs_wrapped();
+    // An invalid wind (NaN velocity, negative drag, ...) is left out, and said once.
+    let mut valid = |source: Option<Entity>, w: &WindParams| match w.validate() {
+        Ok(()) => {
+            reported.remove(&source);
+            true
+        }
+        Err(e) => {
+            if reported.insert(source) {
+                match source {
+                    Some(entity) => error!("wind zone {entity}: {e}; it is ignored"),
+                    None => error!("Wind resource: {e}; it is ignored"),
+                }
+            }
+            false
+        }
+    };
+    let global = global.filter(|w| valid(None, &w.0));
+    let zones: Vec<_> = zones
+        .iter()
+        .filter(|(e, z, gt)| valid(Some(*e), &z.wind) && gt.translation().is_finite())
+        .map(|(_, z, gt)| (z, gt))
+        .collect();
     let sources = global
         .map(|w| (w.0, None))
         .into_iter()
-        .chain(zones.iter().map(|(z, gt)| {
+        .chain(zones.into_iter().map(|(z, gt)| {
             let (scale, rotation, translation) = gt.to_scale_rotation_translation();
             (
                 z.wind,
