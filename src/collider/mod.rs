@@ -320,7 +320,7 @@ type ColliderQueryData = (
 /// What is wrong with a collider, if anything: sizes, thickness or friction negative or not
 /// finite, or a transform that is not finite.
 fn collider_problem(c: &ClothCollider, gt: &GlobalTransform) -> Option<String> {
-    let ok = |v: f32| v.is_finite() && v >= 0.0;
+    let ok = |v: f32| (0.0..=crate::solver::MAX_COORDINATE).contains(&v);
     if !ok(c.thickness) {
         return Some(format!("thickness {} must be finite and ≥ 0", c.thickness));
     }
@@ -345,6 +345,12 @@ fn collider_problem(c: &ClothCollider, gt: &GlobalTransform) -> Option<String> {
     }
     if !gt.affine().is_finite() {
         return Some("its transform is not finite".to_string());
+    }
+    if gt.translation().abs().max_element() > crate::solver::MAX_COORDINATE {
+        return Some(format!(
+            "it is over {} m from the origin",
+            crate::solver::MAX_COORDINATE
+        ));
     }
     None
 }

@@ -12,6 +12,7 @@
 //! `v` is caught as long as `v·h < r + thickness`, with `h` the substep length. At 60 Hz and 10
 //! substeps (`h` ≈ 1.7 ms) a 0.2 m ball survives speeds up to about 120 m/s.
 
+use super::state::within_range;
 use std::sync::Arc;
 
 use glam::{Quat, Vec3, Vec4, Vec4Swizzles};
@@ -269,7 +270,8 @@ pub(crate) fn collide_vertex(
                 tangential * (limit / t_len)
             };
         }
-        if !corrected.is_finite() {
+        // A push out of a huge or broken shape that lands nowhere sensible is dropped.
+        if !within_range(corrected) {
             continue;
         }
         // Momentum given to the cloth is m·Δx/h; the collider gets the opposite (h applied later).

@@ -34,6 +34,7 @@ mod batches;
 mod bending;
 mod collide;
 mod distance;
+pub mod fuzz;
 mod lab;
 mod lanes;
 mod metrics;
@@ -64,8 +65,8 @@ pub use step::{StepInput, StepScratch, step};
 pub use tear::overstretched_edges;
 pub use tether::{TetherParams, Tethers};
 pub use topology::{
-    Bend, BendRest, Edge, EdgeKind, Grid, MassDistribution, Topology, TopologyError,
-    TopologyOptions,
+    Bend, BendRest, Edge, EdgeKind, Grid, MAX_COORDINATE, MassDistribution, Topology,
+    TopologyError, TopologyOptions,
 };
 pub use wind::{WindField, WindParams, WindRegion, triangle_wind_force, wind_accelerations};
 

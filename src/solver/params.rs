@@ -150,6 +150,11 @@ fn check_range(name: &'static str, v: f32, lo: f32, hi: f32) -> Result<(), Param
 impl SolverParams {
     /// Largest accepted substep and iteration counts: enough for any converged reference.
     pub const MAX_COUNT: u32 = 10_000;
+    /// Largest accepted gravity, m/s² (about 10 000 g).
+    pub const MAX_GRAVITY: f32 = 1.0e5;
+    /// Largest accepted speed limit, m/s (ten times the speed of sound in air: nothing a cloth
+    /// survives).
+    pub const MAX_SPEED: f32 = 3.5e3;
 
     /// Checks every parameter and says which one is wrong.
     ///
@@ -158,7 +163,8 @@ impl SolverParams {
     /// of zero or over
     /// [`Self::MAX_COUNT`], non-finite gravity, negative or NaN damping, stiffness outside
     /// `[0, 1]`, negative or NaN compliance (infinite bending compliance is allowed: it means
-    /// no bending), a `max_speed` that is not finite and positive.
+    /// no bending), gravity over [`Self::MAX_GRAVITY`], a `max_speed` outside
+    /// `(0, MAX_SPEED]`.
     pub fn validate(&self) -> Result<(), ParamError> {
         for (name, n) in [("substeps", self.substeps), ("iterations", self.iterations)] {
             if n == 0 || n > Self::MAX_COUNT {
@@ -168,17 +174,21 @@ impl SolverParams {
                 });
             }
         }
-        if !self.gravity.is_finite() {
+        if !(self.gravity.is_finite() && self.gravity.length() <= Self::MAX_GRAVITY) {
             return Err(ParamError {
                 name: "gravity",
-                reason: format!("{} is not finite", self.gravity),
+                reason: format!(
+                    "{} must be finite and at most {} m/s² long",
+                    self.gravity,
+                    Self::MAX_GRAVITY
+                ),
             });
         }
         check_range("damping", self.damping, 0.0, f32::MAX)?;
-        if !(self.max_speed.is_finite() && self.max_speed > 0.0) {
+        if !(self.max_speed > 0.0 && self.max_speed <= Self::MAX_SPEED) {
             return Err(ParamError {
                 name: "max_speed",
-                reason: format!("{} must be finite and > 0", self.max_speed),
+                reason: format!("{} must be in (0, {}] m/s", self.max_speed, Self::MAX_SPEED),
             });
         }
         match self.solver {

@@ -5,6 +5,7 @@
 //! aligned vector per vertex. Positions carry the vertex's *active* inverse mass in `w`
 //! (0 for pinned vertices), so a constraint kernel gets both in one load.
 
+use super::topology::MAX_COORDINATE;
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
 /// Positions, velocities and pins of one cloth.
@@ -49,7 +50,8 @@ pub enum StateError {
         /// The mass given.
         mass: f32,
     },
-    /// A position is NaN or infinite.
+    /// A position is NaN, infinite or farther than
+    /// [`MAX_COORDINATE`](crate::solver::MAX_COORDINATE) from the origin along an axis.
     NonFinitePosition {
         /// Vertex index.
         vertex: usize,
@@ -61,7 +63,8 @@ pub enum StateError {
         /// Number of vertices.
         vertex_count: usize,
     },
-    /// A pin target is NaN or infinite.
+    /// A pin target is NaN, infinite or farther than
+    /// [`MAX_COORDINATE`](crate::solver::MAX_COORDINATE) from the origin along an axis.
     NonFinitePinTarget {
         /// The pin's vertex index.
         vertex: u32,
@@ -81,7 +84,10 @@ impl core::fmt::Display for StateError {
                 )
             }
             StateError::NonFinitePosition { vertex } => {
-                write!(f, "vertex {vertex} has a NaN or infinite position")
+                write!(
+                    f,
+                    "vertex {vertex} has a NaN, infinite or too distant position (limit {MAX_COORDINATE} m)"
+                )
             }
             StateError::PinOutOfRange {
                 vertex,
@@ -91,13 +97,22 @@ impl core::fmt::Display for StateError {
                 "pin on vertex {vertex}, but the cloth has {vertex_count} vertices"
             ),
             StateError::NonFinitePinTarget { vertex } => {
-                write!(f, "pin on vertex {vertex} has a NaN or infinite target")
+                write!(
+                    f,
+                    "pin on vertex {vertex} has a NaN, infinite or too distant target (limit {MAX_COORDINATE} m)"
+                )
             }
         }
     }
 }
 
 impl std::error::Error for StateError {}
+
+/// Finite and within [`MAX_COORDINATE`] of the origin along every axis.
+#[inline]
+pub(crate) fn within_range(p: Vec3) -> bool {
+    p.is_finite() && p.abs().max_element() <= MAX_COORDINATE
+}
 
 impl ClothState {
     /// A cloth at rest at `positions` with per-vertex `masses` in kilograms, no pins.
@@ -117,7 +132,7 @@ impl ClothState {
             if !(m.is_finite() && m > 0.0 && (1.0 / m).is_finite()) {
                 return Err(StateError::BadMass { vertex, mass: m });
             }
-            if !p.is_finite() {
+            if !within_range(*p) {
                 return Err(StateError::NonFinitePosition { vertex });
             }
             inv_mass.push(1.0 / m);
@@ -188,7 +203,7 @@ impl ClothState {
                     vertex_count: self.len(),
                 });
             }
-            if !pin.target.is_finite() {
+            if !within_range(pin.target) {
                 return Err(StateError::NonFinitePinTarget { vertex: pin.vertex });
             }
         }
@@ -208,10 +223,11 @@ impl ClothState {
     }
 
     /// Moves the targets of the existing pins, in the order [`Self::pins`] lists them.
-    /// Targets that are not finite are ignored (the pin keeps its previous target).
+    /// Targets that are not finite or beyond [`MAX_COORDINATE`] are ignored (the pin keeps
+    /// its previous target).
     pub fn set_pin_targets(&mut self, targets: impl IntoIterator<Item = Vec3>) {
         for (pin, t) in self.pins.iter_mut().zip(targets) {
-            if t.is_finite() {
+            if within_range(t) {
                 pin.target = t;
             }
         }

@@ -296,8 +296,14 @@ fn coincident_and_degenerate_geometry_stays_finite() {
             .iter()
             .map(|p| *p * Vec3::new(squash, 1.0, 1.0))
             .collect();
-        let t =
-            Topology::from_triangles(&pos, Some(&uvs), &idx, TopologyOptions::default()).unwrap();
+        let t = match Topology::from_triangles(&pos, Some(&uvs), &idx, TopologyOptions::default()) {
+            // All on one line: nothing to simulate, refused with a typed error.
+            Err(e) if squash == 0.0 => {
+                assert_eq!(e, TopologyError::ZeroArea);
+                continue;
+            }
+            t => t.unwrap(),
+        };
         for solver in [
             Solver::LAB,
             Solver::default(),

@@ -69,6 +69,10 @@ pub struct TopologyOptions {
     pub bend_rest: BendRest,
 }
 
+/// Largest accepted vertex coordinate magnitude, in metres (10 000 km). At this distance an
+/// `f32` resolves 1 m; keep cloth within a few km of the origin for millimetre precision.
+pub const MAX_COORDINATE: f32 = 1.0e7;
+
 /// Why a mesh cannot be simulated.
 #[derive(Clone, Debug, PartialEq)]
 pub enum TopologyError {
@@ -92,6 +96,14 @@ pub enum TopologyError {
     NonFinitePosition {
         /// Vertex index.
         vertex: usize,
+    },
+    /// A vertex lies farther than [`MAX_COORDINATE`] from the origin along some axis: `f32`
+    /// has no precision left there for cloth, and squared lengths would overflow.
+    PositionTooFar {
+        /// Vertex index.
+        vertex: usize,
+        /// Its position.
+        position: Vec3,
     },
     /// The UV array has a different length from the positions.
     UvCount {
@@ -134,6 +146,10 @@ impl core::fmt::Display for TopologyError {
             TopologyError::UvCount { uvs, positions } => {
                 write!(f, "{uvs} UVs for {positions} positions")
             }
+            TopologyError::PositionTooFar { vertex, position } => write!(
+                f,
+                "vertex {vertex} at {position} is over {MAX_COORDINATE} m from the origin"
+            ),
             TopologyError::NoTriangles => {
                 write!(f, "no triangle with three distinct vertices")
             }
@@ -187,6 +203,15 @@ impl Topology {
         }
         if let Some(vertex) = positions.iter().position(|p| !p.is_finite()) {
             return Err(TopologyError::NonFinitePosition { vertex });
+        }
+        if let Some(vertex) = positions
+            .iter()
+            .position(|p| p.abs().max_element() > MAX_COORDINATE)
+        {
+            return Err(TopologyError::PositionTooFar {
+                vertex,
+                position: positions[vertex],
+            });
         }
         if let Some(uvs) = uvs
             && uvs.len() != n

@@ -180,14 +180,26 @@ impl WindField {
                 0.0
             };
             let noise = perlin.get([
-                f64::from(local.y / scale),
-                f64::from(local.z / scale),
-                f64::from(t) * 0.5,
+                wrap_noise(local.y / scale),
+                wrap_noise(local.z / scale),
+                wrap_noise(t * 0.5),
             ]) as f32;
             let factor = 1.0 + w.gust_amplitude * (omega * t + phase).sin() + w.turbulence * noise;
             u += w.velocity * factor * weight;
         }
         u
+    }
+}
+
+/// Perlin noise repeats every 256 lattice units; wrapping into one period gives the same
+/// value and keeps huge or non-finite coordinates (a cloth 10³⁸ m away) from overflowing the
+/// noise crate's integer conversion, which panics. Non-finite input gives 0.
+fn wrap_noise(x: f32) -> f64 {
+    let x = f64::from(x);
+    if x.is_finite() {
+        x.rem_euclid(256.0)
+    } else {
+        0.0
     }
 }
 
