@@ -2,14 +2,14 @@
 //! problem on its entity, is reported once (log + [`ClothFailed`]), is left unsimulated, and
 //! leaves every other cloth and the app exactly as they would have been without it.
 
-use std::time::Duration;
-
 use bevy::asset::RenderAssetUsages;
-use bevy::mesh::{Indices, MeshPlugin, PrimitiveTopology, VertexAttributeValues};
+use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
 use bevy::prelude::*;
-use bevy::time::TimeUpdateStrategy;
 use bevy_cloth::prelude::*;
 use bevy_cloth::solver::{SolverError, StateError, TopologyError};
+
+mod common;
+use common::run;
 
 #[derive(Resource, Default)]
 struct Failures(Vec<ClothFailed>);
@@ -19,20 +19,8 @@ fn collect(mut reader: MessageReader<ClothFailed>, mut out: ResMut<Failures>) {
 }
 
 fn app() -> App {
-    let mut app = App::new();
-    app.add_plugins((
-        MinimalPlugins,
-        TransformPlugin,
-        AssetPlugin::default(),
-        MeshPlugin,
-        ClothPlugins::default(),
-    ))
-    .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
-        1.0 / 60.0,
-    )))
-    .insert_resource(Time::<Fixed>::from_hz(60.0))
-    .init_resource::<Failures>()
-    .add_systems(Update, collect);
+    let mut app = common::app();
+    app.init_resource::<Failures>().add_systems(Update, collect);
     app
 }
 
@@ -69,12 +57,6 @@ fn good_positions(app: &App, e: Entity) -> Vec<Vec3> {
         .collect()
 }
 
-fn run(app: &mut App, frames: usize) {
-    for _ in 0..frames {
-        app.update();
-    }
-}
-
 fn mesh_with(positions: Vec<[f32; 3]>, indices: Option<Vec<u32>>) -> Mesh {
     let mut m = Mesh::new(
         PrimitiveTopology::TriangleList,
@@ -95,9 +77,28 @@ fn grid_positions() -> Vec<[f32; 3]> {
 struct Case {
     name: &'static str,
     bundle: Box<dyn FnOnce(&mut App) -> Entity>,
-    expect: fn(&ClothError) -> bool,
+    expect: Expect,
     /// A word the error's message must contain, so the user sees what is wrong.
     says: &'static str,
+}
+
+/// The error a case must get.
+enum Expect {
+    /// One that satisfies this test.
+    Error(fn(&ClothError) -> bool),
+    /// An out-of-range parameter of this name.
+    Param(&'static str),
+}
+
+impl Expect {
+    fn matches(&self, e: &ClothError) -> bool {
+        match self {
+            Expect::Error(f) => f(e),
+            Expect::Param(name) => {
+                matches!(e, ClothError::Solver(SolverError::Params(p)) if p.name == *name)
+            }
+        }
+    }
 }
 
 fn spawn_with(mesh: Mesh, extra: impl Bundle) -> Box<dyn FnOnce(&mut App) -> Entity> {
@@ -135,13 +136,13 @@ fn cases() -> Vec<Case> {
                 .with_inserted_indices(Indices::U32(vec![0, 1, 2])),
                 Cloth::default(),
             ),
-            expect: |e| matches!(e, ClothError::NoPositions),
+            expect: Expect::Error(|e| matches!(e, ClothError::NoPositions)),
             says: "POSITION",
         },
         Case {
             name: "mesh without indices",
             bundle: spawn_with(mesh_with(grid_positions(), None), Cloth::default()),
-            expect: |e| matches!(e, ClothError::NoIndices),
+            expect: Expect::Error(|e| matches!(e, ClothError::NoIndices)),
             says: "indices",
         },
         Case {
@@ -151,7 +152,7 @@ fn cases() -> Vec<Case> {
                     .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, vec![[0.0f32; 3]; 2]),
                 Cloth::default(),
             ),
-            expect: |e| matches!(e, ClothError::NotTriangleList(_)),
+            expect: Expect::Error(|e| matches!(e, ClothError::NotTriangleList(_))),
             says: "triangle list",
         },
         Case {
@@ -160,38 +161,38 @@ fn cases() -> Vec<Case> {
                 mesh_with(grid_positions(), Some(not_multiple)),
                 Cloth::default(),
             ),
-            expect: |e| {
+            expect: Expect::Error(|e| {
                 matches!(
                     e,
                     ClothError::Solver(SolverError::Topology(TopologyError::NotTriangles { .. }))
                 )
-            },
+            }),
             says: "multiple of 3",
         },
         Case {
             name: "NaN vertex position",
             bundle: spawn_with(mesh_with(nan, Some(GRID.indices())), Cloth::default()),
-            expect: |e| {
+            expect: Expect::Error(|e| {
                 matches!(
                     e,
                     ClothError::Solver(SolverError::Topology(TopologyError::NonFinitePosition {
                         vertex: 5
                     }))
                 )
-            },
+            }),
             says: "5",
         },
         Case {
             name: "infinite vertex position",
             bundle: spawn_with(mesh_with(inf, Some(GRID.indices())), Cloth::default()),
-            expect: |e| {
+            expect: Expect::Error(|e| {
                 matches!(
                     e,
                     ClothError::Solver(SolverError::Topology(TopologyError::NonFinitePosition {
                         vertex: 9
                     }))
                 )
-            },
+            }),
             says: "9",
         },
         Case {
@@ -200,7 +201,7 @@ fn cases() -> Vec<Case> {
                 mesh_with(grid_positions(), Some(out_of_range)),
                 Cloth::default(),
             ),
-            expect: |e| {
+            expect: Expect::Error(|e| {
                 matches!(
                     e,
                     ClothError::Solver(SolverError::Topology(TopologyError::IndexOutOfRange {
@@ -208,7 +209,7 @@ fn cases() -> Vec<Case> {
                         ..
                     }))
                 )
-            },
+            }),
             says: "999",
         },
         Case {
@@ -217,7 +218,7 @@ fn cases() -> Vec<Case> {
                 grid_mesh(&GRID),
                 (Cloth::default(), ClothPins::rest([0, 64])),
             ),
-            expect: |e| {
+            expect: Expect::Error(|e| {
                 matches!(
                     e,
                     ClothError::Solver(SolverError::State(StateError::PinOutOfRange {
@@ -225,29 +226,29 @@ fn cases() -> Vec<Case> {
                         ..
                     }))
                 )
-            },
+            }),
             says: "64",
         },
         Case {
             name: "zero-sized grid (no vertices)",
             bundle: spawn_with(grid_mesh(&Grid::new(0, 0, 1.0, 1.0)), Cloth::default()),
-            expect: |e| {
+            expect: Expect::Error(|e| {
                 matches!(
                     e,
                     ClothError::Solver(SolverError::Topology(TopologyError::NoVertices))
                 )
-            },
+            }),
             says: "vertices",
         },
         Case {
             name: "grid of zero width (every triangle degenerate)",
             bundle: spawn_with(grid_mesh(&Grid::new(8, 8, 0.0, 0.0)), Cloth::default()),
-            expect: |e| {
+            expect: Expect::Error(|e| {
                 matches!(
                     e,
                     ClothError::Solver(SolverError::Topology(TopologyError::ZeroArea))
                 )
-            },
+            }),
             says: "zero area",
         },
         Case {
@@ -259,7 +260,7 @@ fn cases() -> Vec<Case> {
                     ..default()
                 },
             ),
-            expect: |e| matches!(e, ClothError::BadMass(m) if *m == -1.0),
+            expect: Expect::Error(|e| matches!(e, ClothError::BadMass(m) if *m == -1.0)),
             says: "mass",
         },
         Case {
@@ -271,7 +272,7 @@ fn cases() -> Vec<Case> {
                     ..default()
                 },
             ),
-            expect: |e| matches!(e, ClothError::BadMass(m) if m.is_infinite()),
+            expect: Expect::Error(|e| matches!(e, ClothError::BadMass(m) if m.is_infinite())),
             says: "mass",
         },
         Case {
@@ -283,7 +284,9 @@ fn cases() -> Vec<Case> {
                     ..default()
                 },
             ),
-            expect: |e| matches!(e, ClothError::BadTeleportDistance(d) if d.is_nan()),
+            expect: Expect::Error(
+                |e| matches!(e, ClothError::BadTeleportDistance(d) if d.is_nan()),
+            ),
             says: "teleport",
         },
         Case {
@@ -298,7 +301,7 @@ fn cases() -> Vec<Case> {
                     },
                 ),
             ),
-            expect: |e| matches!(e, ClothError::Solver(SolverError::Params(p)) if p.name == "iterations"),
+            expect: Expect::Param("iterations"),
             says: "iterations",
         },
         Case {
@@ -313,7 +316,7 @@ fn cases() -> Vec<Case> {
                     },
                 ),
             ),
-            expect: |e| matches!(e, ClothError::Solver(SolverError::Params(p)) if p.name == "damping"),
+            expect: Expect::Param("damping"),
             says: "damping",
         },
         Case {
@@ -328,19 +331,19 @@ fn cases() -> Vec<Case> {
                     },
                 ),
             ),
-            expect: |e| matches!(e, ClothError::Solver(SolverError::Params(p)) if p.name == "gravity"),
+            expect: Expect::Param("gravity"),
             says: "gravity",
         },
         Case {
             name: "NaN compliance",
             bundle: spawn_with(grid_mesh(&GRID), (Cloth::default(), xpbd(f32::NAN))),
-            expect: |e| matches!(e, ClothError::Solver(SolverError::Params(p)) if p.name == "stretch"),
+            expect: Expect::Param("stretch"),
             says: "stretch",
         },
         Case {
             name: "negative compliance",
             bundle: spawn_with(grid_mesh(&GRID), (Cloth::default(), xpbd(-1.0))),
-            expect: |e| matches!(e, ClothError::Solver(SolverError::Params(p)) if p.name == "stretch"),
+            expect: Expect::Param("stretch"),
             says: "stretch",
         },
         Case {
@@ -359,7 +362,7 @@ fn cases() -> Vec<Case> {
                     },
                 ),
             ),
-            expect: |e| matches!(e, ClothError::Solver(SolverError::Params(p)) if p.name == "stretch"),
+            expect: Expect::Param("stretch"),
             says: "stretch",
         },
         Case {
@@ -374,7 +377,7 @@ fn cases() -> Vec<Case> {
                     },
                 ),
             ),
-            expect: |e| matches!(e, ClothError::Solver(SolverError::Params(p)) if p.name == "max_speed"),
+            expect: Expect::Param("max_speed"),
             says: "max_speed",
         },
         Case {
@@ -389,7 +392,7 @@ fn cases() -> Vec<Case> {
                     },
                 ),
             ),
-            expect: |e| matches!(e, ClothError::Solver(SolverError::Params(p)) if p.name == "self_collision.thickness"),
+            expect: Expect::Param("self_collision.thickness"),
             says: "thickness",
         },
         Case {
@@ -398,7 +401,7 @@ fn cases() -> Vec<Case> {
                 grid_mesh(&GRID),
                 (Cloth::default(), ClothTearing { threshold: 0.5 }),
             ),
-            expect: |e| matches!(e, ClothError::Solver(SolverError::Params(p)) if p.name == "tear_threshold"),
+            expect: Expect::Param("tear_threshold"),
             says: "tear",
         },
         Case {
@@ -414,7 +417,7 @@ fn cases() -> Vec<Case> {
                     },
                 ),
             ),
-            expect: |e| matches!(e, ClothError::Solver(SolverError::Params(p)) if p.name == "tethers.slack"),
+            expect: Expect::Param("tethers.slack"),
             says: "slack",
         },
     ]
@@ -445,7 +448,7 @@ fn every_bad_input_gets_a_typed_error_once_and_nothing_else_changes() {
             .get::<ClothInvalid>(*e)
             .unwrap_or_else(|| panic!("{name}: no ClothInvalid"));
         assert!(
-            expect(&invalid.0),
+            expect.matches(&invalid.0),
             "{name}: unexpected error {:?}",
             invalid.0
         );

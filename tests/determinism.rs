@@ -8,10 +8,13 @@ use std::io::{Read, Write};
 use bevy::prelude::*;
 use bevy_cloth::cloth::TaskPoolParallel;
 use bevy_cloth::prelude::*;
+
+mod common;
 use bevy_cloth::solver::{
     Collider, Environment, Features, Parallel, Pin, Pose, SelfCollision, Serial, Shape, Simulation,
-    SolverParams, TetherParams, TopologyOptions, WindField, WindParams,
+    SolverParams, TetherParams, WindField, WindParams,
 };
+use common::placed_grid;
 
 /// Runs items on `n` scoped threads, each taking every n-th item.
 struct Threads(usize);
@@ -62,18 +65,7 @@ fn inputs(steps: usize) -> Vec<StepInput> {
 /// A 96×96 cloth (four vertex-range parts) with every feature on.
 fn scene() -> (Simulation, Vec<u32>) {
     let grid = Grid::new(96, 96, 1.0, 1.0);
-    let positions: Vec<Vec3> = grid
-        .positions()
-        .iter()
-        .map(|p| *p + Vec3::Y * 2.0)
-        .collect();
-    let topology = bevy_cloth::solver::Topology::from_triangles(
-        &positions,
-        Some(&grid.uvs()),
-        &grid.indices(),
-        TopologyOptions::default(),
-    )
-    .unwrap();
+    let topology = placed_grid(&grid, |p| p + Vec3::Y * 2.0);
     let masses = topology.masses(0.5, MassDistribution::Area);
     let mut sim = Simulation::new(
         topology,
@@ -94,10 +86,11 @@ fn scene() -> (Simulation, Vec<u32>) {
     })
     .unwrap();
     let pins = vec![grid.index(0, 0), grid.index(95, 0)];
+    let rest = sim.topology().rest_positions().to_vec();
     sim.state_mut()
         .set_pins(pins.iter().map(|&v| Pin {
             vertex: v,
-            target: positions[v as usize],
+            target: rest[v as usize],
         }))
         .unwrap();
     (sim, pins)

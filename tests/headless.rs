@@ -2,24 +2,12 @@
 
 use std::time::Duration;
 
-use bevy::mesh::{MeshPlugin, VertexAttributeValues};
+use bevy::mesh::VertexAttributeValues;
 use bevy::prelude::*;
-use bevy::time::TimeUpdateStrategy;
 use bevy_cloth::prelude::*;
 
-fn app(frame: Duration) -> App {
-    let mut app = App::new();
-    app.add_plugins((
-        MinimalPlugins,
-        TransformPlugin,
-        AssetPlugin::default(),
-        MeshPlugin,
-        ClothPlugins::default(),
-    ))
-    .insert_resource(TimeUpdateStrategy::ManualDuration(frame))
-    .insert_resource(Time::<Fixed>::from_hz(60.0));
-    app
-}
+mod common;
+use common::{app_with_frame, run};
 
 const GRID: Grid = Grid {
     columns: 16,
@@ -59,15 +47,9 @@ fn positions(app: &App, handle: &Handle<Mesh>) -> Vec<[f32; 3]> {
     }
 }
 
-fn run(app: &mut App, frames: usize) {
-    for _ in 0..frames {
-        app.update();
-    }
-}
-
 #[test]
 fn a_pinned_cloth_sags_and_its_mesh_is_rewritten() {
-    let mut app = app(Duration::from_secs_f64(1.0 / 60.0));
+    let mut app = app_with_frame(Duration::from_secs_f64(1.0 / 60.0));
     let lift = Transform::from_xyz(0.0, 2.0, 0.0);
     let (e, source) = spawn_cloth(&mut app, lift);
     run(&mut app, 90);
@@ -118,8 +100,8 @@ fn a_pinned_cloth_sags_and_its_mesh_is_rewritten() {
 fn frame_rate_does_not_change_the_result() {
     // Same fixed rate, frames of 1/144 s against 1/25 s: after the same number of fixed steps
     // the cloths must be bit-identical.
-    let mut fast = app(Duration::from_secs_f64(1.0 / 144.0));
-    let mut slow = app(Duration::from_secs_f64(1.0 / 25.0));
+    let mut fast = app_with_frame(Duration::from_secs_f64(1.0 / 144.0));
+    let mut slow = app_with_frame(Duration::from_secs_f64(1.0 / 25.0));
     let (ef, _) = spawn_cloth(&mut fast, Transform::IDENTITY);
     let (es, _) = spawn_cloth(&mut slow, Transform::IDENTITY);
     run(&mut slow, 30);
@@ -137,7 +119,7 @@ fn frame_rate_does_not_change_the_result() {
 
 #[test]
 fn bad_cloths_are_reported_and_others_keep_running() {
-    let mut app = app(Duration::from_secs_f64(1.0 / 60.0));
+    let mut app = app_with_frame(Duration::from_secs_f64(1.0 / 60.0));
     let (good, _) = spawn_cloth(&mut app, Transform::IDENTITY);
     let lines = Mesh::new(
         bevy::mesh::PrimitiveTopology::LineList,
@@ -214,7 +196,7 @@ fn bad_cloths_are_reported_and_others_keep_running() {
 
 #[test]
 fn pins_change_at_runtime_and_follow_entities() {
-    let mut app = app(Duration::from_secs_f64(1.0 / 60.0));
+    let mut app = app_with_frame(Duration::from_secs_f64(1.0 / 60.0));
     let (e, _) = spawn_cloth(&mut app, Transform::IDENTITY);
     let corner = GRID.positions()[0];
     let hand = app
@@ -271,7 +253,7 @@ fn pins_change_at_runtime_and_follow_entities() {
 
 #[test]
 fn config_changes_apply_without_rebuild() {
-    let mut app = app(Duration::from_secs_f64(1.0 / 60.0));
+    let mut app = app_with_frame(Duration::from_secs_f64(1.0 / 60.0));
     let (e, _) = spawn_cloth(&mut app, Transform::IDENTITY);
     run(&mut app, 3);
     app.world_mut().get_mut::<ClothConfig>(e).unwrap().gravity = Vec3::ZERO;

@@ -10,16 +10,12 @@ use bevy_cloth::solver::{
 };
 use glam::{Quat, Vec3};
 
+mod common;
+use common::placed_grid;
+
 fn cloth(n: u32, size: f32, at: Vec3, params: SolverParams) -> (Grid, Simulation) {
     let grid = Grid::new(n, n, size, size);
-    let positions: Vec<Vec3> = grid.positions().iter().map(|p| *p + at).collect();
-    let topology = bevy_cloth::solver::Topology::from_triangles(
-        &positions,
-        Some(&grid.uvs()),
-        &grid.indices(),
-        TopologyOptions::default(),
-    )
-    .unwrap();
+    let topology = placed_grid(&grid, |p| p + at);
     let masses = topology.masses(0.3, MassDistribution::Area);
     (grid, Simulation::new(topology, &masses, params).unwrap())
 }
@@ -283,18 +279,7 @@ fn self_collision_stops_a_strip_passing_through_itself() {
     let crossings = |on: bool| {
         let grid = Grid::new(8, 40, 0.4, 2.0);
         let stand = Quat::from_rotation_x(core::f32::consts::FRAC_PI_2 * 0.97);
-        let positions: Vec<Vec3> = grid
-            .positions()
-            .iter()
-            .map(|p| stand * *p + Vec3::new(0.0, 1.05, 0.0))
-            .collect();
-        let topology = bevy_cloth::solver::Topology::from_triangles(
-            &positions,
-            Some(&grid.uvs()),
-            &grid.indices(),
-            TopologyOptions::default(),
-        )
-        .unwrap();
+        let topology = placed_grid(&grid, |p| stand * p + Vec3::new(0.0, 1.05, 0.0));
         let masses = topology.masses(0.2, MassDistribution::Area);
         let mut sim = Simulation::new(topology, &masses, SolverParams::default()).unwrap();
         let spacing = 2.0 / 39.0;

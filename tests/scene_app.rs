@@ -1,28 +1,11 @@
 //! Colliders, wind, tearing, teleports and (with `rapier`) two-way coupling, through the
 //! plugin in a headless app.
 
-use std::time::Duration;
-
-use bevy::mesh::MeshPlugin;
 use bevy::prelude::*;
-use bevy::time::TimeUpdateStrategy;
 use bevy_cloth::prelude::*;
 
-fn app() -> App {
-    let mut app = App::new();
-    app.add_plugins((
-        MinimalPlugins,
-        TransformPlugin,
-        AssetPlugin::default(),
-        MeshPlugin,
-        ClothPlugins::default(),
-    ))
-    .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
-        1.0 / 60.0,
-    )))
-    .insert_resource(Time::<Fixed>::from_hz(60.0));
-    app
-}
+mod common;
+use common::{app, run};
 
 fn spawn_sheet(app: &mut App, n: u32, transform: Transform, extra: impl Bundle) -> Entity {
     let grid = Grid::new(n, n, 1.0, 1.0);
@@ -37,12 +20,6 @@ fn spawn_sheet(app: &mut App, n: u32, transform: Transform, extra: impl Bundle) 
 
 fn sim(app: &App, e: Entity) -> &ClothSim {
     app.world().get::<ClothSim>(e).expect("cloth not created")
-}
-
-fn run(app: &mut App, frames: usize) {
-    for _ in 0..frames {
-        app.update();
-    }
 }
 
 #[test]

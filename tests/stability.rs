@@ -10,9 +10,9 @@
 use std::sync::Arc;
 
 use bevy_cloth::solver::{
-    Collider, Environment, Features, Pin, Pose, SdfGrid, SelfCollision, Serial, Shape, Simulation,
-    Solver, SolverParams, TetherParams, Topology, TopologyError, TopologyOptions, WindField,
-    WindParams,
+    Collider, Environment, Features, Grid, Pin, Pose, SdfGrid, SelfCollision, Serial, Shape,
+    Simulation, Solver, SolverParams, TetherParams, Topology, TopologyError, TopologyOptions,
+    WindField, WindParams,
 };
 use glam::{Quat, Vec2, Vec3};
 use proptest::prelude::*;
@@ -134,25 +134,15 @@ struct Outcome {
     max_travel: f32,
 }
 
-/// A `n × n` grid in the xz plane of side `size` at height `size`.
+/// A `n × n` grid in the xz plane of side `size`, centred at height `size`.
 fn grid_mesh(n: u32, size: f32) -> (Vec<Vec3>, Vec<Vec2>, Vec<u32>) {
-    let mut pos = Vec::new();
-    let mut uvs = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            let (u, v) = (i as f32 / (n - 1) as f32, j as f32 / (n - 1) as f32);
-            pos.push(Vec3::new(u * size, size, v * size));
-            uvs.push(Vec2::new(u, v));
-        }
-    }
-    let mut idx = Vec::new();
-    for j in 0..n - 1 {
-        for i in 0..n - 1 {
-            let a = j * n + i;
-            idx.extend([a, a + 1, a + n + 1, a, a + n + 1, a + n]);
-        }
-    }
-    (pos, uvs, idx)
+    let g = Grid::new(n, n, size, size);
+    let pos = g
+        .positions()
+        .into_iter()
+        .map(|p| p + Vec3::Y * size)
+        .collect();
+    (pos, g.uvs(), g.indices())
 }
 
 fn simulation(s: &Scenario, pos: &[Vec3], uvs: Option<&[Vec2]>, idx: &[u32]) -> Simulation {

@@ -317,44 +317,6 @@ type ColliderQueryData = (
     Option<&'static mut ClothContactImpulse>,
 );
 
-/// What is wrong with a collider, if anything: sizes, thickness or friction negative or not
-/// finite, or a transform that is not finite.
-fn collider_problem(c: &ClothCollider, gt: &GlobalTransform) -> Option<String> {
-    let ok = |v: f32| (0.0..=crate::solver::MAX_COORDINATE).contains(&v);
-    if !ok(c.thickness) {
-        return Some(format!("thickness {} must be finite and ≥ 0", c.thickness));
-    }
-    if !ok(c.friction) {
-        return Some(format!("friction {} must be finite and ≥ 0", c.friction));
-    }
-    let sizes_ok = match &c.shape {
-        ColliderShape::Sphere { radius } => ok(*radius),
-        ColliderShape::Cuboid { half_extents } => half_extents.to_array().into_iter().all(ok),
-        ColliderShape::Capsule {
-            half_height,
-            radius,
-        } => ok(*half_height) && ok(*radius),
-        ColliderShape::Plane | ColliderShape::Baked(_) => true,
-        ColliderShape::Mesh { resolution, .. } => *resolution >= 4,
-    };
-    if !sizes_ok {
-        return Some(format!(
-            "shape {:?} has a size that is negative or not finite (or a mesh resolution below 4)",
-            c.shape
-        ));
-    }
-    if !gt.affine().is_finite() {
-        return Some("its transform is not finite".to_string());
-    }
-    if gt.translation().abs().max_element() > crate::solver::MAX_COORDINATE {
-        return Some(format!(
-            "it is over {} m from the origin",
-            crate::solver::MAX_COORDINATE
-        ));
-    }
-    None
-}
-
 /// Collects every collider's shape and its poses at the start and end of this step.
 fn gather_colliders(
     mut commands: Commands,
@@ -372,33 +334,30 @@ fn gather_colliders(
                 .entity(entity)
                 .insert(ClothContactImpulse::default());
         }
-        // An invalid collider is left out, and said once (again after it was fixed).
-        let problem = collider_problem(collider, gt);
-        match (&problem, reported.contains(&entity)) {
-            (Some(p), false) => {
-                error!("cloth collider {entity}: {p}; it is ignored");
-                reported.insert(entity);
-            }
-            (None, true) => {
-                reported.remove(&entity);
-            }
-            _ => {}
-        }
-        if problem.is_some() {
-            continue;
-        }
         let baked = runtime.as_ref().and_then(|r| r.baked.as_ref());
         let Some((pose, shape)) = pose_and_shape(gt, &collider.shape, baked) else {
             continue;
         };
-        if !(pose.translation.is_finite() && pose.rotation.is_finite() && pose.scale > 0.0) {
-            continue;
-        }
         let last = runtime.as_ref().and_then(|r| r.last);
         let start = match last {
             Some(l) if l.translation.distance(pose.translation) < TELEPORT_DISTANCE => l,
             _ => pose,
         };
+        let c = Collider {
+            shape,
+            start,
+            end: pose,
+            thickness: collider.thickness,
+            friction: collider.friction,
+        };
+        // An invalid collider is left out, and said once (again after it was fixed).
+        if let Err(problem) = c.validate() {
+            if reported.insert(entity) {
+                error!("cloth collider {entity}: {problem}; it is ignored");
+            }
+            continue;
+        }
+        reported.remove(&entity);
         match runtime {
             Some(mut r) => r.last = Some(pose),
             None => {
@@ -408,13 +367,7 @@ fn gather_colliders(
                 });
             }
         }
-        out.colliders.push(Collider {
-            shape,
-            start,
-            end: pose,
-            thickness: collider.thickness,
-            friction: collider.friction,
-        });
+        out.colliders.push(c);
         out.entities.push(entity);
     }
 }

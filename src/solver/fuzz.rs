@@ -12,9 +12,9 @@ use std::sync::Arc;
 use glam::{Quat, Vec3};
 
 use super::{
-    Collider, Environment, Features, MAX_COORDINATE, MassDistribution, Pin, Pose, SdfGrid,
-    SelfCollision, Serial, Shape, Simulation, Solver, SolverParams, TetherParams, Topology,
-    TopologyOptions, WindField, WindParams,
+    Collider, Environment, Features, MassDistribution, Pin, Pose, SdfGrid, SelfCollision, Serial,
+    Shape, Simulation, Solver, SolverParams, TetherParams, Topology, TopologyOptions, WindField,
+    WindParams,
 };
 
 /// What one fuzz input did.
@@ -206,18 +206,8 @@ pub fn fuzz_one(bytes: &[u8]) -> FuzzOutcome {
     // Wind the plugin would refuse (NaN velocity) is not passed on.
     let wind = (flags & 32 != 0 && wind_params.validate().is_ok())
         .then(|| WindField::new([(wind_params, None)]));
-    // Colliders the plugin would refuse (NaN sizes or poses) are not passed on.
-    colliders.retain(|c| {
-        c.thickness.is_finite()
-            && c.friction.is_finite()
-            && c.start.translation.abs().max_element() <= MAX_COORDINATE
-            && c.end.translation.abs().max_element() <= MAX_COORDINATE
-            && c.start.rotation.is_finite()
-            && match c.shape {
-                Shape::Sphere { radius } => radius <= MAX_COORDINATE,
-                _ => true,
-            }
-    });
+    // Colliders the plugin would refuse are not passed on.
+    colliders.retain(|c| c.validate().is_ok());
     let steps = 1 + u32::from(r.u8() % 12);
     let mut recoveries = 0;
     for step in 0..steps {

@@ -289,6 +289,22 @@ pub fn step(
         p.clear();
         p.resize(colliders.len(), ContactImpulse::default());
     }
+    // One phase over every part, the parts in parallel.
+    let run_parts = |parts: &mut [Part],
+                     state: &mut ClothState,
+                     impulses: &mut [Vec<ContactImpulse>],
+                     phase: Phase,
+                     poses: &[SubstepPose]| {
+        let mut work = split(
+            parts,
+            &mut state.positions,
+            &mut state.prev,
+            &mut state.velocities,
+            acc,
+            impulses,
+        );
+        par.for_each_mut(&mut work, |w| run_part(w, phase, c, colliders, poses));
+    };
     for s in 0..substeps {
         // Pins: finish their velocity for the previous substep, then move.
         for pin in &state.pins {
@@ -310,15 +326,13 @@ pub fn step(
                 project: true,
                 collide: false,
             };
-            let mut work = split(
+            run_parts(
                 &mut batches.parts,
-                &mut state.positions,
-                &mut state.prev,
-                &mut state.velocities,
-                acc,
+                state,
                 &mut scratch.part_impulses,
+                phase,
+                poses,
             );
-            par.for_each_mut(&mut work, |w| run_part(w, phase, c, colliders, poses));
             if it == 0 && c.accumulate {
                 batches.boundary.reset_lambda();
             }
@@ -342,32 +356,26 @@ pub fn step(
                 collide: true,
                 ..Default::default()
             };
-            let mut work = split(
+            run_parts(
                 &mut batches.parts,
-                &mut state.positions,
-                &mut state.prev,
-                &mut state.velocities,
-                acc,
+                state,
                 &mut scratch.part_impulses,
+                phase,
+                poses,
             );
-            par.for_each_mut(&mut work, |w| run_part(w, phase, c, colliders, poses));
         }
     }
     let phase = Phase {
         finish_velocity: true,
         ..Default::default()
     };
-    let mut work = split(
+    run_parts(
         &mut batches.parts,
-        &mut state.positions,
-        &mut state.prev,
-        &mut state.velocities,
-        acc,
+        state,
         &mut scratch.part_impulses,
+        phase,
+        &scratch.poses,
     );
-    par.for_each_mut(&mut work, |w| {
-        run_part(w, phase, c, colliders, &scratch.poses)
-    });
     for pin in &state.pins {
         let i = pin.vertex as usize;
         state.velocities[i] =

@@ -92,28 +92,25 @@ fn gather_wind(
         }
     };
     let global = global.filter(|w| valid(None, &w.0));
-    let zones: Vec<_> = zones
-        .iter()
-        .filter(|(e, z, gt)| valid(Some(*e), &z.wind) && gt.translation().is_finite())
-        .map(|(_, z, gt)| (z, gt))
-        .collect();
-    let sources = global
-        .map(|w| (w.0, None))
-        .into_iter()
-        .chain(zones.into_iter().map(|(z, gt)| {
-            let (scale, rotation, translation) = gt.to_scale_rotation_translation();
-            (
-                z.wind,
-                Some(WindRegion {
-                    pose: Pose {
-                        translation,
-                        rotation,
-                        scale: 1.0,
-                    },
-                    half_extents: z.half_extents * scale.abs(),
-                    falloff: z.falloff,
-                }),
-            )
-        }));
+    let sources = global.map(|w| (w.0, None)).into_iter().chain(
+        zones
+            .iter()
+            .filter(|(e, z, gt)| valid(Some(*e), &z.wind) && gt.translation().is_finite())
+            .map(|(_, z, gt)| {
+                let (scale, rotation, translation) = gt.to_scale_rotation_translation();
+                (
+                    z.wind,
+                    Some(WindRegion {
+                        pose: Pose {
+                            translation,
+                            rotation,
+                            scale: 1.0,
+                        },
+                        half_extents: z.half_extents * scale.abs(),
+                        falloff: z.falloff,
+                    }),
+                )
+            }),
+    );
     out.field = WindField::new(sources);
 }

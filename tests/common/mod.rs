@@ -1,0 +1,50 @@
+//! Helpers shared by the integration tests (each test file uses some of them).
+#![allow(dead_code)]
+
+use std::time::Duration;
+
+use bevy::mesh::MeshPlugin;
+use bevy::prelude::*;
+use bevy::time::TimeUpdateStrategy;
+use bevy_cloth::prelude::*;
+use bevy_cloth::solver::{Topology, TopologyOptions};
+
+/// A headless app (no window, no GPU) with the cloth plugins, a 60 Hz fixed step and frames
+/// of `frame` each.
+pub fn app_with_frame(frame: Duration) -> App {
+    let mut app = App::new();
+    app.add_plugins((
+        MinimalPlugins,
+        TransformPlugin,
+        AssetPlugin::default(),
+        MeshPlugin,
+        ClothPlugins::default(),
+    ))
+    .insert_resource(TimeUpdateStrategy::ManualDuration(frame))
+    .insert_resource(Time::<Fixed>::from_hz(60.0));
+    app
+}
+
+/// [`app_with_frame`] at 60 frames a second.
+pub fn app() -> App {
+    app_with_frame(Duration::from_secs_f64(1.0 / 60.0))
+}
+
+/// Runs `frames` app updates.
+pub fn run(app: &mut App, frames: usize) {
+    for _ in 0..frames {
+        app.update();
+    }
+}
+
+/// The topology of `grid` with every vertex moved by `place`.
+pub fn placed_grid(grid: &Grid, place: impl Fn(Vec3) -> Vec3) -> Topology {
+    let positions: Vec<Vec3> = grid.positions().into_iter().map(place).collect();
+    Topology::from_triangles(
+        &positions,
+        Some(&grid.uvs()),
+        &grid.indices(),
+        TopologyOptions::default(),
+    )
+    .unwrap()
+}
