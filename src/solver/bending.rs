@@ -68,7 +68,9 @@ pub(crate) fn bend_correction<T: Real>(
         + w[3] * q4.length_squared();
     let denom = g + alpha * s2;
     let f = k * s * (-c - alpha * lambda) / denom;
-    let f = denom.if_gt(T::splat(1e-20), f, zero);
+    // Nothing can move (all four pinned, or gradients that vanish): no correction. Tested on
+    // g, not the denominator: with g = 0 a tiny α̃·s² would make f overflow and 0·∞ = NaN.
+    let f = g.if_gt(T::splat(1e-20), f, zero);
     // Both triangles must have an area, else the normals (and everything after) are zero.
     let f = l23.if_gt(eps, f, zero);
     let f = l24.if_gt(eps, f, zero);
@@ -219,6 +221,18 @@ mod tests {
                 assert!(dl.is_finite());
                 assert!(dx.iter().all(|d| g(*d).is_finite()), "{x:?} {alpha}");
             }
+        }
+    }
+
+    #[test]
+    fn all_pinned_with_a_tiny_compliance_gives_no_nan() {
+        // Nothing can move: no correction, and the multiplier stays put (α̃·sin² alone must not drive it).
+        let mut x = hinge(0.8).map(l);
+        x[3].x = 3.0e6;
+        for alpha in [1e-10, 1e-19, 0.0] {
+            let (dx, dl) = bend_correction(x, [0.0; 4], 0.0, alpha, 1.0, 0.0);
+            assert_eq!(dl, 0.0, "α̃ {alpha}");
+            assert!(dx.iter().all(|d| g(*d) == Vec3::ZERO), "α̃ {alpha}: {dx:?}");
         }
     }
 }

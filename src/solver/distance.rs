@@ -31,9 +31,11 @@ pub(crate) fn distance_correction<T: Real>(
     let len = d.length_squared().sqrt();
     let denom = wa + wb + alpha;
     let s = k * (-(len - rest) - alpha * lambda) / denom;
-    // No direction or nothing can move: no correction (and no NaN from 0/0).
+    // No direction or nothing can move: no correction (and no NaN from 0/0). The test is on
+    // wa + wb, not the denominator: with both ends pinned and a tiny (even denormal) α̃,
+    // −C/α̃ overflows to ∞ and 0·∞ would be NaN.
     let s = len.if_gt(T::splat(MIN_LENGTH), s, zero);
-    let s = denom.if_gt(zero, s, zero);
+    let s = (wa + wb).if_gt(zero, s, zero);
     let n = d.scale(len.if_gt(T::splat(MIN_LENGTH), T::splat(1.0) / len, zero));
     (n.scale(wa * s), n.scale(-(wb * s)), s)
 }
@@ -128,6 +130,20 @@ mod tests {
             let (da, db, s) = distance_correction(xa, wa, v(1.0, 1.0, 1.0), wb, 1.0, 0.0, 1.0, 0.0);
             for c in [da.x, da.y, da.z, db.x, db.y, db.z, s] {
                 assert_eq!(c, 0.0);
+            }
+        }
+    }
+
+    #[test]
+    fn pinned_ends_with_a_tiny_compliance_give_no_nan() {
+        // Both ends pinned, stretched by 1e6 m, α̃ a denormal: −C/α̃ is −∞, and the
+        // correction must still be zero (the fuzzer found 0·∞ = NaN here).
+        let far = v(-1.1e6, 6.9, -0.7);
+        for alpha in [2.56e-36, 1e-45, 0.0] {
+            let (da, db, s) =
+                distance_correction(v(28.0, -13.8, 47.4), 0.0, far, 0.0, 50.0, alpha, 1.0, 0.0);
+            for c in [da.x, da.y, da.z, db.x, db.y, db.z, s] {
+                assert_eq!(c, 0.0, "α̃ {alpha}");
             }
         }
     }
