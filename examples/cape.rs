@@ -80,9 +80,7 @@ fn setup(
         ClothTethers::default(),
     ));
     if let Some(mut m) = materials {
-        cape.insert(MeshMaterial3d(
-            m.add(support::cloth_material(Color::srgb(0.6, 0.08, 0.12))),
-        ));
+        cape.insert(support::ClothLook(Color::srgb(0.6, 0.08, 0.12)));
         support::stage(
             &mut commands,
             &mut meshes,

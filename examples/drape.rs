@@ -98,9 +98,7 @@ fn setup(
             commands
                 .entity(obstacle)
                 .insert(MeshMaterial3d(materials.add(Color::srgb(0.75, 0.75, 0.72))));
-            commands.entity(cloth).insert(MeshMaterial3d(
-                materials.add(support::cloth_material(colors[k])),
-            ));
+            commands.entity(cloth).insert(support::ClothLook(colors[k]));
         }
     }
     commands.spawn(ClothCollider::plane().with_thickness(0.01));

@@ -28,10 +28,11 @@ fn setup(
     materials: Option<ResMut<Assets<StandardMaterial>>>,
 ) {
     let grid = setup.grid;
-    // Grid vertices lie in XZ; rotating −90° about X stands the flag up in XY, row 0 on top.
-    // Shift so column 0 (the hoist) sits on the pole at x = 0.
+    // Grid vertices lie in XZ with the front on +Y; rotating 90° about X stands the flag up in
+    // XY with its front towards the camera (+Z). Shift so column 0 (the hoist) sits on the
+    // pole at x = 0.
     let transform = Transform::from_xyz(grid.width / 2.0, 3.2, 0.0)
-        .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
+        .with_rotation(Quat::from_rotation_x(core::f32::consts::FRAC_PI_2));
     let hoist = (0..grid.rows).map(|j| grid.index(0, j));
     let mut flag = commands.spawn((
         Mesh3d(meshes.add(grid_mesh(&grid))),
@@ -44,9 +45,7 @@ fn setup(
         ClothPins::rest(hoist),
     ));
     if let Some(mut materials) = materials {
-        flag.insert(MeshMaterial3d(
-            materials.add(support::cloth_material(Color::srgb(0.1, 0.25, 0.7))),
-        ));
+        flag.insert(support::ClothLook(Color::srgb(0.1, 0.25, 0.7)));
         commands.spawn((
             Mesh3d(meshes.add(Cylinder::new(0.04, 4.4))),
             MeshMaterial3d(materials.add(Color::srgb(0.6, 0.6, 0.62))),

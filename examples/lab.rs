@@ -74,9 +74,7 @@ fn setup(
         ClothPins::rest([0, 20]),
     ));
     if let Some(mut materials) = materials {
-        cloth.insert(MeshMaterial3d(
-            materials.add(support::cloth_material(Color::srgb(0.75, 0.2, 0.25))),
-        ));
+        cloth.insert(support::ClothLook(Color::srgb(0.75, 0.2, 0.25)));
         support::stage(
             &mut commands,
             &mut meshes,

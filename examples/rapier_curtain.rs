@@ -55,9 +55,7 @@ fn setup(
         ClothTethers::default(),
     ));
     if let Some(mut m) = materials {
-        curtain.insert(MeshMaterial3d(
-            m.add(support::cloth_material(Color::srgb(0.55, 0.15, 0.35))),
-        ));
+        curtain.insert(support::ClothLook(Color::srgb(0.55, 0.15, 0.35)));
         support::stage(
             &mut commands,
             &mut meshes,

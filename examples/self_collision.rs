@@ -54,9 +54,7 @@ fn setup(
         });
     }
     if let Some(mut m) = materials {
-        strip.insert(MeshMaterial3d(
-            m.add(support::cloth_material(Color::srgb(0.3, 0.3, 0.75))),
-        ));
+        strip.insert(support::ClothLook(Color::srgb(0.3, 0.3, 0.75)));
         support::stage(
             &mut commands,
             &mut meshes,

@@ -85,9 +85,7 @@ fn setup(
         ClothTearing { threshold: 1.5 },
     ));
     if let Some(mut m) = materials {
-        cloth.insert(MeshMaterial3d(
-            m.add(support::cloth_material(Color::srgb(0.85, 0.8, 0.65))),
-        ));
+        cloth.insert(support::ClothLook(Color::srgb(0.85, 0.8, 0.65)));
         support::stage(
             &mut commands,
             &mut meshes,

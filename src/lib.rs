@@ -31,6 +31,7 @@
 //! - [`collider`]: shapes cloth collides with; with the `rapier` feature, the bevy_rapier3d
 //!   bridge and two-way coupling.
 //! - [`wind`]: global and local wind.
+//! - [`render`]: the velvet material (two-sided, report §3.4) and its CPU reference BRDF.
 //!
 //! # Headless
 //! A [`MinimalPlugins`](bevy::prelude::MinimalPlugins) app simulates cloth with no window and
@@ -39,6 +40,7 @@
 
 pub mod cloth;
 pub mod collider;
+pub mod render;
 pub mod solver;
 pub mod wind;
 
@@ -52,6 +54,9 @@ pub mod prelude {
     #[cfg(feature = "rapier")]
     pub use crate::collider::rapier::ClothRapierPlugin;
     pub use crate::collider::{ClothCollider, ClothContactImpulse, ColliderShape};
+    pub use crate::render::{
+        VelvetExtension, VelvetMaterial, VelvetPlugin, velvet_material, velvet_material_from,
+    };
     pub use crate::solver::{BendRest, Grid, MassDistribution, Solver, WindParams};
     pub use crate::wind::{Wind, WindZone};
 }

@@ -152,7 +152,9 @@ pub fn app(args: &Args, title: &str, fixed_step: f64) -> App {
                 ..default()
             }),
             ..default()
-        }));
+        }))
+        .add_plugins(VelvetPlugin)
+        .add_systems(Update, dress_cloths);
     }
     app.add_plugins(ClothPlugins::default())
         .insert_resource(Time::<Fixed>::from_seconds(fixed_step))
@@ -310,13 +312,40 @@ pub fn max_penetration(world: &mut World) -> f32 {
     worst
 }
 
-/// A double-sided cloth material.
-pub fn cloth_material(color: Color) -> StandardMaterial {
-    StandardMaterial {
-        base_color: color,
-        perceptual_roughness: 0.9,
-        double_sided: true,
-        cull_mode: None,
-        ..default()
+/// How the examples dress a cloth: velvet in this colour on the front, a paler lining on the
+/// back (windowed runs; headless runs ignore it).
+#[derive(Component, Clone, Copy, Debug)]
+pub struct ClothLook(pub Color);
+
+/// The examples' cloth material: velvet with `color` in front and a lining behind.
+pub fn cloth_material(color: Color) -> VelvetMaterial {
+    let front = color.to_linear();
+    let lining = LinearRgba::rgb(0.75, 0.7, 0.6);
+    let back = LinearRgba::rgb(
+        0.5 * (front.red + lining.red),
+        0.5 * (front.green + lining.green),
+        0.5 * (front.blue + lining.blue),
+    );
+    velvet_material(
+        color,
+        VelvetExtension {
+            back_color: Some(back.into()),
+            ..default()
+        },
+    )
+}
+
+fn dress_cloths(
+    mut commands: Commands,
+    looks: Query<(Entity, &ClothLook), Without<MeshMaterial3d<VelvetMaterial>>>,
+    materials: Option<ResMut<Assets<VelvetMaterial>>>,
+) {
+    let Some(mut materials) = materials else {
+        return;
+    };
+    for (entity, look) in &looks {
+        commands
+            .entity(entity)
+            .insert(MeshMaterial3d(materials.add(cloth_material(look.0))));
     }
 }

@@ -48,3 +48,31 @@ pub fn placed_grid(grid: &Grid, place: impl Fn(Vec3) -> Vec3) -> Topology {
     )
     .unwrap()
 }
+
+/// A wgpu adapter and device for GPU tests, or `None` after printing why the test is skipped.
+/// With `CLOTH_REQUIRE_GPU=1` (set by CI) a missing adapter fails the test instead.
+pub fn gpu_or_skip(test: &str) -> Option<(wgpu::Adapter, wgpu::Device, wgpu::Queue)> {
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
+    let found =
+        bevy::tasks::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+            .map_err(|e| e.to_string())
+            .and_then(|adapter| {
+                bevy::tasks::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default()))
+                    .map(|(device, queue)| (adapter, device, queue))
+                    .map_err(|e| e.to_string())
+            });
+    match found {
+        Ok(gpu) => Some(gpu),
+        Err(e) if std::env::var("CLOTH_REQUIRE_GPU").as_deref() == Ok("1") => {
+            panic!(
+                "{test}: no GPU adapter ({e}) and CLOTH_REQUIRE_GPU=1; install mesa-vulkan-drivers for llvmpipe"
+            )
+        }
+        Err(e) => {
+            eprintln!(
+                "{test}: SKIPPED, no GPU adapter ({e}); install mesa-vulkan-drivers for llvmpipe"
+            );
+            None
+        }
+    }
+}

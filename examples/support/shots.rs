@@ -1,0 +1,341 @@
+//! Offscreen pictures: builds a scene in a windowless app with Bevy's renderer (llvmpipe works),
+//! simulates it, then renders each camera into an image and returns (and optionally saves)
+//! the pixels. Used by `examples/pictures.rs` (the README's pictures) and `tests/pictures.rs`.
+
+#![allow(dead_code, reason = "the example and the test use different parts")]
+
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use bevy::app::PluginsState;
+use bevy::camera::RenderTarget;
+use bevy::core_pipeline::tonemapping::DebandDither;
+use bevy::image::Image;
+use bevy::prelude::*;
+use bevy::render::RenderPlugin;
+use bevy::render::render_resource::TextureFormat;
+use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
+use bevy::time::TimeUpdateStrategy;
+use bevy::window::ExitCondition;
+use bevy::winit::WinitPlugin;
+use bevy_cloth::prelude::*;
+
+/// One picture: a camera and the file name it is saved under.
+#[derive(Clone, Debug)]
+pub struct Shot {
+    /// File stem (`<name>.png`).
+    pub name: &'static str,
+    /// Camera position.
+    pub eye: Vec3,
+    /// Point looked at.
+    pub target: Vec3,
+}
+
+/// The pictures' background (a neutral grey, so colour tests can tell cloth from sky).
+pub const CLEAR: Color = Color::srgb(0.62, 0.64, 0.66);
+
+/// A captured picture, RGBA8 sRGB, row-major, `width × height`.
+pub struct Picture {
+    /// [`Shot::name`].
+    pub name: &'static str,
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// `width × height × 4` bytes.
+    pub rgba: Vec<u8>,
+}
+
+impl Picture {
+    /// Pixels as `[r, g, b]` in `0..=1` (sRGB-encoded values).
+    pub fn pixels(&self) -> impl Iterator<Item = [f32; 3]> + '_ {
+        self.rgba
+            .chunks_exact(4)
+            .map(|p| [p[0], p[1], p[2]].map(|c| f32::from(c) / 255.0))
+    }
+}
+
+/// Builds the app with `scene` (which adds its Startup systems and resources), runs
+/// `frames` frames of 1/60 s with the cameras off, then renders every shot at `size` and
+/// returns the pictures, saving them as PNG into `out` when given. Panics if a picture does
+/// not arrive (a renderer that never draws).
+pub fn render(
+    size: UVec2,
+    frames: u32,
+    scene: impl FnOnce(&mut App),
+    shots: &[Shot],
+    out: Option<&Path>,
+) -> Vec<Picture> {
+    let mut app = App::new();
+    app.add_plugins(
+        DefaultPlugins
+            .set(WindowPlugin {
+                primary_window: None,
+                exit_condition: ExitCondition::DontExit,
+                close_when_requested: false,
+                ..default()
+            })
+            .set(RenderPlugin {
+                synchronous_pipeline_compilation: true,
+                ..default()
+            })
+            .disable::<WinitPlugin>(),
+    )
+    .add_plugins((ClothPlugins::default(), VelvetPlugin))
+    .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+        1.0 / 60.0,
+    )))
+    .insert_resource(Time::<Fixed>::from_hz(60.0))
+    .insert_resource(ClearColor(CLEAR));
+    scene(&mut app);
+    while app.plugins_state() == PluginsState::Adding {
+        bevy::tasks::tick_global_task_pools_on_main_thread();
+    }
+    app.finish();
+    app.cleanup();
+
+    let mut cameras = Vec::new();
+    let mut targets = Vec::new();
+    for shot in shots {
+        let image = app
+            .world_mut()
+            .resource_mut::<Assets<Image>>()
+            .add(Image::new_target_texture(
+                size.x,
+                size.y,
+                TextureFormat::Rgba8UnormSrgb,
+                None,
+            ));
+        let camera = app
+            .world_mut()
+            .spawn((
+                Camera3d::default(),
+                Camera {
+                    is_active: false,
+                    ..default()
+                },
+                RenderTarget::from(image.clone()),
+                DebandDither::Disabled,
+                Transform::from_translation(shot.eye).looking_at(shot.target, Vec3::Y),
+            ))
+            .id();
+        cameras.push(camera);
+        targets.push(image);
+    }
+    for _ in 0..frames {
+        app.update();
+    }
+    for &c in &cameras {
+        app.world_mut()
+            .get_mut::<Camera>(c)
+            .expect("camera")
+            .is_active = true;
+    }
+    // A few frames for pipelines, shadow maps and the mesh uploads to settle.
+    for _ in 0..4 {
+        app.update();
+    }
+    let captured: Arc<Mutex<Vec<Option<Image>>>> = Arc::new(Mutex::new(vec![None; shots.len()]));
+    for (k, image) in targets.iter().enumerate() {
+        let slot = captured.clone();
+        app.world_mut()
+            .spawn(Screenshot::image(image.clone()))
+            .observe(move |shot: On<ScreenshotCaptured>| {
+                slot.lock().expect("lock")[k] = Some(shot.image.clone());
+            });
+    }
+    for _ in 0..120 {
+        app.update();
+        if captured.lock().expect("lock").iter().all(Option::is_some) {
+            break;
+        }
+    }
+    let images = std::mem::take(&mut *captured.lock().expect("lock"));
+    shots
+        .iter()
+        .zip(images)
+        .map(|(shot, image)| {
+            let image = image.unwrap_or_else(|| panic!("picture {} never arrived", shot.name));
+            let width = image.width();
+            let height = image.height();
+            let rgba = image.data.clone().expect("picture without data");
+            if let Some(dir) = out {
+                std::fs::create_dir_all(dir).expect("create the output folder");
+                let path = dir.join(format!("{}.png", shot.name));
+                let dynamic = image
+                    .try_into_dynamic()
+                    .expect("picture as an image buffer");
+                dynamic
+                    .to_rgb8()
+                    .save(&path)
+                    .unwrap_or_else(|e| panic!("saving {}: {e}", path.display()));
+                println!("saved {}", path.display());
+            }
+            Picture {
+                name: shot.name,
+                width,
+                height,
+                rgba,
+            }
+        })
+        .collect()
+}
+
+/// The flag's front (velvet) and back (lining) colours in the pictures.
+pub const FLAG_FRONT: Color = Color::srgb(0.08, 0.16, 0.55);
+/// See [`FLAG_FRONT`].
+pub const FLAG_BACK: Color = Color::srgb(0.85, 0.62, 0.2);
+/// The draped cloth's colour.
+pub const DRAPE: Color = Color::srgb(0.45, 0.04, 0.1);
+/// Where the drape stands (far enough from the flag to stay out of its pictures).
+pub const DRAPE_AT: Vec3 = Vec3::new(30.0, 0.0, 0.0);
+
+/// The flag in wind (front blue velvet, gold lining behind, sun in front) and a velvet cloth
+/// dropped over a ball, on a ground plane.
+pub fn velvet_scene(app: &mut App) {
+    app.add_systems(Startup, spawn_velvet_scene);
+}
+
+/// The three README pictures of [`velvet_scene`].
+pub fn velvet_shots() -> Vec<Shot> {
+    vec![
+        Shot {
+            name: "velvet_front",
+            eye: Vec3::new(-0.6, 2.2, 5.4),
+            target: Vec3::new(1.4, 2.3, 0.0),
+        },
+        Shot {
+            name: "velvet_back",
+            eye: Vec3::new(-0.6, 2.2, -5.4),
+            target: Vec3::new(1.4, 2.3, 0.0),
+        },
+        Shot {
+            name: "velvet_drape",
+            eye: DRAPE_AT + Vec3::new(2.0, 2.3, 3.0),
+            target: DRAPE_AT + Vec3::new(0.0, 0.7, 0.0),
+        },
+    ]
+}
+
+fn spawn_velvet_scene(
+    mut commands: Commands,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut standard: ResMut<Assets<StandardMaterial>>,
+    mut velvet: ResMut<Assets<VelvetMaterial>>,
+) {
+    commands.spawn((
+        DirectionalLight {
+            illuminance: 9_000.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::from_xyz(3.0, 7.0, 6.0).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    commands.insert_resource(GlobalAmbientLight {
+        brightness: 350.0,
+        ..default()
+    });
+    let ground = standard.add(Color::srgb(0.36, 0.38, 0.35));
+    for at in [Vec3::ZERO, DRAPE_AT] {
+        commands.spawn((
+            Mesh3d(meshes.add(Plane3d::default().mesh().size(14.0, 14.0))),
+            MeshMaterial3d(ground.clone()),
+            Transform::from_translation(at),
+        ));
+    }
+
+    // The flag: 3 m × 2 m, hoist pinned to a pole, its front (the grid's +Y side) turned to
+    // +Z, towards the sun; wind only around the flag, so the drape hangs still.
+    commands.spawn((
+        WindZone {
+            wind: WindParams {
+                velocity: Vec3::new(3.5, 0.0, -1.2),
+                gust_amplitude: 0.6,
+                gust_frequency: 1.5,
+                turbulence: 1.0,
+                turbulence_scale: 1.2,
+                seed: 3,
+                ..default()
+            },
+            half_extents: Vec3::new(6.0, 5.0, 6.0),
+            falloff: 2.0,
+        },
+        Transform::from_xyz(1.5, 2.5, 0.0),
+    ));
+    let grid = Grid::new(48, 32, 3.0, 2.0);
+    commands.spawn((
+        Mesh3d(meshes.add(grid_mesh(&grid))),
+        MeshMaterial3d(velvet.add(velvet_material(
+            FLAG_FRONT,
+            VelvetExtension {
+                back_color: Some(FLAG_BACK),
+                alpha: 0.4,
+                ..default()
+            },
+        ))),
+        Transform::from_xyz(grid.width / 2.0, 3.4, 0.0)
+            .with_rotation(Quat::from_rotation_x(core::f32::consts::FRAC_PI_2)),
+        Cloth {
+            mass: 0.4,
+            ..default()
+        },
+        ClothConfig {
+            substeps: 12,
+            solver: Solver::Xpbd {
+                stretch: 0.0,
+                shear: 1e-6,
+                bending: 0.5,
+            },
+            damping: 0.2,
+            ..default()
+        },
+        ClothPins::rest((0..grid.rows).map(|j| grid.index(0, j))),
+    ));
+    commands.spawn((
+        Mesh3d(meshes.add(Cylinder::new(0.04, 4.6))),
+        MeshMaterial3d(standard.add(Color::srgb(0.7, 0.7, 0.72))),
+        Transform::from_xyz(-0.04, 2.3, 0.0),
+    ));
+
+    // The drape: a 2.2 m square dropped over a ball held 1 m up (a tablecloth over a lamp).
+    let ball = 0.55;
+    let centre = DRAPE_AT + Vec3::Y * 1.0;
+    commands.spawn((
+        ClothCollider::sphere(ball).with_thickness(0.012),
+        Mesh3d(meshes.add(Sphere::new(ball).mesh().uv(48, 24))),
+        MeshMaterial3d(standard.add(Color::srgb(0.75, 0.74, 0.7))),
+        Transform::from_translation(centre),
+    ));
+    commands.spawn((
+        ClothCollider::plane().with_thickness(0.01),
+        Transform::from_translation(DRAPE_AT),
+    ));
+    let cloth = Grid::new(56, 56, 2.2, 2.2);
+    commands.spawn((
+        Mesh3d(meshes.add(grid_mesh(&cloth))),
+        MeshMaterial3d(velvet.add(velvet_material(
+            DRAPE,
+            VelvetExtension {
+                alpha: 0.35,
+                ..default()
+            },
+        ))),
+        Transform::from_translation(centre + Vec3::new(0.02, ball + 0.1, -0.01))
+            .with_rotation(Quat::from_rotation_y(0.4)),
+        Cloth {
+            mass: 0.5,
+            ..default()
+        },
+        ClothConfig {
+            substeps: 12,
+            // Softer in bending than the default, so it falls into folds around the ball.
+            solver: Solver::Xpbd {
+                stretch: 0.0,
+                shear: 0.1,
+                bending: 200.0,
+            },
+            ..default()
+        },
+    ));
+}

@@ -1,0 +1,111 @@
+//! The velvet material rendered for real (offscreen, llvmpipe in CI): the pictures are not
+//! empty, the flag's front shows the velvet colour and its back the lining colour, the sunlit
+//! front is brighter than the back, and the drape shows its velvet.
+
+mod common;
+#[path = "../examples/support/shots.rs"]
+mod shots;
+
+use bevy::prelude::*;
+use shots::Picture;
+
+/// Fraction of pixels that are not the clear colour (more than 8/255 away in some channel).
+fn coverage(p: &Picture) -> f32 {
+    let clear = shots::CLEAR.to_srgba();
+    let clear = [clear.red, clear.green, clear.blue];
+    let n = p
+        .pixels()
+        .filter(|c| (0..3).any(|i| (c[i] - clear[i]).abs() > 8.0 / 255.0))
+        .count();
+    n as f32 / (p.width * p.height) as f32
+}
+
+/// Pixels of a clearly blue, gold or wine-red hue: the flag's front, its lining and the drape
+/// (lighting and tonemapping shift the exact colour; the hue family survives). Background,
+/// ground, ball and pole are all near grey and match none.
+fn blue(v: &[f32; 3]) -> bool {
+    v[2] > v[0] + 0.15 && v[2] > v[1] + 0.1
+}
+
+fn gold(v: &[f32; 3]) -> bool {
+    v[0] > v[2] + 0.15 && v[1] > v[2] + 0.05
+}
+
+fn wine(v: &[f32; 3]) -> bool {
+    v[0] > v[1] + 0.12 && v[0] > v[2] + 0.08 && v[1] < v[2] + 0.05
+}
+
+fn matching(p: &Picture, family: fn(&[f32; 3]) -> bool) -> Vec<[f32; 3]> {
+    p.pixels().filter(family).collect()
+}
+
+fn luminance(px: &[[f32; 3]]) -> f32 {
+    px.iter()
+        .map(|v| 0.2126 * v[0] + 0.7152 * v[1] + 0.0722 * v[2])
+        .sum::<f32>()
+        / px.len().max(1) as f32
+}
+
+#[test]
+fn velvet_pictures_show_both_sides() {
+    if common::gpu_or_skip("velvet_pictures_show_both_sides").is_none() {
+        return;
+    }
+    let out = std::env::temp_dir().join("bevy_cloth_pictures");
+    let pictures = shots::render(
+        UVec2::new(320, 200),
+        120,
+        shots::velvet_scene,
+        &shots::velvet_shots(),
+        Some(&out),
+    );
+    let [front, back, drape] = &pictures[..] else {
+        panic!("three pictures expected");
+    };
+    for p in &pictures {
+        let c = coverage(p);
+        eprintln!("{}: {:.0} % not background", p.name, c * 100.0);
+        // The ground fills the lower part and the subject the middle: far from empty.
+        assert!(c > 0.3, "{} is nearly empty ({c})", p.name);
+        let lum: Vec<[f32; 3]> = p.pixels().collect();
+        let mean = luminance(&lum);
+        assert!(
+            mean > 0.05 && mean < 0.95,
+            "{}: mean luminance {mean}",
+            p.name
+        );
+    }
+    let (front_blue, front_gold) = (matching(front, blue), matching(front, gold));
+    let (back_blue, back_gold) = (matching(back, blue), matching(back, gold));
+    eprintln!(
+        "front: {} blue, {} gold px; back: {} blue, {} gold px",
+        front_blue.len(),
+        front_gold.len(),
+        back_blue.len(),
+        back_gold.len()
+    );
+    let area = (front.width * front.height) as usize;
+    // Each view mostly shows its own side (folds may show a little of the other).
+    assert!(front_blue.len() > area / 20, "front shows little velvet");
+    assert!(back_gold.len() > area / 20, "back shows little lining");
+    assert!(front_blue.len() > 3 * front_gold.len());
+    assert!(back_gold.len() > 3 * back_blue.len());
+    // The sun is on the front side: the front's own colour is lit, the back only by ambient
+    // light and what the flipped normal catches. Compare each side relative to its albedo.
+    let rel = |px: &[[f32; 3]], c: Color| {
+        let s = c.to_srgba();
+        luminance(px) / (0.2126 * s.red + 0.7152 * s.green + 0.0722 * s.blue)
+    };
+    let (lit_front, lit_back) = (
+        rel(&front_blue, shots::FLAG_FRONT),
+        rel(&back_gold, shots::FLAG_BACK),
+    );
+    eprintln!("relative brightness: front {lit_front:.2}, back {lit_back:.2}");
+    assert!(
+        lit_front > 1.2 * lit_back,
+        "front {lit_front} back {lit_back}"
+    );
+    let wine = matching(drape, wine);
+    eprintln!("drape: {} velvet px", wine.len());
+    assert!(wine.len() > area / 20, "the drape shows little velvet");
+}
