@@ -193,10 +193,10 @@ fn setup(
         Vec3::new(0.0, 2.0, 0.0),
     );
     commands.insert_resource(Wind(WindParams {
-        velocity: Vec3::new(0.5, 0.0, 1.5),
+        velocity: Vec3::new(1.0, 0.0, 0.4),
         gust_amplitude: 0.5,
         gust_frequency: 0.7,
-        turbulence: 0.5,
+        turbulence: 0.4,
         ..default()
     }));
 

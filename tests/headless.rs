@@ -263,3 +263,15 @@ fn config_changes_apply_without_rebuild() {
     assert_eq!(params.gravity, Vec3::ZERO);
     assert_eq!(params.substeps, 3);
 }
+
+#[test]
+fn velvet_plugin_in_a_headless_app_adds_nothing_and_cloth_still_runs() {
+    // No renderer: the plugin logs and steps aside instead of panicking, so one plugin list
+    // serves windowed and headless builds.
+    let mut app = common::app();
+    app.add_plugins(VelvetPlugin);
+    let (e, _) = spawn_cloth(&mut app, Transform::default());
+    common::run(&mut app, 10);
+    assert!(app.world().get_resource::<Assets<VelvetMaterial>>().is_none());
+    assert!(sim(&app, e).steps() > 0);
+}

@@ -277,7 +277,8 @@ impl Plugin for VelvetPlugin {
     fn build(&self, app: &mut App) {
         if !app.is_plugin_added::<PbrPlugin>() {
             warn!(
-                "VelvetPlugin: no PbrPlugin in this app (headless?); the velvet material is not available"
+                "VelvetPlugin: no PbrPlugin in this app (a headless app, or VelvetPlugin added \
+                 before DefaultPlugins); the velvet material is not available"
             );
             return;
         }
