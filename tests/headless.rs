@@ -272,6 +272,10 @@ fn velvet_plugin_in_a_headless_app_adds_nothing_and_cloth_still_runs() {
     app.add_plugins(VelvetPlugin);
     let (e, _) = spawn_cloth(&mut app, Transform::default());
     common::run(&mut app, 10);
-    assert!(app.world().get_resource::<Assets<VelvetMaterial>>().is_none());
+    assert!(
+        app.world()
+            .get_resource::<Assets<VelvetMaterial>>()
+            .is_none()
+    );
     assert!(sim(&app, e).steps() > 0);
 }

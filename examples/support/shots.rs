@@ -321,8 +321,11 @@ fn spawn_velvet_scene(
                 ..default()
             },
         ))),
-        Transform::from_translation(centre + Vec3::new(0.02, ball + 0.1, -0.01))
-            .with_rotation(Quat::from_rotation_y(0.4)),
+        // Upside down: the back side faces the sun, so its shadow on the ground comes from
+        // back faces (the two-sided shadow pass; tests/pictures.rs checks the shadow is there).
+        Transform::from_translation(centre + Vec3::new(0.02, ball + 0.1, -0.01)).with_rotation(
+            Quat::from_rotation_y(0.4) * Quat::from_rotation_x(core::f32::consts::PI),
+        ),
         Cloth {
             mass: 0.5,
             ..default()
