@@ -1,6 +1,7 @@
 //! The velvet material rendered for real (offscreen, llvmpipe in CI): the pictures are not
 //! empty, the flag's front shows the velvet colour and its back the lining colour, the sunlit
-//! front is brighter than the back, and the drape shows its velvet.
+//! front is brighter than the back, the drape shows its velvet and (lying upside down) casts a
+//! shadow from its back faces, and a normal map shades a cloth through the solver's tangents.
 
 mod common;
 #[path = "../examples/support/shots.rs"]
@@ -52,15 +53,17 @@ fn velvet_pictures_show_both_sides() {
         return;
     }
     let out = std::env::temp_dir().join("bevy_cloth_pictures");
+    let mut list = shots::velvet_shots();
+    list.push(shots::normal_map_shot());
     let pictures = shots::render(
         UVec2::new(320, 200),
         120,
         shots::velvet_scene,
-        &shots::velvet_shots(),
+        &list,
         Some(&out),
     );
-    let [front, back, drape] = &pictures[..] else {
-        panic!("three pictures expected");
+    let [front, back, drape, patches] = &pictures[..] else {
+        panic!("four pictures expected");
     };
     for p in &pictures {
         let c = coverage(p);
@@ -124,5 +127,35 @@ fn velvet_pictures_show_both_sides() {
     assert!(
         shadow > area / 100,
         "no shadow under the upside-down drape: {shadow} px"
+    );
+
+    // Normal map: the left patch (striped normal map, shaded through the solver's tangents)
+    // varies in brightness stripe by stripe; the right one (none) is nearly uniform.
+    let half = patches.width / 2;
+    let spread = |left: bool| {
+        let px: Vec<f32> = patches
+            .rgba
+            .chunks_exact(4)
+            .enumerate()
+            .filter(|(i, _)| ((*i as u32 % patches.width) < half) == left)
+            .map(|(_, p)| [p[0], p[1], p[2]].map(|c| f32::from(c) / 255.0))
+            .filter(|v| v[1] > v[0] + 0.05 && v[1] > v[2] + 0.05)
+            .map(|v| luminance(&[v]))
+            .collect();
+        let mean = px.iter().sum::<f32>() / px.len().max(1) as f32;
+        let var = px.iter().map(|l| (l - mean) * (l - mean)).sum::<f32>() / px.len().max(1) as f32;
+        (px.len(), var.sqrt())
+    };
+    let ((n_left, sd_left), (n_right, sd_right)) = (spread(true), spread(false));
+    eprintln!(
+        "patches: normal-mapped {n_left} px, sd {sd_left:.4}; plain {n_right} px, sd {sd_right:.4}"
+    );
+    assert!(
+        n_left > area / 20 && n_right > area / 20,
+        "patches not in view"
+    );
+    assert!(
+        sd_left > 3.0 * sd_right,
+        "the normal map changes nothing: {sd_left} vs {sd_right}"
     );
 }

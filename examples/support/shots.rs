@@ -190,6 +190,49 @@ pub const FLAG_BACK: Color = Color::srgb(0.85, 0.62, 0.2);
 pub const DRAPE: Color = Color::srgb(0.45, 0.04, 0.1);
 /// Where the drape stands (far enough from the flag to stay out of its pictures).
 pub const DRAPE_AT: Vec3 = Vec3::new(30.0, 0.0, 0.0);
+/// Where two velvet patches lie on the ground, the left one with a normal map.
+pub const PATCHES_AT: Vec3 = Vec3::new(-30.0, 0.0, 0.0);
+/// The patches' colour.
+pub const PATCH: Color = Color::srgb(0.15, 0.45, 0.12);
+
+/// Two 1 m velvet cloths lying on the ground side by side, seen from above: the left one
+/// with a striped normal map (shaded through the tangents the solver writes), the right one
+/// without. Rendered in [`velvet_scene`] but not one of the README pictures.
+pub fn normal_map_shot() -> Shot {
+    Shot {
+        name: "velvet_normal_map",
+        eye: PATCHES_AT + Vec3::new(0.0, 1.8, 1.6),
+        target: PATCHES_AT,
+    }
+}
+
+/// A tangent-space normal map of 8 stripes whose normals lean alternately ±0.6 rad along the
+/// texture's u axis (linear RGBA8, `n·0.5 + 0.5`).
+fn striped_normal_map() -> Image {
+    use bevy::asset::RenderAssetUsages;
+    use bevy::render::render_resource::{Extent3d, TextureDimension};
+    let size = 64u32;
+    let mut data = Vec::with_capacity((size * size * 4) as usize);
+    for _y in 0..size {
+        for x in 0..size {
+            let lean = if (x / 4) % 2 == 0 { 0.6f32 } else { -0.6 };
+            let n = Vec3::new(lean.sin(), 0.0, lean.cos());
+            let e = |c: f32| ((c * 0.5 + 0.5) * 255.0).round() as u8;
+            data.extend_from_slice(&[e(n.x), e(n.y), e(n.z), 255]);
+        }
+    }
+    Image::new(
+        Extent3d {
+            width: size,
+            height: size,
+            depth_or_array_layers: 1,
+        },
+        TextureDimension::D2,
+        data,
+        TextureFormat::Rgba8Unorm,
+        RenderAssetUsages::RENDER_WORLD,
+    )
+}
 
 /// The flag in wind (front blue velvet, gold lining behind, sun in front) and a velvet cloth
 /// dropped over a ball, on a ground plane.
@@ -223,6 +266,7 @@ fn spawn_velvet_scene(
     mut meshes: ResMut<Assets<Mesh>>,
     mut standard: ResMut<Assets<StandardMaterial>>,
     mut velvet: ResMut<Assets<VelvetMaterial>>,
+    mut images: ResMut<Assets<Image>>,
 ) {
     commands.spawn((
         DirectionalLight {
@@ -237,7 +281,7 @@ fn spawn_velvet_scene(
         ..default()
     });
     let ground = standard.add(Color::srgb(0.36, 0.38, 0.35));
-    for at in [Vec3::ZERO, DRAPE_AT] {
+    for at in [Vec3::ZERO, DRAPE_AT, PATCHES_AT] {
         commands.spawn((
             Mesh3d(meshes.add(Plane3d::default().mesh().size(14.0, 14.0))),
             MeshMaterial3d(ground.clone()),
@@ -341,4 +385,24 @@ fn spawn_velvet_scene(
             ..default()
         },
     ));
+
+    // Two patches on the ground (the plane collider above holds them), the left one
+    // normal-mapped.
+    let normal_map = images.add(striped_normal_map());
+    let patch = Grid::new(24, 24, 1.0, 1.0);
+    for (dx, map) in [(-0.6, Some(normal_map)), (0.6, None)] {
+        commands.spawn((
+            Mesh3d(meshes.add(grid_mesh(&patch))),
+            MeshMaterial3d(velvet.add(velvet_material_from(
+                StandardMaterial {
+                    base_color: PATCH,
+                    normal_map_texture: map,
+                    ..default()
+                },
+                VelvetExtension::default(),
+            ))),
+            Transform::from_translation(PATCHES_AT + Vec3::new(dx, 0.05, 0.0)),
+            Cloth::default(),
+        ));
+    }
 }
