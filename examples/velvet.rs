@@ -264,18 +264,26 @@ fn drag_sliders(
         };
         let t = (at.x + 0.5).clamp(0.0, 1.0);
         let r = slider.0.range();
-        if let Some(mut m) = materials.get_mut(&live.0) {
-            slider
-                .0
-                .set(&mut m.extension, r.start() + t * (r.end() - r.start()));
+        let value = r.start() + t * (r.end() - r.start());
+        // Only touch the asset when the setting moves: each mutable access re-uploads it.
+        let Some(current) = materials.get(&live.0).map(|m| m.extension.clone()) else {
+            continue;
+        };
+        let mut next = current.clone();
+        slider.0.set(&mut next, value);
+        if slider.0.get(&next) != slider.0.get(&current)
+            && let Some(mut m) = materials.get_mut(&live.0)
+        {
+            m.extension = next;
         }
     }
 }
 
-/// Slider fills and labels follow the live material.
+/// Slider fills and labels follow the live material, when it changes.
 fn show_values(
     live: Option<Res<Live>>,
     materials: Option<Res<Assets<VelvetMaterial>>>,
+    mut shown: Local<Option<[f32; 5]>>,
     mut fills: Query<(&mut Node, &SliderFill)>,
     mut texts: Query<(&mut Text, &SliderText)>,
 ) {
@@ -285,6 +293,11 @@ fn show_values(
     let Some(m) = materials.get(&live.0) else {
         return;
     };
+    let values = Param::ALL.map(|p| p.get(&m.extension));
+    if *shown == Some(values) {
+        return;
+    }
+    *shown = Some(values);
     for (mut node, fill) in &mut fills {
         let r = fill.0.range();
         let t = (fill.0.get(&m.extension) - r.start()) / (r.end() - r.start());

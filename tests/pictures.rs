@@ -21,7 +21,8 @@ fn coverage(p: &Picture) -> f32 {
     n as f32 / (p.width * p.height) as f32
 }
 
-/// Pixels of a clearly blue, gold or wine-red hue: the flag's front, its lining and the drape
+/// Pixels of a clearly blue, gold, wine-red or green hue: the flag's front, its lining, the drape
+/// and the patches
 /// (lighting and tonemapping shift the exact colour; the hue family survives). Background,
 /// ground, ball and pole are all near grey and match none.
 fn blue(v: &[f32; 3]) -> bool {
@@ -34,6 +35,24 @@ fn gold(v: &[f32; 3]) -> bool {
 
 fn wine(v: &[f32; 3]) -> bool {
     v[0] > v[1] + 0.12 && v[0] > v[2] + 0.08 && v[1] < v[2] + 0.05
+}
+
+fn green(v: &[f32; 3]) -> bool {
+    v[1] > v[0] + 0.05 && v[1] > v[2] + 0.05
+}
+
+/// Pixels of `family` in the columns `x` for which `columns(x)` holds.
+fn in_columns(
+    p: &Picture,
+    columns: impl Fn(u32) -> bool,
+    family: fn(&[f32; 3]) -> bool,
+) -> Vec<[f32; 3]> {
+    p.pixels()
+        .enumerate()
+        .filter(|(i, _)| columns(*i as u32 % p.width))
+        .map(|(_, v)| v)
+        .filter(family)
+        .collect()
 }
 
 fn matching(p: &Picture, family: fn(&[f32; 3]) -> bool) -> Vec<[f32; 3]> {
@@ -55,6 +74,7 @@ fn velvet_pictures_show_both_sides() {
     let out = std::env::temp_dir().join("bevy_cloth_pictures");
     let mut list = shots::velvet_shots();
     list.push(shots::normal_map_shot());
+    list.push(shots::lamps_shot());
     let pictures = shots::render(
         UVec2::new(320, 200),
         120,
@@ -62,8 +82,8 @@ fn velvet_pictures_show_both_sides() {
         &list,
         Some(&out),
     );
-    let [front, back, drape, patches] = &pictures[..] else {
-        panic!("four pictures expected");
+    let [front, back, drape, patches, lamps] = &pictures[..] else {
+        panic!("five pictures expected");
     };
     for p in &pictures {
         let c = coverage(p);
@@ -133,14 +153,9 @@ fn velvet_pictures_show_both_sides() {
     // varies in brightness stripe by stripe; the right one (none) is nearly uniform.
     let half = patches.width / 2;
     let spread = |left: bool| {
-        let px: Vec<f32> = patches
-            .rgba
-            .chunks_exact(4)
-            .enumerate()
-            .filter(|(i, _)| ((*i as u32 % patches.width) < half) == left)
-            .map(|(_, p)| [p[0], p[1], p[2]].map(|c| f32::from(c) / 255.0))
-            .filter(|v| v[1] > v[0] + 0.05 && v[1] > v[2] + 0.05)
-            .map(|v| luminance(&[v]))
+        let px: Vec<f32> = in_columns(patches, |x| (x < half) == left, green)
+            .iter()
+            .map(|v| luminance(&[*v]))
             .collect();
         let mean = px.iter().sum::<f32>() / px.len().max(1) as f32;
         let var = px.iter().map(|l| (l - mean) * (l - mean)).sum::<f32>() / px.len().max(1) as f32;
@@ -157,5 +172,31 @@ fn velvet_pictures_show_both_sides() {
     assert!(
         sd_left > 3.0 * sd_right,
         "the normal map changes nothing: {sd_left} vs {sd_right}"
+    );
+
+    // Clustered lights: the cloth's ends under the spot and the point light are brighter
+    // than its middle, which only the sun and the ambient light reach.
+    // The brightest tenth of each third's cloth pixels (a lamp lights a disc, not the whole end).
+    let third = |k: u32| {
+        let px = in_columns(lamps, |x| x * 3 / lamps.width == k, green);
+        let mut l: Vec<f32> = px.iter().map(|v| luminance(&[*v])).collect();
+        l.sort_by(f32::total_cmp);
+        (px.len(), l.get(l.len() * 9 / 10).copied().unwrap_or(0.0))
+    };
+    let (spot, middle, point) = (third(0), third(1), third(2));
+    eprintln!(
+        "lamps: spot end {spot:?}, middle {middle:?}, point end {point:?} (px, 90th-percentile luminance)"
+    );
+    assert!(
+        spot.0 > area / 50 && middle.0 > area / 50 && point.0 > area / 50,
+        "cloth not in view"
+    );
+    assert!(
+        spot.1 > 1.2 * middle.1,
+        "the spot light does not light the velvet"
+    );
+    assert!(
+        point.1 > 1.2 * middle.1,
+        "the point light does not light the velvet"
     );
 }

@@ -319,17 +319,11 @@ pub struct ClothLook(pub Color);
 
 /// The examples' cloth material: velvet with `color` in front and a lining behind.
 pub fn cloth_material(color: Color) -> VelvetMaterial {
-    let front = color.to_linear();
-    let lining = LinearRgba::rgb(0.75, 0.7, 0.6);
-    let back = LinearRgba::rgb(
-        0.5 * (front.red + lining.red),
-        0.5 * (front.green + lining.green),
-        0.5 * (front.blue + lining.blue),
-    );
+    let lining = color.to_linear().mix(&LinearRgba::rgb(0.75, 0.7, 0.6), 0.5);
     velvet_material(
         color,
         VelvetExtension {
-            back_color: Some(back.into()),
+            back_color: Some(lining.into()),
             ..default()
         },
     )

@@ -15,7 +15,7 @@ use bevy::image::Image;
 use bevy::prelude::*;
 use bevy::render::RenderPlugin;
 use bevy::render::render_resource::TextureFormat;
-use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
+use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured, save_to_disk};
 use bevy::time::TimeUpdateStrategy;
 use bevy::window::ExitCondition;
 use bevy::winit::WinitPlugin;
@@ -136,14 +136,19 @@ pub fn render(
     for _ in 0..4 {
         app.update();
     }
+    if let Some(dir) = out {
+        std::fs::create_dir_all(dir).expect("create the output folder");
+    }
     let captured: Arc<Mutex<Vec<Option<Image>>>> = Arc::new(Mutex::new(vec![None; shots.len()]));
-    for (k, image) in targets.iter().enumerate() {
+    for (k, (image, shot)) in targets.iter().zip(shots).enumerate() {
         let slot = captured.clone();
-        app.world_mut()
-            .spawn(Screenshot::image(image.clone()))
-            .observe(move |shot: On<ScreenshotCaptured>| {
-                slot.lock().expect("lock")[k] = Some(shot.image.clone());
-            });
+        let mut screenshot = app.world_mut().spawn(Screenshot::image(image.clone()));
+        screenshot.observe(move |shot: On<ScreenshotCaptured>| {
+            slot.lock().expect("lock")[k] = Some(shot.image.clone());
+        });
+        if let Some(dir) = out {
+            screenshot.observe(save_to_disk(dir.join(format!("{}.png", shot.name))));
+        }
     }
     for _ in 0..120 {
         app.update();
@@ -157,26 +162,15 @@ pub fn render(
         .zip(images)
         .map(|(shot, image)| {
             let image = image.unwrap_or_else(|| panic!("picture {} never arrived", shot.name));
-            let width = image.width();
-            let height = image.height();
-            let rgba = image.data.clone().expect("picture without data");
             if let Some(dir) = out {
-                std::fs::create_dir_all(dir).expect("create the output folder");
                 let path = dir.join(format!("{}.png", shot.name));
-                let dynamic = image
-                    .try_into_dynamic()
-                    .expect("picture as an image buffer");
-                dynamic
-                    .to_rgb8()
-                    .save(&path)
-                    .unwrap_or_else(|e| panic!("saving {}: {e}", path.display()));
-                println!("saved {}", path.display());
+                assert!(path.exists(), "{} was not saved", path.display());
             }
             Picture {
                 name: shot.name,
-                width,
-                height,
-                rgba,
+                width: image.width(),
+                height: image.height(),
+                rgba: image.data.expect("picture without data"),
             }
         })
         .collect()
@@ -203,6 +197,19 @@ pub fn normal_map_shot() -> Shot {
         name: "velvet_normal_map",
         eye: PATCHES_AT + Vec3::new(0.0, 1.8, 1.6),
         target: PATCHES_AT,
+    }
+}
+
+/// Where a 3 m velvet cloth lies under a spot light (left end) and a point light (right end).
+pub const LAMPS_AT: Vec3 = Vec3::new(-60.0, 0.0, 0.0);
+
+/// The lamp-lit cloth from above: its two ends lit by the spot and the point light, its
+/// middle by the sun alone. Rendered in [`velvet_scene`] but not one of the README pictures.
+pub fn lamps_shot() -> Shot {
+    Shot {
+        name: "velvet_lamps",
+        eye: LAMPS_AT + Vec3::new(0.0, 2.4, 2.2),
+        target: LAMPS_AT,
     }
 }
 
@@ -281,7 +288,7 @@ fn spawn_velvet_scene(
         ..default()
     });
     let ground = standard.add(Color::srgb(0.36, 0.38, 0.35));
-    for at in [Vec3::ZERO, DRAPE_AT, PATCHES_AT] {
+    for at in [Vec3::ZERO, DRAPE_AT, PATCHES_AT, LAMPS_AT] {
         commands.spawn((
             Mesh3d(meshes.add(Plane3d::default().mesh().size(14.0, 14.0))),
             MeshMaterial3d(ground.clone()),
@@ -405,4 +412,35 @@ fn spawn_velvet_scene(
             Cloth::default(),
         ));
     }
+
+    // A 3 m × 1 m cloth on the ground under a spot light (left end) and a point light
+    // (right end), both casting shadows: the clustered-light path of the velvet shader.
+    let strip = Grid::new(48, 16, 3.0, 1.0);
+    commands.spawn((
+        Mesh3d(meshes.add(grid_mesh(&strip))),
+        MeshMaterial3d(velvet.add(velvet_material(PATCH, VelvetExtension::default()))),
+        Transform::from_translation(LAMPS_AT + Vec3::Y * 0.05),
+        Cloth::default(),
+    ));
+    commands.spawn((
+        SpotLight {
+            intensity: 200_000.0,
+            range: 6.0,
+            outer_angle: 0.5,
+            inner_angle: 0.3,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::from_translation(LAMPS_AT + Vec3::new(-1.2, 0.6, 0.0))
+            .looking_at(LAMPS_AT + Vec3::new(-1.2, 0.0, 0.0), Vec3::Z),
+    ));
+    commands.spawn((
+        PointLight {
+            intensity: 50_000.0,
+            range: 6.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::from_translation(LAMPS_AT + Vec3::new(1.2, 0.3, 0.0)),
+    ));
 }

@@ -171,8 +171,7 @@ impl VelvetExtension {
 }
 
 fn rgb(c: Color) -> Vec3 {
-    let l = c.to_linear();
-    Vec3::new(l.red, l.green, l.blue)
+    c.to_linear().to_vec3()
 }
 
 /// Bit in [`VelvetUniform::flags`]: the back side has its own colour or texture.
@@ -200,16 +199,10 @@ impl From<&VelvetExtension> for VelvetUniform {
     fn from(e: &VelvetExtension) -> Self {
         let b = e.brdf(Color::BLACK);
         let back = e.back_color.is_some() || e.back_texture.is_some();
-        let back_color = e.back_color.unwrap_or(Color::WHITE).to_linear();
+        let back_color = e.back_color.unwrap_or(Color::WHITE).to_linear().to_vec4();
         Self {
             sheen_color: b.sheen.extend(1.0),
-            back_color: Vec4::new(
-                back_color.red,
-                back_color.green,
-                back_color.blue,
-                back_color.alpha,
-            )
-            .clamp(Vec4::ZERO, Vec4::ONE),
+            back_color: back_color.clamp(Vec4::ZERO, Vec4::ONE),
             alpha: b.alpha,
             k_amp: b.k_amp,
             f0: b.f0,

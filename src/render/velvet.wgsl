@@ -60,10 +60,12 @@ fn velvet_lighting(in: pbr_types::PbrInput) -> vec4<f32> {
     let cluster_index = clustering::view_fragment_cluster_index(in.frag_coord.xy, view_z, in.is_orthographic);
     let ranges = clustering::unpack_clusterable_object_index_ranges(cluster_index);
 
-    // Point lights (clustered).
+    // Point and spot lights (clustered; the cluster lists point lights first, then spot
+    // lights, in one range with the same data layout).
     for (var i: u32 = ranges.first_point_light_index_offset;
-            i < ranges.first_spot_light_index_offset;
+            i < ranges.first_reflection_probe_index_offset;
             i = i + 1u) {
+        let is_spot = i >= ranges.first_spot_light_index_offset;
         let light_id = clustering::get_clusterable_object_id(i);
         let light = &view_bindings::clustered_lights.data[light_id];
         let to_light = (*light).position_radius.xyz - P;
@@ -72,46 +74,30 @@ fn velvet_lighting(in: pbr_types::PbrInput) -> vec4<f32> {
         let NdotL = saturate(dot(N, L));
         // color_inverse_square_range.rgb = colour × intensity/(4π) (premultiplied on the CPU);
         // .w = 1/range² for the smooth range cut-off.
-        let attenuation = lighting::getDistanceAttenuation(d2, (*light).color_inverse_square_range.w);
+        var falloff = lighting::getDistanceAttenuation(d2, (*light).color_inverse_square_range.w);
+        if is_spot {
+            // Cone: direction stored as (x, z) + sign-of-y flag; scale/offset precomputed.
+            var spot_dir = vec3<f32>((*light).light_custom_data.x, 0.0, (*light).light_custom_data.y);
+            spot_dir.y = sqrt(max(0.0, 1.0 - spot_dir.x * spot_dir.x - spot_dir.z * spot_dir.z));
+            if ((*light).flags & mesh_view_types::POINT_LIGHT_FLAGS_SPOT_LIGHT_Y_NEGATIVE) != 0u {
+                spot_dir.y = -spot_dir.y;
+            }
+            let cone = saturate(dot(-spot_dir, L) * (*light).light_custom_data.z
+                + (*light).light_custom_data.w);
+            falloff = falloff * cone * cone;
+        }
         var shadow = 1.0;
         if receives_shadows
                 && ((*light).flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = shadows::fetch_point_shadow(light_id, in.world_position, in.world_normal, in.frag_coord.xy);
+            if is_spot {
+                shadow = shadows::fetch_spot_shadow(
+                    light_id, in.world_position, in.world_normal, (*light).shadow_map_near_z, in.frag_coord.xy);
+            } else {
+                shadow = shadows::fetch_point_shadow(light_id, in.world_position, in.world_normal, in.frag_coord.xy);
+            }
         }
         direct += velvet_brdf(N, V, L, albedo, sheen, alpha, k_amp, f0) * NdotL
-            * (*light).color_inverse_square_range.rgb * attenuation * shadow;
-    }
-
-    // Spot lights (clustered; same data layout as point lights).
-    for (var i: u32 = ranges.first_spot_light_index_offset;
-            i < ranges.first_reflection_probe_index_offset;
-            i = i + 1u) {
-        let light_id = clustering::get_clusterable_object_id(i);
-        let light = &view_bindings::clustered_lights.data[light_id];
-        let to_light = (*light).position_radius.xyz - P;
-        let d2 = dot(to_light, to_light);
-        let L = to_light * inverseSqrt(max(d2, 1.0e-8));
-        let NdotL = saturate(dot(N, L));
-        let attenuation = lighting::getDistanceAttenuation(d2, (*light).color_inverse_square_range.w);
-
-        // Cone: spot direction stored as (x, z) + sign-of-y flag; scale/offset precomputed.
-        var spot_dir = vec3<f32>((*light).light_custom_data.x, 0.0, (*light).light_custom_data.y);
-        spot_dir.y = sqrt(max(0.0, 1.0 - spot_dir.x * spot_dir.x - spot_dir.z * spot_dir.z));
-        if ((*light).flags & mesh_view_types::POINT_LIGHT_FLAGS_SPOT_LIGHT_Y_NEGATIVE) != 0u {
-            spot_dir.y = -spot_dir.y;
-        }
-        let cd = dot(-spot_dir, L);
-        let cone = saturate(cd * (*light).light_custom_data.z + (*light).light_custom_data.w);
-        let spot_attenuation = cone * cone;
-
-        var shadow = 1.0;
-        if receives_shadows
-                && ((*light).flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = shadows::fetch_spot_shadow(
-                light_id, in.world_position, in.world_normal, (*light).shadow_map_near_z, in.frag_coord.xy);
-        }
-        direct += velvet_brdf(N, V, L, albedo, sheen, alpha, k_amp, f0) * NdotL
-            * (*light).color_inverse_square_range.rgb * attenuation * spot_attenuation * shadow;
+            * (*light).color_inverse_square_range.rgb * falloff * shadow;
     }
 
     // Directional lights (color.rgb = colour × illuminance).

@@ -146,6 +146,15 @@ fn clamp_speed(v: Vec4, max: f32) -> Vec4 {
     }
 }
 
+/// A pinned vertex's velocity over the substep just done (pins are moved, not integrated).
+fn finish_pin_velocities(state: &mut ClothState, inv_h: f32) {
+    for pin in &state.pins {
+        let i = pin.vertex as usize;
+        state.velocities[i] =
+            ((state.positions[i].xyz() - state.prev[i].xyz()) * inv_h).extend(0.0);
+    }
+}
+
 fn run_part(
     w: &mut Work<'_>,
     phase: Phase,
@@ -307,12 +316,11 @@ pub fn step(
     };
     for s in 0..substeps {
         // Pins: finish their velocity for the previous substep, then move.
+        if s > 0 {
+            finish_pin_velocities(state, c.inv_h);
+        }
         for pin in &state.pins {
             let i = pin.vertex as usize;
-            if s > 0 {
-                state.velocities[i] =
-                    ((state.positions[i].xyz() - state.prev[i].xyz()) * c.inv_h).extend(0.0);
-            }
             state.prev[i] = state.positions[i];
         }
         state.place_pins(&scratch.pin_start, s, substeps);
@@ -376,11 +384,7 @@ pub fn step(
         phase,
         &scratch.poses,
     );
-    for pin in &state.pins {
-        let i = pin.vertex as usize;
-        state.velocities[i] =
-            ((state.positions[i].xyz() - state.prev[i].xyz()) * c.inv_h).extend(0.0);
-    }
+    finish_pin_velocities(state, c.inv_h);
     // Momentum per collider: the per-part sums of −m·Δx, over h.
     for part in &scratch.part_impulses {
         for (total, p) in scratch.impulses.iter_mut().zip(part) {

@@ -318,6 +318,24 @@ mod tests {
         assert!((l.length() - 0.3 * 200.0 * 0.5 * c * c).abs() < 1e-3);
     }
 
+    /// Wind accelerations on one resting triangle with this inverse mass per vertex.
+    fn resting_triangle(corners: [Vec3; 3], inv_mass: f32, wind: WindParams, dt: f32) -> Vec<Vec4> {
+        let field = WindField::new([(wind, None)]);
+        let pos = corners.map(|p| p.extend(inv_mass));
+        let (mut air, mut out) = (Vec::new(), Vec::new());
+        wind_accelerations(
+            &pos,
+            &[Vec4::ZERO; 3],
+            &[[0, 1, 2]],
+            &field,
+            0.0,
+            dt,
+            &mut air,
+            &mut out,
+        );
+        out
+    }
+
     #[test]
     fn steady_wind_pushes_a_resting_sheet_downwind() {
         let wind = WindParams {
@@ -326,23 +344,7 @@ mod tests {
             turbulence: 0.0,
             ..Default::default()
         };
-        let field = WindField::new([(wind, None)]);
-        let pos: Vec<Vec4> = [Vec3::ZERO, Vec3::X, Vec3::Y]
-            .iter()
-            .map(|p| p.extend(1.0))
-            .collect();
-        let vel = vec![Vec4::ZERO; 3];
-        let (mut air, mut out) = (Vec::new(), Vec::new());
-        wind_accelerations(
-            &pos,
-            &vel,
-            &[[0, 1, 2]],
-            &field,
-            0.0,
-            1.0 / 60.0,
-            &mut air,
-            &mut out,
-        );
+        let out = resting_triangle([Vec3::ZERO, Vec3::X, Vec3::Y], 1.0, wind, 1.0 / 60.0);
         // v_rel = +5 z: F_D = −0.6·25·½ z = −7.5 z, a third per vertex, unit masses.
         for a in &out {
             assert!((a.xyz() - Vec3::new(0.0, 0.0, -2.5)).length() < 1e-4, "{a}");
@@ -379,24 +381,8 @@ mod tests {
             velocity: Vec3::new(100.0, 0.0, 0.0),
             ..Default::default()
         };
-        let field = WindField::new([(wind, None)]);
-        let pos: Vec<Vec4> = [Vec3::ZERO, Vec3::Y, Vec3::Z]
-            .iter()
-            .map(|p| p.extend(100.0))
-            .collect();
-        let vel = vec![Vec4::ZERO; 3];
-        let (mut air, mut out) = (Vec::new(), Vec::new());
         let dt = 1.0 / 60.0;
-        wind_accelerations(
-            &pos,
-            &vel,
-            &[[0, 1, 2]],
-            &field,
-            0.0,
-            dt,
-            &mut air,
-            &mut out,
-        );
+        let out = resting_triangle([Vec3::ZERO, Vec3::Y, Vec3::Z], 100.0, wind, dt);
         // No vertex can be accelerated past the air speed in one step.
         for a in &out {
             assert!(a.length() * dt <= 200.0, "{a}");
