@@ -54,18 +54,33 @@ pub struct Cloth {
     /// Rest angle of the bending constraints: flat, or the mesh's modelled folds.
     pub bend_rest: BendRest,
     /// When a pin's anchor jumps farther than this in one step (metres), the whole cloth is
-    /// moved with it instead of being dragged (a teleported character keeps its cape).
+    /// moved with it instead of being dragged (a teleported character keeps its cape). The
+    /// same rule, with the same default, applies to colliders
+    /// ([`ClothCollider::teleport_distance`](crate::collider::ClothCollider::teleport_distance)).
     pub teleport_distance: f32,
+    /// Mesh vertices closer than this fraction of the mesh's bounding-box diagonal are one
+    /// particle (finite, ≥ 0; 0 welds exact duplicates only). Exporters split vertices along
+    /// UV seams and hard edges; welding keeps such a mesh in one piece. The copies are all
+    /// written back; where their source normals agree (a UV seam) they share a smooth normal,
+    /// where they differ (a hard edge) each keeps its own side's normal.
+    pub weld_tolerance: f32,
 }
 
+/// Default for [`Cloth::teleport_distance`] and
+/// [`ClothCollider::teleport_distance`](crate::collider::ClothCollider::teleport_distance):
+/// a jump of more than 2 m in one fixed step is a teleport, not a motion.
+pub const DEFAULT_TELEPORT_DISTANCE: f32 = 2.0;
+
 impl Default for Cloth {
-    /// 0.2 kg (a 1 m² cotton sheet), area-weighted, flat at rest, teleport beyond 2 m.
+    /// 0.2 kg (a 1 m² cotton sheet), area-weighted, flat at rest, teleport beyond 2 m, welding
+    /// copies within 1e-5 of the mesh's size.
     fn default() -> Self {
         Self {
             mass: 0.2,
             mass_distribution: MassDistribution::Area,
             bend_rest: BendRest::Flat,
-            teleport_distance: 2.0,
+            teleport_distance: DEFAULT_TELEPORT_DISTANCE,
+            weld_tolerance: 1e-5,
         }
     }
 }
@@ -122,13 +137,19 @@ impl Default for ClothTearing {
 pub struct ClothTorn {
     /// The cloth entity.
     pub cloth: Entity,
-    /// The torn edges, as pairs of mesh vertex indices.
+    /// Every edge that left the cloth in this step, as pairs of mesh vertex indices: those
+    /// stretched past the threshold and those that lost all their triangles with them. A
+    /// welded vertex is named by its first copy in the mesh.
     pub edges: Vec<[u32; 2]>,
 }
 
 /// How a cloth is solved: solver and material, substeps, iterations, gravity, damping.
 ///
-/// Changing it at runtime takes effect on the next step without a rebuild.
+/// Changing it at runtime takes effect on the next step without a rebuild. An invalid value
+/// (say substeps 0 while a slider passes through it) is reported once (an error log and a
+/// [`ClothFailed`](crate::cloth::ClothFailed) message); the cloth keeps running with its last
+/// valid settings ([`ClothSim::rejected`](crate::cloth::ClothSim::rejected) says why) and
+/// takes the new ones as soon as they are valid.
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component, Default, Clone, PartialEq)]
 pub struct ClothConfig {
@@ -202,7 +223,8 @@ pub enum PinAnchor {
 #[derive(Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Clone, PartialEq)]
 pub struct ClothPin {
-    /// Vertex index in the mesh.
+    /// Vertex index in the mesh (any copy of a welded vertex pins the particle; the first
+    /// pin of a particle wins).
     pub vertex: u32,
     /// Where the vertex is held.
     pub anchor: PinAnchor,
@@ -212,7 +234,10 @@ pub struct ClothPin {
 ///
 /// Replacing or mutating this component re-pins the cloth on the next step (the report's
 /// "update anchors" button): vertices no longer listed fall free, new ones are pulled to their
-/// anchors over one step.
+/// anchors over one step. Vertices pinned before and after keep the teleport rule: if their
+/// anchors jumped farther than [`Cloth::teleport_distance`], the whole cloth moves with them.
+/// An invalid pin list (a vertex out of range, a non-finite anchor) is reported once and the
+/// old pins are kept until the list is valid again.
 #[derive(Component, Reflect, Clone, Debug, Default, PartialEq)]
 #[reflect(Component, Default, Clone, PartialEq)]
 pub struct ClothPins(pub Vec<ClothPin>);

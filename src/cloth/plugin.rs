@@ -1,11 +1,14 @@
 //! [`ClothPlugin`], the [`ClothPlugins`] group and the public [`ClothSystems`] sets.
 
 use bevy::app::PluginGroupBuilder;
+use bevy::asset::AssetEventSystems;
 use bevy::ecs::schedule::{InternedScheduleLabel, ScheduleLabel};
 use bevy::prelude::*;
 use bevy::transform::TransformSystems;
 
-use super::sim::{ClothFailed, init_cloths, retry_cloths, step_cloths, sync_cloths};
+use super::sim::{
+    ClothFailed, init_cloths, on_cloth_removed, retry_cloths, step_cloths, sync_cloths,
+};
 use super::writeback::write_back;
 use super::{
     Cloth, ClothConfig, ClothPin, ClothPins, ClothSelfCollision, ClothTearing, ClothTethers,
@@ -19,7 +22,8 @@ use crate::wind::ClothWindPlugin;
 /// 1. `Prepare` (simulation schedule): create simulations for new cloths, apply changed
 ///    configs and pins, move pins to their anchors.
 /// 2. `Simulate` (simulation schedule): step every cloth by the schedule's time step.
-/// 3. `Writeback` ([`PostUpdate`], after transform propagation): write positions, normals and
+/// 3. `Writeback` ([`PostUpdate`], after transform propagation and before Bevy's asset events,
+///    so the renderer draws the new shape in the same frame): write positions, normals and
 ///    tangents of cloths that moved into their meshes, once per rendered frame.
 ///
 /// Order your own systems against these, e.g. move a pin anchor `.before(ClothSystems::Prepare)`.
@@ -75,8 +79,11 @@ impl Plugin for ClothPlugin {
             )
             .configure_sets(
                 PostUpdate,
-                ClothSystems::Writeback.after(TransformSystems::Propagate),
+                ClothSystems::Writeback
+                    .after(TransformSystems::Propagate)
+                    .before(AssetEventSystems),
             )
+            .add_observer(on_cloth_removed)
             .add_systems(
                 self.schedule,
                 (

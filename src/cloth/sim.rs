@@ -5,12 +5,13 @@ use bevy::tasks::{ComputeTaskPool, TaskPool};
 
 use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
 use crate::solver::{
-    Environment, Features, Parallel, Pin, SelfCollision, Serial, Simulation, SolverError,
-    SolverParams, TetherParams, Topology, TopologyOptions,
+    Environment, Features, MeshBinding, Parallel, Pin, SelfCollision, Serial, Simulation,
+    SolverError, SolverParams, StateError, TetherParams, TopologyOptions, Weld,
 };
 use crate::wind::ClothWindField;
 
 use super::mesh::{cloth_mesh, read_mesh};
+use super::pose::FixedPoses;
 use super::{
     Cloth, ClothConfig, ClothPins, ClothSelfCollision, ClothTearing, ClothTethers, ClothTorn,
     PinAnchor,
@@ -37,6 +38,8 @@ pub enum ClothError {
     BadMass(f32),
     /// [`Cloth::teleport_distance`] is NaN or not positive.
     BadTeleportDistance(f32),
+    /// [`Cloth::weld_tolerance`] is negative or not finite.
+    BadWeldTolerance(f32),
     /// The solver rejected the mesh, masses, pins or parameters.
     Solver(SolverError),
 }
@@ -61,6 +64,9 @@ impl core::fmt::Display for ClothError {
                     f,
                     "teleport distance {d} must be > 0 (infinity turns it off)"
                 )
+            }
+            ClothError::BadWeldTolerance(t) => {
+                write!(f, "weld tolerance {t} must be finite and ≥ 0")
             }
             ClothError::Solver(e) => e.fmt(f),
         }
@@ -95,22 +101,34 @@ pub struct ClothInvalid(pub ClothError);
 ///
 /// Read it for the simulated positions (world space), normals and strain; mutate it through
 /// [`ClothSim::simulation_mut`] to teleport or reset the cloth.
+///
+/// The solver simulates *particles*: the mesh's vertices after welding (see
+/// [`Cloth::weld_tolerance`]). For a mesh without duplicated vertices particle `i` is mesh
+/// vertex `i`; in general [`ClothSim::particle`] maps a mesh vertex to its particle, and
+/// [`ClothSim::position`] reads a mesh vertex directly.
 #[derive(Component)]
 pub struct ClothSim {
     pub(crate) sim: Simulation,
     pub(crate) mesh: Handle<Mesh>,
-    /// Mesh-space rest positions (for pins that follow the cloth entity).
+    pub(crate) binding: MeshBinding,
+    /// Mesh-space rest position of every particle (for pins that follow the cloth entity).
     rest_local: Vec<Vec3>,
+    pub(crate) u16_indices: bool,
     steps: u64,
     pub(crate) dirty: bool,
     /// The triangles changed (tearing): the index buffer must be rewritten.
     pub(crate) indices_dirty: bool,
     torn_edges: usize,
     recoveries: u32,
+    /// A config or feature change that was refused (the last valid settings run meanwhile).
+    settings_error: Option<ClothError>,
+    /// A pin list that was refused (the last valid pins hold meanwhile).
+    pins_error: Option<ClothError>,
 }
 
 impl ClothSim {
-    /// The solver-side simulation (topology, state in world space, parameters).
+    /// The solver-side simulation (topology, state in world space, parameters), in particle
+    /// indices.
     #[must_use]
     pub fn simulation(&self) -> &Simulation {
         &self.sim
@@ -129,13 +147,50 @@ impl ClothSim {
         &self.mesh
     }
 
+    /// How the mesh's vertices map onto particles.
+    #[must_use]
+    pub fn weld(&self) -> &Weld {
+        self.binding.weld()
+    }
+
+    /// The particle that simulates mesh vertex `vertex`.
+    ///
+    /// # Panics
+    /// If `vertex` is not a vertex of the mesh.
+    #[must_use]
+    pub fn particle(&self, vertex: u32) -> u32 {
+        self.binding.weld().particle(vertex)
+    }
+
+    /// World position of mesh vertex `vertex` now.
+    ///
+    /// # Panics
+    /// If `vertex` is not a vertex of the mesh.
+    #[must_use]
+    pub fn position(&self, vertex: u32) -> Vec3 {
+        self.sim.state().position(self.particle(vertex) as usize)
+    }
+
+    /// World-space unit normal of every mesh vertex, as of the last write-back.
+    #[must_use]
+    pub fn normals(&self) -> &[Vec3] {
+        self.binding.shading().normals()
+    }
+
+    /// World-space tangents of every mesh vertex as of the last write-back (empty when the
+    /// mesh has neither UVs nor tangents).
+    #[must_use]
+    pub fn tangents(&self) -> &[Vec4] {
+        self.binding.shading().tangents()
+    }
+
     /// Steps simulated so far.
     #[must_use]
     pub fn steps(&self) -> u64 {
         self.steps
     }
 
-    /// Edges torn so far.
+    /// Edges torn so far (every edge that left the cloth, as in [`ClothTorn`]).
     #[must_use]
     pub fn torn_edges(&self) -> usize {
         self.torn_edges
@@ -147,11 +202,19 @@ impl ClothSim {
     pub fn recoveries(&self) -> u32 {
         self.recoveries
     }
+
+    /// Why the latest [`ClothConfig`], opt-in feature or [`ClothPins`] change was refused,
+    /// while the cloth runs on its last valid ones; `None` when everything asked for is in use.
+    #[must_use]
+    pub fn rejected(&self) -> Option<&ClothError> {
+        self.settings_error.as_ref().or(self.pins_error.as_ref())
+    }
 }
 
 /// The mesh a cloth was built from and the cloth's own copy of it (which its [`Mesh3d`] shows
 /// and the simulation rewrites). Inserted by the plugin; rebuilding the cloth starts again from
-/// `source` as long as the entity still shows `copy`.
+/// `source` as long as the entity still shows `copy`, and removing [`Cloth`] puts `source`
+/// back on the entity.
 #[derive(Component, Clone, Debug, PartialEq)]
 pub struct ClothSource {
     /// The mesh the user gave.
@@ -179,24 +242,134 @@ impl Parallel for TaskPoolParallel<'_> {
     }
 }
 
-/// Where each pin should be now.
-fn pin_targets<'a>(
-    pins: &'a ClothPins,
-    rest: &'a [Vec3],
-    own: &'a GlobalTransform,
-    transforms: &'a Query<&GlobalTransform>,
-) -> impl Iterator<Item = Option<Vec3>> + 'a {
-    pins.0.iter().map(move |p| match p.anchor {
-        PinAnchor::Rest => rest.get(p.vertex as usize).map(|r| own.transform_point(*r)),
-        PinAnchor::World(w) => Some(w),
-        PinAnchor::Entity { entity, offset } => transforms
-            .get(entity)
-            .ok()
-            .map(|t| t.transform_point(offset)),
-    })
+/// The pins of `pins` in particle terms, first pin of a particle winning.
+fn pin_list(pins: &ClothPins, weld: &Weld) -> Result<Vec<(u32, PinAnchor)>, ClothError> {
+    let n = weld.vertex_count();
+    let mut seen = std::collections::HashSet::new();
+    let mut out = Vec::with_capacity(pins.0.len());
+    for p in &pins.0 {
+        if p.vertex as usize >= n {
+            return Err(SolverError::State(StateError::PinOutOfRange {
+                vertex: p.vertex,
+                vertex_count: n,
+            })
+            .into());
+        }
+        let particle = weld.particle(p.vertex);
+        if seen.insert(particle) {
+            out.push((particle, p.anchor));
+        }
+    }
+    Ok(out)
 }
 
-type Built = (Simulation, Vec<Vec3>, Mesh);
+/// Where a pin should be now (`None`: its anchor entity has no pose; the pin stays).
+fn pin_target(
+    particle: u32,
+    anchor: PinAnchor,
+    rest_local: &[Vec3],
+    own: &GlobalTransform,
+    poses: &FixedPoses,
+) -> Option<Vec3> {
+    match anchor {
+        PinAnchor::Rest => rest_local
+            .get(particle as usize)
+            .map(|r| own.transform_point(*r)),
+        PinAnchor::World(w) => Some(w),
+        PinAnchor::Entity { entity, offset } => {
+            poses.get(entity).map(|t| t.transform_point(offset))
+        }
+    }
+}
+
+/// Replaces the pins of `sim` with `list`. Vertices pinned before and after keep the teleport
+/// rule: if their anchors jumped farther than `teleport` since the last step, the whole cloth
+/// moves with them. Atomic: on error nothing changes.
+fn repin(
+    sim: &mut Simulation,
+    list: &[(u32, PinAnchor)],
+    rest_local: &[Vec3],
+    own: &GlobalTransform,
+    poses: &FixedPoses,
+    teleport: f32,
+) -> Result<(), ClothError> {
+    let old: std::collections::HashMap<u32, Vec3> = sim
+        .state()
+        .pins()
+        .iter()
+        .map(|p| (p.vertex, p.target))
+        .collect();
+    let new: Vec<Pin> = list
+        .iter()
+        .map(|&(particle, anchor)| Pin {
+            vertex: particle,
+            target: pin_target(particle, anchor, rest_local, own, poses)
+                .unwrap_or_else(|| sim.state().position(particle as usize)),
+        })
+        .collect();
+    let jumps: Vec<Vec3> = new
+        .iter()
+        .filter_map(|p| old.get(&p.vertex).map(|o| p.target - *o))
+        .filter(|d| d.length() > teleport)
+        .collect();
+    let state = sim.state_mut();
+    state
+        .set_pins(new.iter().copied())
+        .map_err(SolverError::from)?;
+    if !jumps.is_empty() {
+        let offset = jumps.iter().sum::<Vec3>() / jumps.len() as f32;
+        state.translate(offset);
+        state.set_pin_targets(new.iter().map(|p| p.target));
+        state.snap_pins();
+    }
+    Ok(())
+}
+
+/// Moves the pins of an unchanged pin list to their anchors; a jump past `teleport` moves the
+/// whole cloth by the pins' mean jump.
+fn follow_anchors(
+    sim: &mut Simulation,
+    list: &[(u32, PinAnchor)],
+    rest_local: &[Vec3],
+    own: &GlobalTransform,
+    poses: &FixedPoses,
+    teleport: f32,
+) -> bool {
+    let targets: Vec<Option<Vec3>> = list
+        .iter()
+        .map(|&(p, a)| pin_target(p, a, rest_local, own, poses))
+        .collect();
+    let current: Vec<Vec3> = sim.state().pins().iter().map(|p| p.target).collect();
+    let jumps: Vec<Vec3> = targets
+        .iter()
+        .zip(&current)
+        .filter_map(|(t, c)| t.map(|t| t - *c))
+        .filter(|d| d.length() > teleport)
+        .collect();
+    let state = sim.state_mut();
+    if !jumps.is_empty() {
+        let offset = jumps.iter().sum::<Vec3>() / jumps.len() as f32;
+        state.translate(offset);
+    }
+    state.set_pin_targets(
+        targets
+            .into_iter()
+            .zip(current)
+            .map(|(t, c)| t.unwrap_or(c)),
+    );
+    if !jumps.is_empty() {
+        state.snap_pins();
+    }
+    !jumps.is_empty()
+}
+
+struct Built {
+    sim: Simulation,
+    binding: MeshBinding,
+    rest_local: Vec<Vec3>,
+    mesh: Mesh,
+    u16_indices: bool,
+}
 
 fn build(
     cloth: &Cloth,
@@ -204,7 +377,7 @@ fn build(
     pins: &ClothPins,
     mesh: &Mesh,
     own: &GlobalTransform,
-    transforms: &Query<&GlobalTransform>,
+    poses: &FixedPoses,
 ) -> Result<Built, ClothError> {
     if !(cloth.mass.is_finite() && cloth.mass > 0.0) {
         return Err(ClothError::BadMass(cloth.mass));
@@ -212,7 +385,26 @@ fn build(
     if cloth.teleport_distance.is_nan() || cloth.teleport_distance <= 0.0 {
         return Err(ClothError::BadTeleportDistance(cloth.teleport_distance));
     }
+    if !(cloth.weld_tolerance.is_finite() && cloth.weld_tolerance >= 0.0) {
+        return Err(ClothError::BadWeldTolerance(cloth.weld_tolerance));
+    }
     let data = read_mesh(mesh)?;
+    let (lo, hi) = data.positions.iter().filter(|p| p.is_finite()).fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    let size = if lo.cmple(hi).all() {
+        (hi - lo).length()
+    } else {
+        0.0
+    };
+    let binding = MeshBinding::new(
+        &data.positions,
+        data.attributes(),
+        &data.indices,
+        cloth.weld_tolerance * size,
+    )
+    .map_err(SolverError::from)?;
     // The rest shape is the mesh placed by the entity's transform, so a scaled entity gets a
     // scaled cloth (rest lengths in world units).
     let world: Vec<Vec3> = data
@@ -220,21 +412,36 @@ fn build(
         .iter()
         .map(|p| own.transform_point(*p))
         .collect();
-    let topology = Topology::from_triangles(
-        &world,
-        data.uvs.as_deref(),
-        &data.indices,
-        TopologyOptions {
-            bend_rest: cloth.bend_rest,
-        },
-    )
-    .map_err(SolverError::from)?;
+    let topology = binding
+        .topology(
+            &world,
+            TopologyOptions {
+                bend_rest: cloth.bend_rest,
+            },
+        )
+        .map_err(SolverError::from)?;
     let masses = topology.masses(cloth.mass, cloth.mass_distribution);
     let mut sim = Simulation::new(topology, &masses, (*config).into())?;
-    set_pins(&mut sim, pins, &data.positions, own, transforms)?;
+    let rest_local = binding.weld().gather(&data.positions);
+    let list = pin_list(pins, binding.weld())?;
+    repin(
+        &mut sim,
+        &list,
+        &rest_local,
+        own,
+        poses,
+        cloth.teleport_distance,
+    )?;
     sim.state_mut().snap_pins();
-    sim.update_shading();
-    Ok((sim, data.positions.clone(), cloth_mesh(mesh, &data)))
+    let mut binding = binding;
+    binding.update_shading(&sim.state().positions);
+    Ok(Built {
+        sim,
+        binding,
+        rest_local,
+        mesh: cloth_mesh(mesh, &data),
+        u16_indices: data.u16_indices,
+    })
 }
 
 /// The solver features a cloth's opt-in components ask for.
@@ -258,37 +465,6 @@ fn features(
         }),
         tear_threshold: tearing.map(|t| t.threshold),
     }
-}
-
-fn set_pins(
-    sim: &mut Simulation,
-    pins: &ClothPins,
-    rest: &[Vec3],
-    own: &GlobalTransform,
-    transforms: &Query<&GlobalTransform>,
-) -> Result<(), SolverError> {
-    let current: Vec<Vec3> = pins
-        .0
-        .iter()
-        .map(|p| {
-            sim.state()
-                .positions
-                .get(p.vertex as usize)
-                .map_or(Vec3::ZERO, |x| x.truncate())
-        })
-        .collect();
-    let list: Vec<Pin> = pins
-        .0
-        .iter()
-        .zip(pin_targets(pins, rest, own, transforms))
-        .zip(current)
-        .map(|((p, target), here)| Pin {
-            vertex: p.vertex,
-            target: target.unwrap_or(here),
-        })
-        .collect();
-    sim.state_mut().set_pins(list)?;
-    Ok(())
 }
 
 fn report(commands: &mut Commands, entity: Entity, error: ClothError) {
@@ -318,18 +494,17 @@ pub(crate) fn init_cloths(
             &ClothConfig,
             &ClothPins,
             &Mesh3d,
-            &GlobalTransform,
             Option<&ClothSource>,
             FeatureQuery,
         ),
         (Without<ClothSim>, Without<ClothInvalid>),
     >,
-    transforms: Query<&GlobalTransform>,
+    poses: FixedPoses,
 ) {
     let Some(meshes) = meshes.as_deref_mut() else {
         return;
     };
-    for (entity, cloth, config, pins, mesh3d, own, source, (sc, tethers, tearing)) in &new {
+    for (entity, cloth, config, pins, mesh3d, source, (sc, tethers, tearing)) in &new {
         // Rebuilding (after a change to `Cloth` or a fix): start from the mesh the user gave,
         // not from the cloth's own, deformed copy — unless the user has put another mesh in.
         let source_handle = match source {
@@ -349,16 +524,18 @@ pub(crate) fn init_cloths(
             }
             continue;
         };
-        let built = build(cloth, config, pins, mesh, own, &transforms).and_then(|b| {
+        // Where the entity is at this step, even if it was spawned in this fixed step and
+        // has no propagated GlobalTransform yet.
+        let own = poses.get(entity).unwrap_or_default();
+        let built = build(cloth, config, pins, mesh, &own, &poses).and_then(|mut b| {
             // Features are checked before the cloth starts, so a bad one never runs a step.
-            let mut b = b;
-            let wanted = features(&b.0, sc, tethers, tearing);
-            b.0.set_features(wanted).map_err(SolverError::Params)?;
+            let wanted = features(&b.sim, sc, tethers, tearing);
+            b.sim.set_features(wanted).map_err(SolverError::Params)?;
             Ok(b)
         });
         match built {
-            Ok((sim, rest_local, mesh)) => {
-                let handle = meshes.add(mesh);
+            Ok(b) => {
+                let handle = meshes.add(b.mesh);
                 commands.entity(entity).try_insert((
                     Mesh3d(handle.clone()),
                     ClothSource {
@@ -366,14 +543,18 @@ pub(crate) fn init_cloths(
                         copy: handle.clone(),
                     },
                     ClothSim {
-                        sim,
+                        sim: b.sim,
                         mesh: handle,
-                        rest_local,
+                        binding: b.binding,
+                        rest_local: b.rest_local,
+                        u16_indices: b.u16_indices,
                         steps: 0,
                         dirty: true,
                         indices_dirty: false,
                         torn_edges: 0,
                         recoveries: 0,
+                        settings_error: None,
+                        pins_error: None,
                     },
                 ));
             }
@@ -406,8 +587,8 @@ pub(crate) fn retry_cloths(
     swapped: Query<(Entity, &Mesh3d, &ClothSim), Changed<Mesh3d>>,
     rebuilt: Query<Entity, (Changed<Cloth>, With<ClothSim>)>,
 ) {
-    // Mass, mass distribution and bend rest are baked into the simulation: rebuild it (the
-    // cloth starts again from its rest shape).
+    // Mass, mass distribution, bend rest and welding are baked into the simulation: rebuild
+    // it (the cloth starts again from its rest shape).
     for entity in &rebuilt {
         commands.entity(entity).remove::<ClothSim>();
     }
@@ -421,12 +602,59 @@ pub(crate) fn retry_cloths(
     }
 }
 
+/// Removing [`Cloth`] stops the simulation and gives the entity its own mesh back; adding it
+/// again starts afresh.
+pub(crate) fn on_cloth_removed(
+    removed: On<Remove, Cloth>,
+    mut commands: Commands,
+    cloths: Query<(Option<&ClothSource>, Option<&Mesh3d>)>,
+) {
+    let entity = removed.entity;
+    if let Ok((Some(source), Some(mesh))) = cloths.get(entity)
+        && mesh.0 == source.copy
+    {
+        commands
+            .entity(entity)
+            .try_insert(Mesh3d(source.source.clone()));
+    }
+    commands
+        .entity(entity)
+        .try_remove::<(ClothSim, ClothSource, ClothInvalid)>();
+}
+
 /// The optional components of a cloth entity.
 type FeatureQuery = (
     Option<&'static ClothSelfCollision>,
     Option<&'static ClothTethers>,
     Option<&'static ClothTearing>,
 );
+
+/// Logs and sends a refused change once, when a cloth goes from fine to refused.
+fn note_rejection(
+    commands: &mut Commands,
+    entity: Entity,
+    slot: &mut Option<ClothError>,
+    result: Result<(), ClothError>,
+    what: &str,
+) {
+    match result {
+        Ok(()) => {
+            if slot.take().is_some() {
+                info!("cloth {entity}: its {what} are valid again and in use");
+            }
+        }
+        Err(e) => {
+            if slot.is_none() {
+                error!("cloth {entity}: {e}; it keeps its last valid {what}");
+                commands.write_message(ClothFailed {
+                    cloth: entity,
+                    error: e.clone(),
+                });
+            }
+            *slot = Some(e);
+        }
+    }
+}
 
 /// Applies changed configs, pins and features, and moves pin targets to their anchors
 /// (moving the whole cloth along when an anchor teleports).
@@ -440,58 +668,81 @@ pub(crate) fn sync_cloths(
             &mut ClothSim,
             Ref<ClothConfig>,
             Ref<ClothPins>,
-            &GlobalTransform,
             FeatureQuery,
         ),
         Without<ClothInvalid>,
     >,
-    transforms: Query<&GlobalTransform>,
+    poses: FixedPoses,
 ) {
-    for (entity, cloth, mut sim, config, pins, own, (sc, tethers, tearing)) in &mut cloths {
+    for (entity, cloth, mut sim, config, pins, (sc, tethers, tearing)) in &mut cloths {
         let cs = &mut *sim;
-        if config.is_changed()
-            && *cs.sim.params() != SolverParams::from(*config)
-            && let Err(e) = cs.sim.set_params((*config).into())
-        {
-            report(&mut commands, entity, SolverError::Params(e).into());
-            continue;
-        }
-        let wanted = features(&cs.sim, sc, tethers, tearing);
-        if wanted != *cs.sim.features()
-            && let Err(e) = cs.sim.set_features(wanted)
-        {
-            report(&mut commands, entity, SolverError::Params(e).into());
-            continue;
-        }
-        if pins.is_changed() {
-            if let Err(e) = set_pins(&mut cs.sim, &pins, &cs.rest_local, own, &transforms) {
-                report(&mut commands, entity, e.into());
+        let own = poses.get(entity).unwrap_or_default();
+        if config.is_changed() || cs.settings_error.is_some() {
+            let wanted = features(&cs.sim, sc, tethers, tearing);
+            let params = SolverParams::from(*config);
+            let result = if params == *cs.sim.params() {
+                Ok(())
+            } else {
+                cs.sim.set_params(params)
             }
+            .and_then(|()| {
+                if wanted == *cs.sim.features() {
+                    Ok(())
+                } else {
+                    cs.sim.set_features(wanted)
+                }
+            })
+            .map_err(|e| ClothError::Solver(SolverError::Params(e)));
+            note_rejection(
+                &mut commands,
+                entity,
+                &mut cs.settings_error,
+                result,
+                "settings",
+            );
+        } else {
+            let wanted = features(&cs.sim, sc, tethers, tearing);
+            if wanted != *cs.sim.features() {
+                let result = cs
+                    .sim
+                    .set_features(wanted)
+                    .map_err(|e| ClothError::Solver(SolverError::Params(e)));
+                note_rejection(
+                    &mut commands,
+                    entity,
+                    &mut cs.settings_error,
+                    result,
+                    "settings",
+                );
+            }
+        }
+        let list = pin_list(&pins, cs.binding.weld());
+        if pins.is_changed() || cs.pins_error.is_some() {
+            let result = list.and_then(|list| {
+                repin(
+                    &mut cs.sim,
+                    &list,
+                    &cs.rest_local,
+                    &own,
+                    &poses,
+                    cloth.teleport_distance,
+                )
+            });
+            note_rejection(&mut commands, entity, &mut cs.pins_error, result, "pins");
+            cs.dirty = true;
             continue;
         }
-        let targets: Vec<Option<Vec3>> =
-            pin_targets(&pins, &cs.rest_local, own, &transforms).collect();
-        let current: Vec<Vec3> = cs.sim.state().pins().iter().map(|p| p.target).collect();
-        // A jump past the teleport distance moves the whole cloth by the pins' mean jump.
-        let jumps: Vec<Vec3> = targets
-            .iter()
-            .zip(&current)
-            .filter_map(|(t, c)| t.map(|t| t - *c))
-            .filter(|d| d.length() > cloth.teleport_distance)
-            .collect();
-        if !jumps.is_empty() {
-            let offset = jumps.iter().sum::<Vec3>() / jumps.len() as f32;
-            cs.sim.state_mut().translate(offset);
+        if let Ok(list) = list
+            && follow_anchors(
+                &mut cs.sim,
+                &list,
+                &cs.rest_local,
+                &own,
+                &poses,
+                cloth.teleport_distance,
+            )
+        {
             cs.dirty = true;
-        }
-        cs.sim.state_mut().set_pin_targets(
-            targets
-                .into_iter()
-                .zip(current)
-                .map(|(t, c)| t.unwrap_or(c)),
-        );
-        if !jumps.is_empty() {
-            cs.sim.state_mut().snap_pins();
         }
     }
 }
@@ -501,9 +752,10 @@ pub(crate) fn step_cloths(
     time: Res<Time>,
     colliders: Option<Res<ClothColliders>>,
     wind: Option<Res<ClothWindField>>,
-    mut cloths: Query<(Entity, &mut ClothSim, Option<&GlobalTransform>), Without<ClothInvalid>>,
+    mut cloths: Query<(Entity, &mut ClothSim), Without<ClothInvalid>>,
     mut impulses: Query<&mut ClothContactImpulse>,
     mut torn: MessageWriter<ClothTorn>,
+    poses: FixedPoses,
 ) {
     let dt = time.delta_secs();
     if dt <= 0.0 {
@@ -517,7 +769,7 @@ pub(crate) fn step_cloths(
         time: wind.as_deref().map_or(0.0, |w| w.time),
     };
     let pool = ComputeTaskPool::try_get();
-    for (entity, mut cloth, transform) in &mut cloths {
+    for (entity, mut cloth) in &mut cloths {
         let cloth = &mut *cloth;
         let report = match pool {
             Some(pool) => cloth.sim.step_in(dt, &env, &TaskPoolParallel(pool)),
@@ -526,7 +778,7 @@ pub(crate) fn step_cloths(
         if report.recovered {
             // The solver already reset to its rest shape where the cloth was created; place
             // the rest shape where the entity is now.
-            if let Some(t) = transform {
+            if let Some(t) = poses.get(entity) {
                 let placed: Vec<Vec3> = cloth
                     .rest_local
                     .iter()
@@ -535,6 +787,7 @@ pub(crate) fn step_cloths(
                 cloth.sim.reset_to(&placed);
             }
             cloth.recoveries += 1;
+            cloth.binding.retain(cloth.sim.topology());
             cloth.indices_dirty = true;
             warn!(
                 "cloth {entity}: its state became NaN or infinite at step {}; reset to the rest \
@@ -545,10 +798,16 @@ pub(crate) fn step_cloths(
         add_impulses(colliders, cloth.sim.impulses(), &mut impulses);
         if !report.torn.is_empty() {
             cloth.torn_edges += report.torn.len();
+            cloth.binding.retain(cloth.sim.topology());
             cloth.indices_dirty = true;
+            let weld = cloth.binding.weld();
             torn.write(ClothTorn {
                 cloth: entity,
-                edges: report.torn,
+                edges: report
+                    .torn
+                    .iter()
+                    .map(|e| e.map(|p| weld.representative(p)))
+                    .collect(),
             });
         }
         cloth.steps += 1;

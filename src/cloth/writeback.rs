@@ -1,9 +1,14 @@
 //! Writes simulated positions, normals and tangents into the cloth's mesh.
 //!
-//! Runs once per rendered frame, after transform propagation, and only for cloths that moved
-//! since the last write. The simulation is in world space; the mesh is in the entity's local
-//! space, so positions go through the inverse of its [`GlobalTransform`], normals through its
-//! transpose (inverse-transpose of world-to-local) and tangents through its inverse.
+//! Runs once per rendered frame in `PostUpdate`, after transform propagation and before Bevy's
+//! asset events (so the renderer picks the new vertices up in the same frame), and only for
+//! cloths that moved since the last write. The simulation is in world space; the mesh is in
+//! the entity's local space, so positions go through the inverse of its [`GlobalTransform`],
+//! normals through its transpose (inverse-transpose of world-to-local) and tangents through
+//! its inverse. Every copy of a welded vertex is written.
+//!
+//! A mirrored entity (negative determinant) turns the triangles' winding around in world
+//! space, so normals computed there point out of the back face: they are flipped back.
 
 use bevy::mesh::{Indices, VertexAttributeValues};
 use bevy::prelude::*;
@@ -23,47 +28,58 @@ pub(crate) fn write_back(
         }
         let cloth = cloth.into_inner();
         cloth.dirty = false;
-        cloth.sim.update_shading();
-        let sim = &cloth.sim;
+        cloth.binding.update_shading(&cloth.sim.state().positions);
         let Some(mut mesh) = meshes.get_mut(&cloth.mesh) else {
             continue;
         };
+        let binding = &cloth.binding;
         if core::mem::take(&mut cloth.indices_dirty) {
-            // Torn triangles leave the index buffer; the vertex buffer keeps its size.
-            let indices: Vec<u32> = sim
-                .topology()
-                .triangles()
-                .iter()
-                .flatten()
-                .copied()
-                .collect();
-            mesh.insert_indices(Indices::U32(indices));
+            // Torn triangles leave the index buffer, kept in the mesh's own index format;
+            // the vertex buffer keeps its size.
+            let indices = binding.drawn_indices();
+            mesh.insert_indices(if cloth.u16_indices {
+                Indices::U16(indices.map(|i| i as u16).collect())
+            } else {
+                Indices::U32(indices.collect())
+            });
         }
         let affine = gt.affine();
         let to_local = affine.inverse();
         let linear = affine.matrix3;
+        let flip = if linear.determinant() < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
         let normal_to_local = linear.transpose();
         let tangent_to_local = to_local.matrix3;
+        let particles = &cloth.sim.state().positions;
+        let weld = binding.weld();
 
         if let Ok(VertexAttributeValues::Float32x3(out)) =
             mesh.try_attribute_mut(Mesh::ATTRIBUTE_POSITION)
         {
-            for (o, p) in out.iter_mut().zip(&sim.state().positions) {
-                *o = to_local.transform_point3(p.truncate()).to_array();
+            for (o, &p) in out.iter_mut().zip(weld.particles()) {
+                *o = to_local
+                    .transform_point3(particles[p as usize].truncate())
+                    .to_array();
             }
         }
+        let shading = binding.shading();
         if let Ok(VertexAttributeValues::Float32x3(out)) =
             mesh.try_attribute_mut(Mesh::ATTRIBUTE_NORMAL)
         {
-            for (o, n) in out.iter_mut().zip(sim.normals()) {
-                *o = (normal_to_local * *n).normalize_or(Vec3::Y).to_array();
+            for (o, n) in out.iter_mut().zip(shading.normals()) {
+                *o = (normal_to_local * (*n * flip))
+                    .normalize_or(Vec3::Y)
+                    .to_array();
             }
         }
-        if !sim.tangents().is_empty()
+        if !shading.tangents().is_empty()
             && let Ok(VertexAttributeValues::Float32x4(out)) =
                 mesh.try_attribute_mut(Mesh::ATTRIBUTE_TANGENT)
         {
-            for (o, t) in out.iter_mut().zip(sim.tangents()) {
+            for (o, t) in out.iter_mut().zip(shading.tangents()) {
                 let local = (tangent_to_local * t.truncate()).normalize_or(Vec3::X);
                 *o = local.extend(t.w).to_array();
             }

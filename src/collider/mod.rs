@@ -9,8 +9,13 @@
 //!
 //! Moving colliders are interpolated over the substeps, so they do not tunnel through cloth
 //! while `speed × substep length < radius + thickness` (about 120 m/s for a 0.2 m ball at 60 Hz
-//! with 10 substeps). A collider that jumps farther than [`TELEPORT_DISTANCE`] in one step is
-//! treated as teleported: it appears at its new place without sweeping through the cloth.
+//! with 10 substeps). A collider that jumps farther than its
+//! [`teleport_distance`](ClothCollider::teleport_distance) in one step (2 m by default, the
+//! same rule and default as cloth pins) is treated as teleported: it appears at its new place
+//! without sweeping through the cloth. Poses are read as of the fixed step
+//! ([`FixedPoses`]), so a collider moved in `FixedUpdate` acts where it is in that step.
+//! Removing [`ClothCollider`] forgets its last pose and impulse: put back elsewhere, it
+//! appears there.
 
 #[cfg(feature = "rapier")]
 pub mod rapier;
@@ -19,7 +24,7 @@ use std::sync::Arc;
 
 use bevy::prelude::*;
 
-use crate::cloth::{ClothSystems, read_mesh};
+use crate::cloth::{ClothSystems, DEFAULT_TELEPORT_DISTANCE, FixedPoses, read_mesh};
 use crate::solver::{Collider, ContactImpulse, Pose, SdfGrid, Shape};
 
 /// A baked signed distance field, shared between colliders.
@@ -27,9 +32,6 @@ use crate::solver::{Collider, ContactImpulse, Pose, SdfGrid, Shape};
 #[reflect(opaque)]
 #[reflect(Debug, Clone, PartialEq)]
 pub struct BakedSdf(pub Arc<SdfGrid>);
-
-/// Distance a collider may move in one step before it counts as teleported (metres).
-pub const TELEPORT_DISTANCE: f32 = 5.0;
 
 /// The shape of a [`ClothCollider`], in the entity's local frame (scaled by its transform).
 #[derive(Reflect, Clone, Debug, PartialEq)]
@@ -91,16 +93,21 @@ pub struct ClothCollider {
     pub thickness: f32,
     /// Coulomb friction: 0 slides, around 0.5 for fabric on wood, 1 or more grips.
     pub friction: f32,
+    /// A jump farther than this in one fixed step (metres) is a teleport: the collider appears
+    /// at its new place instead of sweeping through the cloth on its way. The same rule as
+    /// [`Cloth::teleport_distance`](crate::cloth::Cloth::teleport_distance).
+    pub teleport_distance: f32,
 }
 
 impl ClothCollider {
-    /// A collider with default thickness (1 cm) and friction (0.4).
+    /// A collider with default thickness (1 cm), friction (0.4) and teleport distance (2 m).
     #[must_use]
     pub fn new(shape: ColliderShape) -> Self {
         Self {
             shape,
             thickness: 0.01,
             friction: 0.4,
+            teleport_distance: DEFAULT_TELEPORT_DISTANCE,
         }
     }
 
@@ -199,8 +206,17 @@ impl Plugin for ClothColliderPlugin {
                 (bake_mesh_colliders, gather_colliders)
                     .chain()
                     .in_set(ClothSystems::Prepare),
-            );
+            )
+            .add_observer(on_collider_removed);
     }
+}
+
+/// A removed collider forgets where it was and what it received: put back elsewhere, it
+/// appears there instead of sweeping from its old place.
+fn on_collider_removed(removed: On<Remove, ClothCollider>, mut commands: Commands) {
+    commands
+        .entity(removed.entity)
+        .try_remove::<(ColliderRuntime, ClothContactImpulse)>();
 }
 
 /// Pose of a transform for the solver: translation, rotation and the largest scale axis; the
@@ -312,7 +328,6 @@ fn bake_mesh_colliders(
 type ColliderQueryData = (
     Entity,
     &'static ClothCollider,
-    &'static GlobalTransform,
     Option<&'static mut ColliderRuntime>,
     Option<&'static mut ClothContactImpulse>,
 );
@@ -322,11 +337,16 @@ fn gather_colliders(
     mut commands: Commands,
     mut out: ResMut<ClothColliders>,
     mut colliders: Query<ColliderQueryData>,
+    poses: FixedPoses,
     mut reported: Local<bevy::platform::collections::HashSet<Entity>>,
 ) {
     out.colliders.clear();
     out.entities.clear();
-    for (entity, collider, gt, runtime, impulse) in &mut colliders {
+    for (entity, collider, runtime, impulse) in &mut colliders {
+        let Some(gt) = poses.get(entity) else {
+            continue;
+        };
+        let gt = &gt;
         if let Some(mut i) = impulse {
             *i = ClothContactImpulse::default();
         } else {
@@ -340,7 +360,7 @@ fn gather_colliders(
         };
         let last = runtime.as_ref().and_then(|r| r.last);
         let start = match last {
-            Some(l) if l.translation.distance(pose.translation) < TELEPORT_DISTANCE => l,
+            Some(l) if l.translation.distance(pose.translation) <= collider.teleport_distance => l,
             _ => pose,
         };
         let c = Collider {
@@ -351,7 +371,15 @@ fn gather_colliders(
             friction: collider.friction,
         };
         // An invalid collider is left out, and said once (again after it was fixed).
-        if let Err(problem) = c.validate() {
+        let valid = if collider.teleport_distance > 0.0 {
+            c.validate()
+        } else {
+            Err(format!(
+                "teleport distance {} must be > 0 (infinity turns it off)",
+                collider.teleport_distance
+            ))
+        };
+        if let Err(problem) = valid {
             if reported.insert(entity) {
                 error!("cloth collider {entity}: {problem}; it is ignored");
             }

@@ -151,6 +151,7 @@ fn mirror_colliders(
                         shape,
                         thickness: s.thickness,
                         friction: s.friction,
+                        ..ClothCollider::new(ColliderShape::Plane)
                     },
                     FromRapierCollider,
                 ));

@@ -48,6 +48,7 @@ mod step;
 mod tear;
 mod tether;
 mod topology;
+mod weld;
 mod wind;
 
 pub use batches::{ConstraintBatches, default_part_count};
@@ -68,6 +69,7 @@ pub use topology::{
     Bend, BendRest, Edge, EdgeKind, Grid, MAX_COORDINATE, MassDistribution, Topology,
     TopologyError, TopologyOptions,
 };
+pub use weld::{HARD_EDGE_COS, MeshAttributes, MeshBinding, MeshShading, Weld};
 pub use wind::{WindField, WindParams, WindRegion, triangle_wind_force, wind_accelerations};
 
 use glam::{Vec3, Vec4};
@@ -196,7 +198,8 @@ pub struct Environment<'a> {
 /// What a step did that the caller may want to act on.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct StepReport {
-    /// Edges (vertex pairs) that tore during the step.
+    /// Edges (vertex pairs) that left the cloth during the step: those stretched past the
+    /// tear threshold and those that lost every triangle with them.
     pub torn: Vec<[u32; 2]>,
     /// The state went bad (a NaN or infinite position or velocity, e.g. from a collider or
     /// wind with non-finite input) and was reset to the rest pose, at rest, pins on their
@@ -316,7 +319,11 @@ impl Simulation {
             report.torn =
                 overstretched_edges(&self.state.positions, self.topology.edges(), threshold);
             if !report.torn.is_empty() {
-                self.topology = self.topology.without_edges(&report.torn);
+                let torn = self.topology.without_edges(&report.torn);
+                // Every edge that left, not only those past the threshold: an edge whose
+                // triangles all went with their torn neighbours no longer holds anything.
+                report.torn = vanished_edges(self.topology.edges(), torn.edges());
+                self.topology = torn;
                 self.batches =
                     ConstraintBatches::new(&self.topology, &self.params, self.batches.part_count());
                 self.tethers = None;
@@ -452,6 +459,22 @@ impl Simulation {
     pub fn strain(&self) -> StrainStats {
         edge_strain(&self.state.positions, self.topology.edges())
     }
+}
+
+/// Edges of `before` that are not in `after` (both sorted by vertex pair, as topologies keep
+/// them).
+fn vanished_edges(before: &[Edge], after: &[Edge]) -> Vec<[u32; 2]> {
+    let mut out = Vec::new();
+    let mut j = 0;
+    for e in before {
+        while j < after.len() && after[j].v < e.v {
+            j += 1;
+        }
+        if after.get(j).is_none_or(|a| a.v != e.v) {
+            out.push(e.v);
+        }
+    }
+    out
 }
 
 #[cfg(test)]

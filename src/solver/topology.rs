@@ -169,6 +169,9 @@ pub struct Topology {
     rest_positions: Vec<Vec3>,
     uvs: Option<Vec<Vec2>>,
     triangles: Vec<[u32; 3]>,
+    /// UVs of each triangle's corners (they may differ from `uvs` along seams of a welded
+    /// mesh): they tell stretch from shear edges.
+    corner_uvs: Option<Vec<[Vec2; 3]>>,
     edges: Vec<Edge>,
     bends: Vec<Bend>,
     skipped_triangles: usize,
@@ -189,6 +192,23 @@ impl Topology {
     pub fn from_triangles(
         positions: &[Vec3],
         uvs: Option<&[Vec2]>,
+        indices: &[u32],
+        options: TopologyOptions,
+    ) -> Result<Self, TopologyError> {
+        Self::from_triangles_with_corner_uvs(positions, uvs, None, indices, options)
+    }
+
+    /// Like [`Self::from_triangles`], with the UVs of every triangle's corners given apart
+    /// from the per-vertex `uvs` (a welded mesh, whose particles have several UVs along its
+    /// seams): `corner_uvs[t]` are triangle `t`'s, and tell its edges' kinds.
+    ///
+    /// # Errors
+    /// As [`Self::from_triangles`], and [`TopologyError::UvCount`] if `corner_uvs` does not
+    /// have one entry per triangle.
+    pub fn from_triangles_with_corner_uvs(
+        positions: &[Vec3],
+        uvs: Option<&[Vec2]>,
+        corner_uvs: Option<&[[Vec2; 3]]>,
         indices: &[u32],
         options: TopologyOptions,
     ) -> Result<Self, TopologyError> {
@@ -230,13 +250,28 @@ impl Topology {
                 vertex_count: n,
             });
         }
+        if let Some(c) = corner_uvs
+            && c.len() != indices.len() / 3
+        {
+            return Err(TopologyError::UvCount {
+                uvs: c.len() * 3,
+                positions: indices.len(),
+            });
+        }
         let mut triangles = Vec::with_capacity(indices.len() / 3);
+        let mut corners = Vec::new();
         let mut skipped = 0;
-        for t in indices.chunks_exact(3) {
+        for (k, t) in indices.chunks_exact(3).enumerate() {
             if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
                 skipped += 1;
             } else {
-                triangles.push([t[0], t[1], t[2]]);
+                let tri = [t[0], t[1], t[2]];
+                triangles.push(tri);
+                match (corner_uvs, uvs) {
+                    (Some(c), _) => corners.push(c[k]),
+                    (None, Some(uv)) => corners.push(tri.map(|v| uv[v as usize])),
+                    (None, None) => {}
+                }
             }
         }
         if triangles.is_empty() {
@@ -249,10 +284,12 @@ impl Topology {
         if !has_area {
             return Err(TopologyError::ZeroArea);
         }
+        let corners = (corner_uvs.is_some() || uvs.is_some()).then_some(corners);
         let mut t = Self::build(
             positions.to_vec(),
             uvs.map(<[Vec2]>::to_vec),
             triangles,
+            corners,
             options,
         );
         t.skipped_triangles = skipped;
@@ -264,24 +301,28 @@ impl Topology {
         positions: Vec<Vec3>,
         uvs: Option<Vec<Vec2>>,
         triangles: Vec<[u32; 3]>,
+        corner_uvs: Option<Vec<[Vec2; 3]>>,
         options: TopologyOptions,
     ) -> Self {
-        // (min, max, triangle, opposite vertex) for every triangle edge, sorted: equal keys
-        // are adjacent, and the unique edges come out sorted as in seed 000.
-        let mut half: Vec<(u32, u32, u32)> = Vec::with_capacity(triangles.len() * 3);
-        for t in &triangles {
+        // (min, max, opposite vertex, triangle, corner) for every triangle edge, sorted: equal
+        // keys are adjacent, and the unique edges come out sorted as in seed 000.
+        let mut half: Vec<(u32, u32, u32, u32, u8)> = Vec::with_capacity(triangles.len() * 3);
+        for (ti, t) in triangles.iter().enumerate() {
             for k in 0..3 {
                 let (a, b, c) = (t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
-                half.push((a.min(b), a.max(b), c));
+                half.push((a.min(b), a.max(b), c, ti as u32, k as u8));
             }
         }
-        half.sort_unstable_by_key(|&(a, b, c)| (a, b, c));
+        half.sort_unstable_by_key(|&(a, b, c, t, _)| (a, b, c, t));
 
-        let uv_kind = |a: u32, b: u32| -> EdgeKind {
-            let Some(uvs) = &uvs else {
+        // Warp/weft edges run along a UV axis; the triangle's own corners decide (a welded
+        // seam vertex has different UVs in the triangles on either side).
+        let uv_kind = |t: u32, k: u8| -> EdgeKind {
+            let Some(corners) = &corner_uvs else {
                 return EdgeKind::Stretch;
             };
-            let d = (uvs[a as usize] - uvs[b as usize]).abs();
+            let c = corners[t as usize];
+            let d = (c[k as usize] - c[(k as usize + 1) % 3]).abs();
             if d.min_element() <= 1e-3 * d.max_element() {
                 EdgeKind::Stretch
             } else {
@@ -293,7 +334,7 @@ impl Topology {
         let mut bends = Vec::new();
         let mut i = 0;
         while i < half.len() {
-            let (a, b, _) = half[i];
+            let (a, b, _, t, k) = half[i];
             let mut j = i;
             while j < half.len() && half[j].0 == a && half[j].1 == b {
                 j += 1;
@@ -302,7 +343,7 @@ impl Topology {
             edges.push(Edge {
                 v: [a, b],
                 rest: positions[a as usize].distance(positions[b as usize]),
-                kind: uv_kind(a, b),
+                kind: uv_kind(t, k),
             });
             if j - i == 2 {
                 let (c, d) = (half[i].2, half[i + 1].2);
@@ -326,6 +367,7 @@ impl Topology {
             rest_positions: positions,
             uvs,
             triangles,
+            corner_uvs,
             edges,
             bends,
             skipped_triangles: 0,
@@ -344,16 +386,30 @@ impl Topology {
             .collect();
         cut.sort_unstable();
         let is_cut = |a: u32, b: u32| cut.binary_search(&(a.min(b), a.max(b))).is_ok();
+        let keep: Vec<bool> = self
+            .triangles
+            .iter()
+            .map(|t| !(is_cut(t[0], t[1]) || is_cut(t[1], t[2]) || is_cut(t[2], t[0])))
+            .collect();
         let triangles = self
             .triangles
             .iter()
-            .filter(|t| !(is_cut(t[0], t[1]) || is_cut(t[1], t[2]) || is_cut(t[2], t[0])))
-            .copied()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(t, _)| *t)
             .collect();
+        let corner_uvs = self.corner_uvs.as_ref().map(|c| {
+            c.iter()
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(c, _)| *c)
+                .collect()
+        });
         let mut t = Self::build(
             self.rest_positions.clone(),
             self.uvs.clone(),
             triangles,
+            corner_uvs,
             self.options,
         );
         t.skipped_triangles = self.skipped_triangles;
