@@ -1,0 +1,841 @@
+//! Correct in a real game: meshes from modelling tools (seams, hard edges, mirrored entities,
+//! tangents without UVs, u16 indices), characters moved in `FixedUpdate`, and entities that
+//! come and go at runtime.
+
+use std::time::Duration;
+
+use bevy::asset::{AssetEvent, AssetEventSystems, RenderAssetUsages};
+use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
+use bevy::prelude::*;
+use bevy_cloth::cloth::{ClothSource, DEFAULT_TELEPORT_DISTANCE};
+use bevy_cloth::prelude::*;
+
+mod common;
+use common::{app, app_with_frame, run};
+
+fn add_mesh(app: &mut App, mesh: Mesh) -> Handle<Mesh> {
+    app.world_mut().resource_mut::<Assets<Mesh>>().add(mesh)
+}
+
+fn sim(app: &App, e: Entity) -> &ClothSim {
+    app.world()
+        .get::<ClothSim>(e)
+        .expect("cloth was not created")
+}
+
+fn mesh_of(app: &App, e: Entity) -> &Mesh {
+    let handle = &app.world().get::<Mesh3d>(e).unwrap().0;
+    app.world().resource::<Assets<Mesh>>().get(handle).unwrap()
+}
+
+fn attr3(mesh: &Mesh, id: bevy::mesh::MeshVertexAttribute) -> Vec<Vec3> {
+    match mesh.attribute(id) {
+        Some(VertexAttributeValues::Float32x3(v)) => v.iter().map(|p| Vec3::from(*p)).collect(),
+        other => panic!("{id:?}: {other:?}"),
+    }
+}
+
+fn tangents(mesh: &Mesh) -> Vec<Vec4> {
+    match mesh.attribute(Mesh::ATTRIBUTE_TANGENT) {
+        Some(VertexAttributeValues::Float32x4(v)) => v.iter().map(|p| Vec4::from(*p)).collect(),
+        other => panic!("tangents: {other:?}"),
+    }
+}
+
+fn max_speed(app: &App, e: Entity) -> f32 {
+    let s = sim(app, e).simulation().state();
+    (0..s.len())
+        .map(|i| s.velocity(i).length())
+        .fold(0.0, f32::max)
+}
+
+/// `grid` as an exporter writes it with a UV seam down column `seam`: the triangles right of
+/// the seam use copies of the seam's vertices (appended after the grid's, one per row), with
+/// the right half's UVs in another chart. Returns the mesh and (original, copy) pairs.
+fn seamed_grid(grid: &Grid, seam: u32) -> (Mesh, Vec<(u32, u32)>) {
+    let n = grid.vertex_count() as u32;
+    let mut positions: Vec<[f32; 3]> = grid.positions().iter().map(|p| p.to_array()).collect();
+    let mut uvs: Vec<[f32; 2]> = grid.uvs().iter().map(|p| p.to_array()).collect();
+    let mut pairs = Vec::new();
+    for j in 0..grid.rows {
+        let v = grid.index(seam, j);
+        positions.push(positions[v as usize]);
+        uvs.push([uvs[v as usize][0] + 2.0, uvs[v as usize][1]]);
+        pairs.push((v, n + j));
+    }
+    // Right of the seam the UV chart is shifted too.
+    for j in 0..grid.rows {
+        for i in seam + 1..grid.columns {
+            uvs[grid.index(i, j) as usize][0] += 2.0;
+        }
+    }
+    let copy = |v: u32, right: bool| -> u32 {
+        let (i, j) = (v % grid.columns, v / grid.columns);
+        if right && i == seam { n + j } else { v }
+    };
+    let mut indices = Vec::new();
+    for t in grid.indices().chunks(3) {
+        let right = t.iter().map(|v| v % grid.columns).min().unwrap() >= seam;
+        indices.extend(t.iter().map(|&v| copy(v, right)));
+    }
+    let count = positions.len();
+    let mesh = Mesh::new(
+        PrimitiveTopology::TriangleList,
+        RenderAssetUsages::default(),
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0f32, 1.0, 0.0]; count])
+    .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uvs)
+    .with_inserted_attribute(
+        Mesh::ATTRIBUTE_TANGENT,
+        vec![[1.0f32, 0.0, 0.0, 1.0]; count],
+    )
+    .with_inserted_indices(Indices::U32(indices));
+    (mesh, pairs)
+}
+
+const GRID: Grid = Grid {
+    columns: 16,
+    rows: 16,
+    width: 1.0,
+    height: 1.0,
+};
+
+fn hang(app: &mut App, mesh: Mesh, extra: impl Bundle) -> Entity {
+    let mesh = add_mesh(app, mesh);
+    app.world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(0.0, 2.0, 0.0),
+            Cloth::default(),
+            ClothPins::rest([GRID.index(0, 0), GRID.index(15, 0)]),
+            extra,
+        ))
+        .id()
+}
+
+#[test]
+fn a_sheet_with_a_uv_seam_hangs_as_one_piece() {
+    // The seamed sheet must do exactly what the plain grid does: its seam copies are welded
+    // into the grid's own particles.
+    let mut plain = app();
+    let p = hang(&mut plain, grid_mesh(&GRID), ());
+    let mut seamed = app();
+    let (mesh, pairs) = seamed_grid(&GRID, 8);
+    let s = hang(&mut seamed, mesh, ());
+    run(&mut plain, 90);
+    run(&mut seamed, 90);
+    let a = &sim(&plain, p).simulation().state().positions;
+    let b = &sim(&seamed, s).simulation().state().positions;
+    assert_eq!(a.len(), b.len(), "the seam copies became extra particles");
+    assert!(
+        a.iter().zip(b).all(|(x, y)| x == y),
+        "not the plain grid's motion"
+    );
+    // Both halves hang down together: across the seam at the bottom, neighbours stay close.
+    let bottom_left = sim(&seamed, s).position(GRID.index(7, 15));
+    let bottom_right = sim(&seamed, s).position(GRID.index(9, 15));
+    assert!(bottom_left.y < 1.4, "did not fall: {bottom_left}");
+    assert!(bottom_left.distance(bottom_right) < 0.2, "halves apart");
+    // Every copy is written back, with one smooth normal across the seam.
+    let mesh = mesh_of(&seamed, s);
+    let (pos, nrm) = (
+        attr3(mesh, Mesh::ATTRIBUTE_POSITION),
+        attr3(mesh, Mesh::ATTRIBUTE_NORMAL),
+    );
+    for (v, c) in pairs {
+        assert_eq!(pos[v as usize], pos[c as usize]);
+        assert_eq!(nrm[v as usize], nrm[c as usize]);
+        assert_eq!(sim(&seamed, s).particle(v), sim(&seamed, s).particle(c));
+    }
+    // Pins given on a copy pin the same particle.
+    assert_eq!(sim(&seamed, s).weld().particle_count(), GRID.vertex_count());
+}
+
+#[test]
+fn hard_edges_keep_their_own_normals() {
+    // Two 1 m panels at 90° along a crease, every vertex pinned so the shape holds. The crease
+    // is split: with each panel's normal on its copies (a hard edge), and with the same normal
+    // on both (a smooth seam).
+    let positions = [
+        [0.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [1.0, 0.0, 0.0],
+        [1.0, 0.0, 1.0], // crease, left copies
+        [1.0, 0.0, 0.0],
+        [1.0, 0.0, 1.0], // crease, right copies
+        [1.0, 1.0, 0.0],
+        [1.0, 1.0, 1.0],
+    ];
+    let indices = vec![0, 1, 2, 2, 1, 3, 4, 5, 6, 6, 5, 7];
+    let floor = Vec3::Y;
+    let wall = Vec3::NEG_X;
+    let panel = |crease_right: Vec3| {
+        let normals = vec![
+            floor,
+            floor,
+            floor,
+            floor,
+            crease_right,
+            crease_right,
+            wall,
+            wall,
+        ];
+        Mesh::new(
+            PrimitiveTopology::TriangleList,
+            RenderAssetUsages::default(),
+        )
+        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions.to_vec())
+        .with_inserted_attribute(
+            Mesh::ATTRIBUTE_NORMAL,
+            normals.iter().map(|n| n.to_array()).collect::<Vec<_>>(),
+        )
+        .with_inserted_indices(Indices::U32(indices.clone()))
+    };
+    let mut app = app();
+    let mut spawn = |mesh: Mesh| {
+        let mesh = add_mesh(&mut app, mesh);
+        app.world_mut()
+            .spawn((Mesh3d(mesh), Cloth::default(), ClothPins::rest(0..8)))
+            .id()
+    };
+    let hard = spawn(panel(wall));
+    let smooth = spawn(panel(floor));
+    run(&mut app, 5);
+    let face = |n: Vec3| n.abs(); // the panels' winding decides the sign; the split is the test
+    let nh = attr3(mesh_of(&app, hard), Mesh::ATTRIBUTE_NORMAL);
+    assert!((face(nh[2]) - Vec3::Y).length() < 1e-5, "{}", nh[2]);
+    assert!((face(nh[4]) - Vec3::X).length() < 1e-5, "{}", nh[4]);
+    let ns = attr3(mesh_of(&app, smooth), Mesh::ATTRIBUTE_NORMAL);
+    assert_eq!(ns[2], ns[4]);
+    assert!(face(ns[2]).x > 0.3 && face(ns[2]).y > 0.3, "{}", ns[2]);
+}
+
+#[test]
+fn a_tear_across_a_seam_opens_both_sides_and_is_reported_in_mesh_indices() {
+    let mut app = app();
+    app.init_resource::<Torn>()
+        .add_systems(Update, collect_torn);
+    let (mesh, pairs) = seamed_grid(&GRID, 8);
+    let vertex_count = GRID.vertex_count() + pairs.len();
+    let mesh = add_mesh(&mut app, mesh);
+    // The bottom corners are pulled 1.5 m apart: the cloth tears up the middle, across the
+    // seam's rows.
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Cloth::default(),
+            ClothTearing { threshold: 1.4 },
+            ClothPins::rest((0..16).map(|i| GRID.index(i, 0)))
+                .with(
+                    GRID.index(0, 15),
+                    PinAnchor::World(Vec3::new(-1.3, -0.5, -0.5)),
+                )
+                .with(
+                    GRID.index(15, 15),
+                    PinAnchor::World(Vec3::new(1.3, -0.5, -0.5)),
+                ),
+        ))
+        .id();
+    // The seamed mesh welds into the plain grid's particles, so it starts with its edges.
+    let edges_before = GRID
+        .topology(bevy_cloth::solver::TopologyOptions::default())
+        .unwrap()
+        .edges()
+        .len();
+    run(&mut app, 90);
+    let torn = &app.world().resource::<Torn>().0;
+    let reported: usize = torn.iter().map(|t| t.edges.len()).sum();
+    let cloth = sim(&app, e);
+    assert!(reported > 10, "{reported} edges tore");
+    // Complete: every edge that left the cloth was reported, and strain counts the rest.
+    let left = cloth.simulation().topology().edges().len();
+    assert_eq!(reported, edges_before - left);
+    assert_eq!(cloth.torn_edges(), reported);
+    assert!(cloth.simulation().strain().max <= 1.4 + 1e-3);
+    // Reported in mesh indices, welded vertices by their first copy.
+    for t in torn {
+        for [a, b] in &t.edges {
+            assert!((*a as usize) < GRID.vertex_count() && (*b as usize) < GRID.vertex_count());
+        }
+    }
+    // Every drawn triangle is one of the cloth's; every dropped one lost an edge.
+    let mesh = mesh_of(&app, e);
+    let Some(Indices::U32(drawn)) = mesh.indices() else {
+        panic!("indices")
+    };
+    assert!(drawn.iter().all(|&v| (v as usize) < vertex_count));
+    assert!(
+        drawn.len() < 2 * 15 * 15 * 3,
+        "nothing left the index buffer"
+    );
+    let topology = cloth.simulation().topology();
+    let has_edge = |a: u32, b: u32| {
+        let (a, b) = (cloth.particle(a), cloth.particle(b));
+        topology
+            .edges()
+            .binary_search_by_key(&[a.min(b), a.max(b)], |e| e.v)
+            .is_ok()
+    };
+    for t in drawn.chunks(3) {
+        assert!(has_edge(t[0], t[1]) && has_edge(t[1], t[2]) && has_edge(t[2], t[0]));
+    }
+}
+
+#[derive(Resource, Default)]
+struct Torn(Vec<ClothTorn>);
+
+fn collect_torn(mut reader: MessageReader<ClothTorn>, mut out: ResMut<Torn>) {
+    out.0.extend(reader.read().cloned());
+}
+
+#[test]
+fn a_mirrored_cloth_is_lit_from_the_right_side() {
+    let mut app = app();
+    let spawn = |app: &mut App, scale: Vec3| {
+        let mesh = add_mesh(app, grid_mesh(&GRID));
+        app.world_mut()
+            .spawn((
+                Mesh3d(mesh),
+                Transform::from_scale(scale),
+                Cloth::default(),
+                ClothPins::rest(0..GRID.vertex_count() as u32),
+            ))
+            .id()
+    };
+    let plain = spawn(&mut app, Vec3::ONE);
+    let mirrored = spawn(&mut app, Vec3::new(-1.0, 1.0, 1.0));
+    run(&mut app, 3);
+    for e in [plain, mirrored] {
+        let n = attr3(mesh_of(&app, e), Mesh::ATTRIBUTE_NORMAL);
+        assert!(
+            n.iter().all(|n| (*n - Vec3::Y).length() < 1e-5),
+            "{e}: {:?}",
+            n[0]
+        );
+        // Tangents keep the source's (mesh-space) frame as well.
+        let t = tangents(mesh_of(&app, e));
+        assert!(
+            t.iter()
+                .all(|t| (*t - Vec4::new(1.0, 0.0, 0.0, 1.0)).length() < 1e-5)
+        );
+    }
+}
+
+#[test]
+fn tangents_without_uvs_follow_the_cloth() {
+    // The same grid with UVs and with only TANGENT: both swing down from one edge; the
+    // tangents made from the source frame agree with the ones made from UVs.
+    let mut app = app();
+    let mut no_uv = grid_mesh(&GRID);
+    no_uv.remove_attribute(Mesh::ATTRIBUTE_UV_0);
+    // Hung from one corner, the sheet swings diagonally and its x tangents turn.
+    let mut corner = |mesh: Mesh| {
+        let mesh = add_mesh(&mut app, mesh);
+        app.world_mut()
+            .spawn((Mesh3d(mesh), Cloth::default(), ClothPins::rest([0])))
+            .id()
+    };
+    let with = corner(grid_mesh(&GRID));
+    let without = corner(no_uv);
+    run(&mut app, 40);
+    let (a, b) = (
+        tangents(mesh_of(&app, with)),
+        tangents(mesh_of(&app, without)),
+    );
+    let n = attr3(mesh_of(&app, without), Mesh::ATTRIBUTE_NORMAL);
+    assert!(b.iter().any(|t| t.x < 0.95), "never rewritten");
+    for ((a, b), n) in a.iter().zip(&b).zip(&n) {
+        assert!((b.truncate().length() - 1.0).abs() < 1e-4);
+        assert!(b.truncate().dot(*n).abs() < 1e-4);
+        assert!(a.truncate().dot(b.truncate()) > 0.98, "{a} vs {b}");
+        assert_eq!(a.w, b.w);
+    }
+}
+
+#[test]
+fn u16_indices_stay_u16_after_tearing() {
+    let mut app = app();
+    let mut mesh = grid_mesh(&GRID);
+    let Some(Indices::U32(i)) = mesh.indices() else {
+        panic!()
+    };
+    let short: Vec<u16> = i.iter().map(|&v| v as u16).collect();
+    mesh.insert_indices(Indices::U16(short));
+    let mesh = add_mesh(&mut app, mesh);
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Cloth::default(),
+            ClothTearing { threshold: 1.3 },
+            ClothPins::rest([0]).with(
+                GRID.index(15, 15),
+                PinAnchor::World(Vec3::new(3.0, 0.0, -3.0)),
+            ),
+        ))
+        .id();
+    run(&mut app, 30);
+    assert!(sim(&app, e).torn_edges() > 0);
+    assert!(matches!(mesh_of(&app, e).indices(), Some(Indices::U16(_))));
+}
+
+/// A character walking along x at 2 m/s, moved in `FixedUpdate` as games do, with a bone two
+/// levels down that carries the pins.
+#[derive(Component)]
+struct Walker;
+
+fn walk(time: Res<Time>, mut walkers: Query<&mut Transform, With<Walker>>) {
+    for mut t in &mut walkers {
+        t.translation.x += 2.0 * time.delta_secs();
+    }
+}
+
+#[derive(Resource, Default)]
+struct PinErrors(Vec<f32>);
+
+fn check_pins(
+    cloths: Query<(&ClothSim, &ClothPins)>,
+    transforms: Query<&Transform>,
+    parents: Query<&ChildOf>,
+    mut out: ResMut<PinErrors>,
+) {
+    for (sim, pins) in &cloths {
+        for pin in &pins.0 {
+            let PinAnchor::Entity { entity, offset } = pin.anchor else {
+                continue;
+            };
+            // The bone's world pose from the Transforms up its hierarchy, as they are now.
+            let mut world = transforms.get(entity).unwrap().compute_affine();
+            let mut e = entity;
+            while let Ok(p) = parents.get(e) {
+                e = p.parent();
+                world = transforms.get(e).unwrap().compute_affine() * world;
+            }
+            out.0.push(
+                sim.position(pin.vertex)
+                    .distance(world.transform_point3(offset)),
+            );
+        }
+    }
+}
+
+fn cape_app(frame: Duration) -> (App, Entity) {
+    let mut app = app_with_frame(frame);
+    app.init_resource::<PinErrors>()
+        .add_systems(FixedUpdate, walk)
+        .add_systems(FixedPostUpdate, check_pins.after(ClothSystems::Simulate));
+    let bone = app
+        .world_mut()
+        .spawn(Transform::from_xyz(0.0, 0.5, 0.1))
+        .id();
+    let spine = app
+        .world_mut()
+        .spawn(Transform::from_xyz(0.0, 1.0, 0.0))
+        .add_child(bone)
+        .id();
+    app.world_mut()
+        .spawn((Walker, Transform::default()))
+        .add_child(spine);
+    let grid = Grid::new(12, 12, 0.6, 1.0);
+    let mesh = add_mesh(&mut app, grid_mesh(&grid));
+    let pins = ClothPins(
+        (0..12)
+            .map(|i| ClothPin {
+                vertex: grid.index(i, 0),
+                anchor: PinAnchor::Entity {
+                    entity: bone,
+                    offset: Vec3::new(-0.3 + 0.6 * i as f32 / 11.0, 0.0, 0.0),
+                },
+            })
+            .collect(),
+    );
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(0.0, 1.5, 0.6),
+            Cloth::default(),
+            pins,
+        ))
+        .id();
+    (app, e)
+}
+
+#[test]
+fn pins_sit_on_an_anchor_moved_in_fixed_update_at_one_and_six_steps_per_frame() {
+    for frame in [1.0 / 60.0, 6.0 / 60.0] {
+        let (mut app, _) = cape_app(Duration::from_secs_f64(frame));
+        run(&mut app, (1.0 / frame).round() as usize);
+        let errors = &app.world().resource::<PinErrors>().0;
+        assert!(errors.len() > 500, "{} checks", errors.len());
+        let worst = errors.iter().copied().fold(0.0, f32::max);
+        assert!(
+            worst < 1e-4,
+            "frame {frame}: a pin is {worst} m off its anchor"
+        );
+    }
+}
+
+/// The cloth's particles right after its 120th step.
+#[derive(Resource, Default)]
+struct AtStep120(Option<Vec<Vec4>>);
+
+fn snapshot(cloths: Query<&ClothSim>, mut out: ResMut<AtStep120>) {
+    for c in &cloths {
+        if c.steps() == 120 {
+            out.0 = Some(c.simulation().state().positions.clone());
+        }
+    }
+}
+
+#[test]
+fn a_moving_anchor_gives_the_same_cape_at_30_60_and_144_fps() {
+    let mut finals = Vec::new();
+    for fps in [30.0, 60.0, 144.0] {
+        let (mut app, _) = cape_app(Duration::from_secs_f64(1.0 / fps));
+        app.init_resource::<AtStep120>()
+            .add_systems(FixedPostUpdate, snapshot.after(ClothSystems::Simulate));
+        while app.world().resource::<AtStep120>().0.is_none() {
+            app.update();
+        }
+        finals.push(app.world().resource::<AtStep120>().0.clone().unwrap());
+    }
+    for other in &finals[1..] {
+        assert_eq!(&finals[0], other, "the result depends on the frame rate");
+    }
+}
+
+#[test]
+fn a_cloth_spawned_in_fixed_update_is_built_where_its_entity_is() {
+    fn spawn_once(mut commands: Commands, mut meshes: ResMut<Assets<Mesh>>, mut done: Local<bool>) {
+        if std::mem::replace(&mut *done, true) {
+            return;
+        }
+        commands.spawn((
+            Mesh3d(meshes.add(grid_mesh(&GRID))),
+            Transform::from_xyz(1.0, 3.0, 0.0).with_scale(Vec3::splat(2.0)),
+            Cloth::default(),
+            ClothPins::rest([GRID.index(0, 0), GRID.index(15, 0)]),
+        ));
+    }
+    let mut app = app();
+    app.add_systems(FixedUpdate, spawn_once);
+    run(&mut app, 60);
+    let mut q = app.world_mut().query::<&ClothSim>();
+    let cloth = q.single(app.world()).unwrap();
+    let corner = cloth.position(GRID.index(0, 0));
+    let expect = Vec3::new(1.0, 3.0, 0.0) + 2.0 * GRID.positions()[0];
+    assert!(corner.distance(expect) < 1e-5, "pinned corner at {corner}");
+    let strain = cloth.simulation().strain().max;
+    assert!(strain < 0.3, "built at the wrong scale: strain {strain}");
+}
+
+#[derive(Resource, Default)]
+struct Frames {
+    stepped: Vec<bool>,
+    modified: Vec<bool>,
+    last_steps: u64,
+}
+
+fn observe_frame(
+    mut frames: ResMut<Frames>,
+    cloths: Query<&ClothSim>,
+    mut events: MessageReader<AssetEvent<Mesh>>,
+) {
+    let Ok(sim) = cloths.single() else {
+        events.clear();
+        return;
+    };
+    let steps = sim.steps();
+    let stepped = steps != frames.last_steps;
+    frames.last_steps = steps;
+    let mesh = sim.mesh().id();
+    let modified = events
+        .read()
+        .any(|e| matches!(e, AssetEvent::Modified { id } if *id == mesh));
+    frames.stepped.push(stepped);
+    frames.modified.push(modified);
+}
+
+#[test]
+fn the_new_shape_reaches_the_renderer_in_the_frame_it_was_computed() {
+    // Frames of 1/120 s: the cloth steps every other frame. The mesh's Modified event, read
+    // right after Bevy's asset events (where render extraction reads them), must come in the
+    // same frames as the steps, not one frame later.
+    let mut app = app_with_frame(Duration::from_secs_f64(1.0 / 120.0));
+    app.init_resource::<Frames>()
+        .add_systems(PostUpdate, observe_frame.after(AssetEventSystems));
+    hang(&mut app, grid_mesh(&GRID), ());
+    run(&mut app, 40);
+    let f = app.world().resource::<Frames>();
+    let steps = f.stepped.iter().filter(|s| **s).count();
+    assert!(steps > 10 && steps < 30, "{steps} of 40 frames stepped");
+    assert_eq!(f.stepped[5..], f.modified[5..]);
+}
+
+#[test]
+fn pins_reinserted_in_the_frame_of_a_teleport_move_the_whole_cloth() {
+    let mut app = app();
+    let e = hang(&mut app, grid_mesh(&GRID), ());
+    run(&mut app, 60);
+    app.world_mut()
+        .get_mut::<Transform>(e)
+        .unwrap()
+        .translation
+        .x += 100.0;
+    app.world_mut()
+        .entity_mut(e)
+        .insert(ClothPins::rest([GRID.index(0, 0), GRID.index(15, 0)]));
+    run(&mut app, 5);
+    let cloth = sim(&app, e);
+    assert!(cloth.simulation().strain().max < 0.5, "smeared");
+    assert!(max_speed(&app, e) < 10.0, "{}", max_speed(&app, e));
+    assert!(cloth.position(GRID.index(8, 15)).x > 99.0);
+}
+
+#[test]
+fn removing_cloth_stops_it_and_gives_the_mesh_back_and_adding_it_restarts() {
+    let mut app = app();
+    let source = add_mesh(&mut app, grid_mesh(&GRID));
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(source.clone()),
+            Transform::from_xyz(0.0, 2.0, 0.0),
+            Cloth::default(),
+            ClothPins::rest([0, 15]),
+        ))
+        .id();
+    run(&mut app, 30);
+    let copy = app.world().get::<Mesh3d>(e).unwrap().0.id();
+    assert_ne!(copy, source.id());
+    app.world_mut().entity_mut(e).remove::<Cloth>();
+    run(&mut app, 3);
+    assert_eq!(app.world().get::<Mesh3d>(e).unwrap().0, source);
+    assert!(app.world().get::<ClothSim>(e).is_none());
+    assert!(app.world().get::<ClothSource>(e).is_none());
+    // The cloth's own copy is freed once nothing holds it.
+    assert!(app.world().resource::<Assets<Mesh>>().get(copy).is_none());
+    let flat = attr3(mesh_of(&app, e), Mesh::ATTRIBUTE_POSITION);
+    run(&mut app, 20);
+    assert_eq!(flat, attr3(mesh_of(&app, e), Mesh::ATTRIBUTE_POSITION));
+    assert!(
+        flat.iter().all(|p| p.y == 0.0),
+        "the user's mesh was deformed"
+    );
+    // Adding it again starts from the rest shape.
+    app.world_mut().entity_mut(e).insert(Cloth::default());
+    run(&mut app, 2);
+    let again = sim(&app, e);
+    assert!(again.steps() <= 2);
+    assert!(again.position(GRID.index(8, 15)).y > 1.9);
+}
+
+#[test]
+fn replacing_the_mesh_rebuilds_the_cloth_from_it() {
+    let mut app = app();
+    let e = hang(&mut app, grid_mesh(&GRID), ());
+    run(&mut app, 10);
+    let small = add_mesh(&mut app, grid_mesh(&Grid::new(5, 5, 1.0, 1.0)));
+    app.world_mut().entity_mut(e).insert(Mesh3d(small));
+    run(&mut app, 3);
+    assert_eq!(sim(&app, e).simulation().state().len(), 25);
+}
+
+#[test]
+fn a_collider_removed_and_put_back_elsewhere_does_not_sweep_through_the_cloth() {
+    // A curtain in the XY plane; a ball in front of it is removed, moved 1 m to behind it
+    // (inside the teleport distance) and put back. It must appear there, not sweep through.
+    let mut app = app();
+    let grid = Grid::new(12, 12, 1.0, 1.0);
+    let mesh = add_mesh(&mut app, grid_mesh(&grid));
+    let curtain = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(0.0, 1.0, 0.0)
+                .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2)),
+            Cloth::default(),
+            ClothPins::rest((0..12).map(|i| grid.index(i, 0))),
+        ))
+        .id();
+    let ball = app
+        .world_mut()
+        .spawn((
+            ClothCollider::sphere(0.2),
+            Transform::from_xyz(0.0, 0.8, -0.45),
+        ))
+        .id();
+    run(&mut app, 90);
+    app.world_mut().entity_mut(ball).remove::<ClothCollider>();
+    run(&mut app, 1);
+    assert!(app.world().get::<ClothContactImpulse>(ball).is_none());
+    app.world_mut()
+        .get_mut::<Transform>(ball)
+        .unwrap()
+        .translation
+        .z = 0.55;
+    run(&mut app, 1);
+    let before: Vec<Vec3> = (0..144).map(|v| sim(&app, curtain).position(v)).collect();
+    app.world_mut()
+        .entity_mut(ball)
+        .insert(ClothCollider::sphere(0.2));
+    run(&mut app, 1);
+    let moved = (0..144)
+        .map(|v| sim(&app, curtain).position(v).distance(before[v as usize]))
+        .fold(0.0, f32::max);
+    assert!(moved < 0.05, "the ball swept the curtain by {moved} m");
+}
+
+#[test]
+fn colliders_follow_the_cloths_teleport_rule() {
+    // A ball jumping 1.5 m through a curtain sweeps it (a motion); with a 1 m teleport
+    // distance the same jump is a teleport.
+    for (teleport, sweeps) in [(DEFAULT_TELEPORT_DISTANCE, true), (1.0, false)] {
+        let mut app = app();
+        let grid = Grid::new(12, 12, 1.0, 1.0);
+        let mesh = add_mesh(&mut app, grid_mesh(&grid));
+        let curtain = app
+            .world_mut()
+            .spawn((
+                Mesh3d(mesh),
+                Transform::from_xyz(0.0, 1.0, 0.0)
+                    .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2)),
+                Cloth::default(),
+                ClothPins::rest((0..12).map(|i| grid.index(i, 0))),
+            ))
+            .id();
+        let mut collider = ClothCollider::sphere(0.2);
+        collider.teleport_distance = teleport;
+        let ball = app
+            .world_mut()
+            .spawn((collider, Transform::from_xyz(0.0, 0.7, -0.75)))
+            .id();
+        run(&mut app, 60);
+        let before: Vec<Vec3> = (0..144).map(|v| sim(&app, curtain).position(v)).collect();
+        app.world_mut()
+            .get_mut::<Transform>(ball)
+            .unwrap()
+            .translation
+            .z = 0.75;
+        run(&mut app, 1);
+        let moved = (0..144)
+            .map(|v| sim(&app, curtain).position(v).distance(before[v as usize]))
+            .fold(0.0, f32::max);
+        assert_eq!(moved > 0.1, sweeps, "teleport {teleport}: moved {moved}");
+    }
+}
+
+#[derive(Resource, Default)]
+struct Failures(Vec<ClothFailed>);
+
+fn collect_failures(mut reader: MessageReader<ClothFailed>, mut out: ResMut<Failures>) {
+    out.0.extend(reader.read().cloned());
+}
+
+#[test]
+fn an_invalid_config_keeps_the_last_good_one_reports_once_and_recovers() {
+    let mut app = app();
+    app.init_resource::<Failures>()
+        .add_systems(Update, collect_failures);
+    let e = hang(&mut app, grid_mesh(&GRID), ());
+    run(&mut app, 60);
+    let low = sim(&app, e).position(GRID.index(8, 15)).y;
+    let steps = sim(&app, e).steps();
+    // A slider passing through invalid values for a few frames.
+    for substeps in [0, 0, 0] {
+        app.world_mut().get_mut::<ClothConfig>(e).unwrap().substeps = substeps;
+        run(&mut app, 1);
+    }
+    app.world_mut().get_mut::<ClothConfig>(e).unwrap().damping = -1.0;
+    run(&mut app, 3);
+    let cloth = sim(&app, e);
+    assert!(cloth.rejected().is_some());
+    assert!(app.world().get::<ClothInvalid>(e).is_none());
+    assert!(cloth.steps() > steps + 5, "it stopped");
+    assert!(
+        cloth.position(GRID.index(8, 15)).y < low + 0.2,
+        "it restarted"
+    );
+    assert_eq!(app.world().resource::<Failures>().0.len(), 1);
+    let mut config = *app.world().get::<ClothConfig>(e).unwrap();
+    config.substeps = 12;
+    config.damping = 0.2;
+    *app.world_mut().get_mut::<ClothConfig>(e).unwrap() = config;
+    run(&mut app, 2);
+    let cloth = sim(&app, e);
+    assert!(cloth.rejected().is_none());
+    assert_eq!(cloth.simulation().params().substeps, 12);
+    // Invalid pins likewise: the old pins hold.
+    app.world_mut()
+        .entity_mut(e)
+        .insert(ClothPins::rest([0, 9999]));
+    run(&mut app, 5);
+    let cloth = sim(&app, e);
+    assert!(cloth.rejected().unwrap().to_string().contains("9999"));
+    assert_eq!(cloth.simulation().state().pins().len(), 2);
+    assert_eq!(app.world().resource::<Failures>().0.len(), 2);
+}
+
+#[test]
+fn switching_solver_and_substeps_does_not_fling_the_cloth() {
+    let lab = ClothConfig {
+        solver: Solver::LAB,
+        substeps: 1,
+        iterations: 32,
+        ..default()
+    };
+    let fine = ClothConfig {
+        substeps: 20,
+        ..default()
+    };
+    let coarse = ClothConfig {
+        substeps: 2,
+        ..default()
+    };
+    for (from, to) in [
+        (lab, ClothConfig::default()),
+        (ClothConfig::default(), lab),
+        (fine, coarse),
+        (coarse, fine),
+    ] {
+        let mut app = app();
+        let grid = Grid::new(24, 24, 1.0, 1.0);
+        let mesh = add_mesh(&mut app, grid_mesh(&grid));
+        let e = app
+            .world_mut()
+            .spawn((
+                Mesh3d(mesh),
+                Transform::from_xyz(0.0, 2.0, 0.0),
+                Cloth::default(),
+                from,
+                ClothPins::rest([grid.index(0, 0), grid.index(23, 0)]),
+            ))
+            .id();
+        run(&mut app, 2);
+        // What this cloth does anyway: its fastest vertex while falling from flat.
+        let mut natural: f32 = 0.0;
+        for _ in 0..118 {
+            run(&mut app, 1);
+            natural = natural.max(max_speed(&app, e));
+        }
+        *app.world_mut().get_mut::<ClothConfig>(e).unwrap() = to;
+        let mut after: f32 = 0.0;
+        for _ in 0..60 {
+            run(&mut app, 1);
+            after = after.max(max_speed(&app, e));
+        }
+        assert!(
+            after < natural.max(3.0),
+            "{} {}×{} → {} {}×{}: {after} m/s after, {natural} m/s falling",
+            from.solver.name(),
+            from.substeps,
+            from.iterations,
+            to.solver.name(),
+            to.substeps,
+            to.iterations
+        );
+    }
+}
