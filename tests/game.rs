@@ -839,3 +839,93 @@ fn switching_solver_and_substeps_does_not_fling_the_cloth() {
         );
     }
 }
+
+#[test]
+fn a_gltf_banner_with_a_uv_seam_drapes_over_a_gltf_statue() {
+    use bevy::gltf::{Gltf, GltfMesh, GltfNode};
+    let mut app = app();
+    app.add_plugins((
+        bevy::image::ImagePlugin::default(),
+        bevy::world_serialization::WorldSerializationPlugin,
+        bevy::gltf::GltfPlugin::default(),
+    ));
+    app.finish();
+    app.cleanup();
+    let handle: Handle<Gltf> = app
+        .world()
+        .resource::<AssetServer>()
+        .load("banner_statue.gltf");
+    let start = std::time::Instant::now();
+    while app
+        .world()
+        .resource::<Assets<Gltf>>()
+        .get(&handle)
+        .is_none()
+    {
+        assert!(
+            start.elapsed().as_secs() < 30,
+            "assets/banner_statue.gltf did not load"
+        );
+        app.update();
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let named = |app: &App, name: &str| {
+        let world = app.world();
+        let gltf = world.resource::<Assets<Gltf>>().get(&handle).unwrap();
+        let node = world
+            .resource::<Assets<GltfNode>>()
+            .get(&gltf.named_nodes[name])
+            .unwrap();
+        let mesh = world
+            .resource::<Assets<GltfMesh>>()
+            .get(node.mesh.as_ref().unwrap())
+            .unwrap();
+        (mesh.primitives[0].mesh.clone(), node.transform)
+    };
+    let (statue, at) = named(&app, "Statue");
+    app.world_mut()
+        .spawn((Mesh3d(statue), at, ClothCollider::mesh(64)));
+    let (banner, at) = named(&app, "Banner");
+    let source_vertices = app
+        .world()
+        .resource::<Assets<Mesh>>()
+        .get(&banner)
+        .unwrap()
+        .count_vertices();
+    let e = app
+        .world_mut()
+        .spawn((Mesh3d(banner), at, Cloth::default()))
+        .id();
+    run(&mut app, 150);
+    let cloth = sim(&app, e);
+    // The exporter's seam copies (one per row of the 33×33 banner) are welded.
+    assert_eq!(source_vertices, 33 * 33 + 33);
+    assert_eq!(cloth.weld().particle_count(), 33 * 33);
+    assert!(matches!(mesh_of(&app, e).indices(), Some(Indices::U16(_))));
+    // It fell onto the statue (1.72 m tall) and stays on top of it, in one piece.
+    // The banner's centre (column 16, row 16 of its left panel) lies on the bust, and no
+    // vertex is inside the statue.
+    let centre = cloth.position(16 * 33 + 16);
+    assert!(
+        centre.y > 0.6 && centre.xz().length() < 0.4,
+        "centre at {centre}: not on the statue"
+    );
+    let colliders = &app
+        .world()
+        .resource::<bevy_cloth::collider::ClothColliders>()
+        .colliders;
+    assert_eq!(colliders.len(), 1, "the statue was not baked");
+    let state = cloth.simulation().state();
+    let deepest = (0..state.len())
+        .map(|i| {
+            let c = &colliders[0];
+            -c.shape.distance(c.end.inverse_apply(state.position(i))).0 * c.end.scale
+        })
+        .fold(f32::MIN, f32::max);
+    assert!(deepest < 0.005, "a vertex is {deepest} m inside the statue");
+    assert!(cloth.simulation().strain().max < 0.5);
+    let pos = attr3(mesh_of(&app, e), Mesh::ATTRIBUTE_POSITION);
+    for (v, &p) in cloth.weld().particles().iter().enumerate() {
+        assert_eq!(pos[v], pos[cloth.weld().representative(p) as usize]);
+    }
+}

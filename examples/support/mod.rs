@@ -131,28 +131,35 @@ fn timing_frame(mut t: ResMut<ClothTiming>) {
     t.per_frame.push(c);
 }
 
+/// Assets from this crate's `assets/` folder, however the example binary is started.
+fn assets() -> AssetPlugin {
+    AssetPlugin {
+        file_path: concat!(env!("CARGO_MANIFEST_DIR"), "/assets").into(),
+        ..default()
+    }
+}
+
 /// The app every example starts from: a window with `DefaultPlugins`, or with `--headless`
 /// `MinimalPlugins` plus transforms, assets and meshes, stepping one fixed step per frame.
 pub fn app(args: &Args, title: &str, fixed_step: f64) -> App {
     let mut app = App::new();
     if args.headless {
-        app.add_plugins((
-            MinimalPlugins,
-            TransformPlugin,
-            AssetPlugin::default(),
-            MeshPlugin,
-        ))
-        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
-            fixed_step,
-        )));
+        app.add_plugins((MinimalPlugins, TransformPlugin, assets(), MeshPlugin))
+            .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+                fixed_step,
+            )));
     } else {
-        app.add_plugins(DefaultPlugins.set(WindowPlugin {
-            primary_window: Some(Window {
-                title: title.into(),
-                ..default()
-            }),
-            ..default()
-        }))
+        app.add_plugins(
+            DefaultPlugins
+                .set(WindowPlugin {
+                    primary_window: Some(Window {
+                        title: title.into(),
+                        ..default()
+                    }),
+                    ..default()
+                })
+                .set(assets()),
+        )
         .add_plugins(VelvetPlugin)
         .add_systems(Update, dress_cloths);
     }
@@ -200,6 +207,11 @@ pub fn cloth_report(world: &mut World) -> Json {
         .num("ms_per_frame", median)
 }
 
+/// Headless runs first update the app until this returns true (assets loaded), then run
+/// their `--frames`.
+#[derive(Resource)]
+pub struct WaitUntil(pub fn(&World) -> bool);
+
 /// Runs the app: `--frames N` frames (headless: driven here; windowed: then exits), then prints
 /// `report(world)` as one JSON line.
 pub fn run(mut app: App, args: &Args, report: fn(&mut World) -> Json) {
@@ -207,6 +219,14 @@ pub fn run(mut app: App, args: &Args, report: fn(&mut World) -> Json) {
         let frames = args.frames.unwrap_or(300);
         app.finish();
         app.cleanup();
+        // Assets load on other threads: wait (at most 30 s) until the example says it is ready.
+        if let Some(ready) = app.world().get_resource::<WaitUntil>().map(|w| w.0) {
+            let start = Instant::now();
+            while !ready(app.world()) && start.elapsed() < Duration::from_secs(30) {
+                app.update();
+                std::thread::sleep(Duration::from_millis(2));
+            }
+        }
         for _ in 0..frames {
             app.update();
         }
