@@ -4,8 +4,9 @@
 //! The scene: a 1 m × 1 m cloth of n×n vertices, 1 kg spread evenly, starting flat and
 //! horizontal, pinned at the two corners of one edge, gravity 9.81 m/s², no collisions;
 //! 60 frames of 1/60 s. Stretch is as stiff as each solver allows (XPBD compliance 0, PBD
-//! stiffness 1); shear and bending as in `ClothConfig::default()` for XPBD (1e-6, 1e-3) and
-//! 1.0 / 0.5 stiffness for PBD; the lab solver has no bending.
+//! stiffness 1); XPBD shear 1e-6 and dihedral bending 1e-3 (the model and setting the peer
+//! comparison uses) and 1.0 / 0.5 stiffness for PBD; the lab solver has no bending. No air
+//! (the peer has none).
 //!
 //! Per case: `ms_per_frame` (median wall time of a step over the frames after 10 of warm-up),
 //! `max_strain` and `mean_strain` (|length − rest|/rest over all edges at the end), and
@@ -36,9 +37,9 @@ use std::time::Instant;
 use bevy::tasks::TaskPoolBuilder;
 use bevy_cloth::cloth::TaskPoolParallel;
 use bevy_cloth::solver::{
-    Collider, Environment, Features, Grid, MassDistribution, Pin, Pose, SelfCollision, Shape,
-    Simulation, Solver, SolverParams, TetherParams, TopologyOptions, WindField, WindParams,
-    position_distance,
+    Aerodynamics, BendingModel, Collider, Environment, Features, Grid, MassDistribution, Pin, Pose,
+    SelfCollision, Shape, Simulation, Solver, SolverParams, TetherParams, TopologyOptions,
+    WindField, WindParams, position_distance,
 };
 use glam::Vec4;
 use support::{Args, Json};
@@ -86,13 +87,19 @@ fn solver(name: &str, h: f32) -> Solver {
 
 fn scene(n: u32, name: &str, substeps: u32, iterations: u32) -> Simulation {
     let grid = Grid::new(n, n, 1.0, 1.0);
-    let topology = grid.topology(TopologyOptions::default()).unwrap();
+    let topology = grid
+        .topology(TopologyOptions {
+            bending: BendingModel::Dihedral,
+            ..Default::default()
+        })
+        .unwrap();
     let masses = topology.masses(1.0, MassDistribution::Uniform);
     let params = SolverParams {
         solver: solver(name, DT / substeps as f32),
         substeps,
         iterations,
         damping: DAMPING,
+        air: Aerodynamics::NONE,
         ..Default::default()
     };
     let mut sim = Simulation::new(topology, &masses, params).unwrap();
@@ -235,6 +242,14 @@ fn scene_costs(args: &Args, par: &TaskPoolParallel, threads: usize) {
                     tear_threshold: v.tearing.then_some(1000.0),
                 })
                 .unwrap();
+                if v.wind {
+                    // Wind acts through the cloth's air coefficients.
+                    let params = SolverParams {
+                        air: Aerodynamics::default(),
+                        ..*sim.params()
+                    };
+                    sim.set_params(params).unwrap();
+                }
                 sim
             };
             let env = Environment {

@@ -57,7 +57,9 @@ pub mod prelude {
     pub use crate::render::{
         VelvetExtension, VelvetMaterial, VelvetPlugin, velvet_material, velvet_material_from,
     };
-    pub use crate::solver::{BendRest, Grid, MassDistribution, Solver, WindParams};
+    pub use crate::solver::{
+        Aerodynamics, BendRest, BendingModel, Grid, MassDistribution, Solver, WindParams,
+    };
     pub use crate::wind::{Wind, WindZone};
 }
 

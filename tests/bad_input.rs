@@ -320,6 +320,24 @@ fn cases() -> Vec<Case> {
             says: "damping",
         },
         Case {
+            name: "negative air drag",
+            bundle: spawn_with(
+                grid_mesh(&GRID),
+                (
+                    Cloth::default(),
+                    ClothConfig {
+                        air: Aerodynamics {
+                            drag: -0.5,
+                            ..default()
+                        },
+                        ..default()
+                    },
+                ),
+            ),
+            expect: Expect::Param("air.drag"),
+            says: "air.drag",
+        },
+        Case {
             name: "infinite gravity",
             bundle: spawn_with(
                 grid_mesh(&GRID),
@@ -510,7 +528,7 @@ fn broken_colliders_and_wind_are_ignored_and_the_cloth_runs_as_without_them() {
         Transform::default(),
         WindZone {
             wind: WindParams {
-                drag: -1.0,
+                turbulence_scale: -1.0,
                 ..default()
             },
             half_extents: Vec3::splat(10.0),

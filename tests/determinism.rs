@@ -117,7 +117,7 @@ fn run(inputs: &[StepInput], par: &impl Parallel) -> (Vec<u64>, Vec<u32>) {
         let env = Environment {
             colliders: std::slice::from_ref(&ball),
             wind: Some(&wind),
-            time: input.time,
+            time: f64::from(input.time),
         };
         sim.step_in(input.dt, &env, par);
         hashes.push(hash(&sim));

@@ -171,7 +171,7 @@ fn hard_edges_keep_their_own_normals() {
     let floor = Vec3::Y;
     let wall = Vec3::NEG_X;
     let panel = |crease_right: Vec3| {
-        let normals = vec![
+        let normals = [
             floor,
             floor,
             floor,

@@ -294,7 +294,7 @@ fn run_mesh(s: &Scenario, pos: &[Vec3], uvs: Option<&[Vec2]>, idx: &[u32]) -> Ou
             } else {
                 None
             },
-            time,
+            time: time.into(),
         };
         let report = sim.step_in(s.dt, &env, &Serial);
         time += s.dt;

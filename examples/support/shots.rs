@@ -301,13 +301,12 @@ fn spawn_velvet_scene(
     commands.spawn((
         WindZone {
             wind: WindParams {
-                velocity: Vec3::new(3.5, 0.0, -1.2),
-                gust_amplitude: 0.6,
+                velocity: Vec3::new(5.0, 0.0, -1.2),
+                gust_amplitude: 0.4,
                 gust_frequency: 1.5,
-                turbulence: 1.0,
+                turbulence: 0.4,
                 turbulence_scale: 1.2,
                 seed: 3,
-                ..default()
             },
             half_extents: Vec3::new(6.0, 5.0, 6.0),
             falloff: 2.0,

@@ -3,10 +3,12 @@
 use bevy::prelude::*;
 use bevy::reflect::impl_reflect_opaque;
 
-use crate::solver::{BendRest, MassDistribution, Solver, SolverParams};
+use crate::solver::{Aerodynamics, BendRest, BendingModel, MassDistribution, Solver, SolverParams};
 
 impl_reflect_opaque!((in bevy_cloth::solver) Solver(Debug, Clone, PartialEq));
 impl_reflect_opaque!((in bevy_cloth::solver) BendRest(Debug, Clone, PartialEq, Default));
+impl_reflect_opaque!((in bevy_cloth::solver) BendingModel(Debug, Clone, PartialEq, Default));
+impl_reflect_opaque!((in bevy_cloth::solver) Aerodynamics(Debug, Clone, PartialEq, Default));
 impl_reflect_opaque!((in bevy_cloth::solver) MassDistribution(Debug, Clone, PartialEq, Default));
 
 /// Marks an entity with a [`Mesh3d`] as cloth: the plugin simulates its vertices.
@@ -53,6 +55,9 @@ pub struct Cloth {
     pub mass_distribution: MassDistribution,
     /// Rest angle of the bending constraints: flat, or the mesh's modelled folds.
     pub bend_rest: BendRest,
+    /// How bending is measured: isometric (default, cheap) or the dihedral angle (used anyway
+    /// for [`BendRest::RestShape`]). Both give the same material for the same compliance.
+    pub bending_model: BendingModel,
     /// When a pin's anchor jumps farther than this in one step (metres), the whole cloth is
     /// moved with it instead of being dragged (a teleported character keeps its cape). The
     /// same rule, with the same default, applies to colliders
@@ -79,6 +84,7 @@ impl Default for Cloth {
             mass: 0.2,
             mass_distribution: MassDistribution::Area,
             bend_rest: BendRest::Flat,
+            bending_model: BendingModel::Isometric,
             teleport_distance: DEFAULT_TELEPORT_DISTANCE,
             weld_tolerance: 1e-5,
         }
@@ -166,6 +172,9 @@ pub struct ClothConfig {
     /// Speed limit for free vertices in m/s; bounds the kinetic energy (see
     /// [`SolverParams::max_speed`]).
     pub max_speed: f32,
+    /// How the cloth meets the air: drag, lift and skin friction, felt with or without wind
+    /// (see [`Aerodynamics`]; [`Aerodynamics::NONE`] for a vacuum).
+    pub air: Aerodynamics,
 }
 
 impl Default for ClothConfig {
@@ -183,6 +192,7 @@ impl From<SolverParams> for ClothConfig {
             gravity: p.gravity,
             damping: p.damping,
             max_speed: p.max_speed,
+            air: p.air,
         }
     }
 }
@@ -196,6 +206,7 @@ impl From<ClothConfig> for SolverParams {
             gravity: c.gravity,
             damping: c.damping,
             max_speed: c.max_speed,
+            air: c.air,
         }
     }
 }

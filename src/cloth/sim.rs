@@ -417,6 +417,7 @@ fn build(
             &world,
             TopologyOptions {
                 bend_rest: cloth.bend_rest,
+                bending: cloth.bending_model,
             },
         )
         .map_err(SolverError::from)?;

@@ -21,11 +21,12 @@ use glam::Vec4;
 
 use super::bending::bend_correction;
 use super::distance::distance_correction;
+use super::isometric::iso_correction;
 use wide::f32x4;
 
-use super::lanes::{Real, add1, add4, idx, lanes, load1, load4};
+use super::lanes::{Real, V3, add1, add4, idx, lanes, load1, load4};
 use super::params::{Solver, SolverParams};
-use super::topology::{EdgeKind, Topology};
+use super::topology::{BendingModel, EdgeKind, Topology};
 
 /// Largest `α̃` used: keeps `α̃·λ` finite for absurd compliances.
 const MAX_ALPHA_TILDE: f32 = 1e30;
@@ -113,13 +114,20 @@ pub(crate) struct DistanceSet {
     pub colours: Colours,
 }
 
-/// Bending constraints of one part or of the boundary.
+/// Bending constraints of one part or of the boundary, in one of the two models.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub(crate) struct BendSet {
     pub v: [Vec<u32>; 4],
+    /// Isometric model (`a` holds each hinge's weights) or dihedral (`rest`, `weight`).
+    pub iso: bool,
+    pub a: [Vec<f32>; 4],
     pub rest: Vec<f32>,
+    /// Dihedral hinges' geometric weights (the compliance is divided by them).
+    pub weight: Vec<f32>,
     pub param: Vec<f32>,
+    /// Multipliers: one per hinge (dihedral) or three, `x` here and `y`, `z` in `lambda_yz`.
     pub lambda: Vec<f32>,
+    pub lambda_yz: [Vec<f32>; 2],
     /// Index into [`Topology::bends`].
     pub bend: Vec<u32>,
     pub colours: Colours,
@@ -218,23 +226,144 @@ impl BendSet {
         let (order, colours) = colour(&local, vertex_count);
         let mut s = BendSet {
             colours,
+            iso: topology.options().effective_bending() == BendingModel::Isometric,
             ..Default::default()
         };
         for i in order {
             let b = bends[i];
+            let bend = &topology.bends()[b as usize];
             for (column, &v) in s.v.iter_mut().zip(&local[i]) {
                 column.push(v);
             }
-            s.rest.push(topology.bends()[b as usize].rest_angle);
+            if s.iso {
+                for (column, &a) in s.a.iter_mut().zip(&bend.coeffs) {
+                    column.push(a);
+                }
+            } else {
+                s.rest.push(bend.rest_angle);
+                s.weight.push(bend.weight);
+            }
             s.bend.push(b);
         }
-        s.param = vec![0.0; s.rest.len()];
-        s.lambda = vec![0.0; s.rest.len()];
+        let n = s.bend.len();
+        s.param = vec![0.0; n];
+        s.lambda = vec![0.0; n];
+        if s.iso {
+            s.lambda_yz = [vec![0.0; n], vec![0.0; n]];
+        }
         s
+    }
+
+    /// Loads the material: a PBD stiffness as it is; an XPBD compliance divided by each
+    /// dihedral hinge's weight (isometric weights are already in `a`).
+    fn set_params(&mut self, value: f32, xpbd: bool) {
+        if self.iso || !xpbd {
+            self.param.fill(value);
+        } else {
+            for (p, w) in self.param.iter_mut().zip(&self.weight) {
+                *p = if *w > 0.0 { value / w } else { f32::INFINITY };
+            }
+        }
+    }
+
+    /// Zeroes the multipliers.
+    fn reset_lambda(&mut self) {
+        self.lambda.fill(0.0);
+        for l in &mut self.lambda_yz {
+            l.fill(0.0);
+        }
     }
 
     /// Projects every constraint once, colour by colour (`ACC` as for distances).
     pub(crate) fn project<const ACC: bool>(&mut self, pos: &mut [Vec4], mode: Mode) {
+        if self.iso {
+            self.project_iso::<ACC>(pos, mode);
+        } else {
+            self.project_dihedral::<ACC>(pos, mode);
+        }
+    }
+
+    fn project_iso<const ACC: bool>(&mut self, pos: &mut [Vec4], mode: Mode) {
+        for c in 0..self.colours.independent.len() {
+            let r = self.colours.independent[c].clone();
+            let e = r.start + r.len() / 4 * 4;
+            for i in (r.start..e).step_by(4) {
+                let q = i..i + 4;
+                let ix = [0, 1, 2, 3].map(|k| idx(&self.v[k][q.clone()]));
+                let a = [0, 1, 2, 3].map(|k| lanes(&self.a[k][q.clone()]));
+                let (x0, w0) = load4(pos, ix[0]);
+                let (x1, w1) = load4(pos, ix[1]);
+                let (x2, w2) = load4(pos, ix[2]);
+                let (x3, w3) = load4(pos, ix[3]);
+                let (alpha, k) = mode.lanes(lanes(&self.param[q.clone()]));
+                let l = if ACC {
+                    V3 {
+                        x: lanes(&self.lambda[q.clone()]),
+                        y: lanes(&self.lambda_yz[0][q.clone()]),
+                        z: lanes(&self.lambda_yz[1][q.clone()]),
+                    }
+                } else {
+                    V3 {
+                        x: f32x4::ZERO,
+                        y: f32x4::ZERO,
+                        z: f32x4::ZERO,
+                    }
+                };
+                let (dx, dl) = iso_correction([x0, x1, x2, x3], [w0, w1, w2, w3], a, alpha, k, l);
+                for (v, d) in ix.iter().zip(dx) {
+                    add4(pos, *v, d);
+                }
+                if ACC {
+                    self.lambda[q.clone()].copy_from_slice(&(l.x + dl.x).to_array());
+                    self.lambda_yz[0][q.clone()].copy_from_slice(&(l.y + dl.y).to_array());
+                    self.lambda_yz[1][q].copy_from_slice(&(l.z + dl.z).to_array());
+                }
+            }
+            self.project_iso_one_by_one::<ACC>(pos, mode, e..r.end);
+        }
+        self.project_iso_one_by_one::<ACC>(pos, mode, self.colours.sequential.clone());
+    }
+
+    fn project_iso_one_by_one<const ACC: bool>(
+        &mut self,
+        pos: &mut [Vec4],
+        mode: Mode,
+        r: Range<usize>,
+    ) {
+        for i in r {
+            let ix = [0, 1, 2, 3].map(|k| self.v[k][i] as usize);
+            let (x0, w0) = load1(pos[ix[0]]);
+            let (x1, w1) = load1(pos[ix[1]]);
+            let (x2, w2) = load1(pos[ix[2]]);
+            let (x3, w3) = load1(pos[ix[3]]);
+            let (alpha, k) = mode.lanes(self.param[i]);
+            let l = if ACC {
+                V3 {
+                    x: self.lambda[i],
+                    y: self.lambda_yz[0][i],
+                    z: self.lambda_yz[1][i],
+                }
+            } else {
+                V3 {
+                    x: 0.0,
+                    y: 0.0,
+                    z: 0.0,
+                }
+            };
+            let a = [0, 1, 2, 3].map(|k| self.a[k][i]);
+            let (dx, dl) = iso_correction([x0, x1, x2, x3], [w0, w1, w2, w3], a, alpha, k, l);
+            for v in 0..4 {
+                add1(&mut pos[ix[v]], dx[v]);
+            }
+            if ACC {
+                self.lambda[i] += dl.x;
+                self.lambda_yz[0][i] += dl.y;
+                self.lambda_yz[1][i] += dl.z;
+            }
+        }
+    }
+
+    fn project_dihedral<const ACC: bool>(&mut self, pos: &mut [Vec4], mode: Mode) {
         for c in 0..self.colours.independent.len() {
             let r = self.colours.independent[c].clone();
             let e = r.start + r.len() / 4 * 4;
@@ -265,12 +394,12 @@ impl BendSet {
                     lambda.copy_from_slice(&(l + dl).to_array());
                 }
             }
-            self.project_one_by_one::<ACC>(pos, mode, e..r.end);
+            self.project_dihedral_one_by_one::<ACC>(pos, mode, e..r.end);
         }
-        self.project_one_by_one::<ACC>(pos, mode, self.colours.sequential.clone());
+        self.project_dihedral_one_by_one::<ACC>(pos, mode, self.colours.sequential.clone());
     }
 
-    fn project_one_by_one<const ACC: bool>(
+    fn project_dihedral_one_by_one<const ACC: bool>(
         &mut self,
         pos: &mut [Vec4],
         mode: Mode,
@@ -318,7 +447,7 @@ impl Part {
     /// Zeroes the XPBD multipliers (start of a substep).
     pub(crate) fn reset_lambda(&mut self) {
         self.distance.lambda.fill(0.0);
-        self.bending.lambda.fill(0.0);
+        self.bending.reset_lambda();
     }
 
     /// Like [`Self::project`] but one constraint at a time (the SIMD path's reference).
@@ -331,7 +460,11 @@ impl Part {
         if bending {
             let b = &mut self.bending;
             for r in b.colours.independent.clone() {
-                b.project_one_by_one::<false>(pos, mode, r);
+                if b.iso {
+                    b.project_iso_one_by_one::<false>(pos, mode, r);
+                } else {
+                    b.project_dihedral_one_by_one::<false>(pos, mode, r);
+                }
             }
         }
     }
@@ -466,7 +599,7 @@ impl ConstraintBatches {
             .chain(core::iter::once(&mut self.boundary))
         {
             part.distance.set_params(topology, stretch, shear);
-            part.bending.param.fill(bending);
+            part.bending.set_params(bending, self.mode_is_xpbd);
         }
     }
 

@@ -30,11 +30,13 @@
 //! assert_eq!(sim.state().position(0), grid.positions()[0]); // which stayed put
 //! ```
 
+mod air;
 mod batches;
 mod bending;
 mod collide;
 mod distance;
 pub mod fuzz;
+mod isometric;
 mod lab;
 mod lanes;
 mod metrics;
@@ -51,13 +53,15 @@ mod topology;
 mod weld;
 mod wind;
 
+pub use air::{Aerodynamics, air_force, air_velocity_change, vertex_area_vectors};
 pub use batches::{ConstraintBatches, default_part_count};
-pub use bending::dihedral_angle;
+pub use bending::{bend_angle, dihedral_angle, dihedral_weight};
 pub use collide::{Collider, ContactImpulse, Pose, Shape};
+pub use isometric::{hinge_coefficients, hinge_curvature};
 pub use lab::{LabScratch, lab_step};
 pub use metrics::{StrainStats, edge_strain, position_distance};
 pub use parallel::{Parallel, Serial};
-pub use params::{LAB_WEIGHT, ParamError, Solver, SolverParams};
+pub use params::{DEFAULT_BENDING_COMPLIANCE, LAB_WEIGHT, ParamError, Solver, SolverParams};
 pub use sdf::{SdfError, SdfGrid, point_triangle_distance};
 pub use self_collision::{SelfCollision, SelfCollisionScratch, count_self_crossings};
 pub use shading::{vertex_normals, vertex_tangents};
@@ -66,11 +70,11 @@ pub use step::{StepInput, StepScratch, step};
 pub use tear::overstretched_edges;
 pub use tether::{TetherParams, Tethers};
 pub use topology::{
-    Bend, BendRest, Edge, EdgeKind, Grid, MAX_COORDINATE, MassDistribution, Topology,
+    Bend, BendRest, BendingModel, Edge, EdgeKind, Grid, MAX_COORDINATE, MassDistribution, Topology,
     TopologyError, TopologyOptions,
 };
 pub use weld::{HARD_EDGE_COS, MeshAttributes, MeshBinding, MeshShading, Weld};
-pub use wind::{WindField, WindParams, WindRegion, triangle_wind_force, wind_accelerations};
+pub use wind::{AirGrid, WindField, WindParams, WindRegion};
 
 use glam::{Vec3, Vec4};
 
@@ -173,8 +177,8 @@ pub struct Simulation {
     settle_speed: Vec<f32>,
     /// Largest strain after the last settling step.
     settle_strain: f32,
-    wind_air: Vec<Vec3>,
-    wind_acc: Vec<Vec4>,
+    air_grid: AirGrid,
+    air_velocities: Vec<Vec4>,
     normals: Vec<Vec3>,
     tangents: Vec<Vec4>,
 }
@@ -208,8 +212,9 @@ pub struct Environment<'a> {
     pub colliders: &'a [Collider],
     /// Wind, if any.
     pub wind: Option<&'a WindField>,
-    /// Time in seconds (drives gusts).
-    pub time: f32,
+    /// Time in seconds at the start of the step (drives gusts and turbulence); `f64` so that
+    /// hours of play keep full precision.
+    pub time: f64,
 }
 
 /// What a step did that the caller may want to act on.
@@ -273,8 +278,8 @@ impl Simulation {
             settling: 0,
             settle_speed: Vec::new(),
             settle_strain: f32::INFINITY,
-            wind_air: Vec::new(),
-            wind_acc: Vec::new(),
+            air_grid: AirGrid::default(),
+            air_velocities: Vec::new(),
             normals: Vec::new(),
             tangents: Vec::new(),
         };
@@ -314,15 +319,12 @@ impl Simulation {
         }
         let wind = env.wind.filter(|w| !w.is_empty());
         if let Some(field) = wind {
-            wind_accelerations(
-                &self.state.positions,
-                &self.state.velocities,
-                self.topology.triangles(),
+            // The air around the cloth at the middle of the step, on a coarse grid.
+            self.air_grid.air_velocities(
                 field,
-                env.time,
-                dt,
-                &mut self.wind_air,
-                &mut self.wind_acc,
+                &self.state.positions,
+                env.time + 0.5 * f64::from(dt),
+                &mut self.air_velocities,
             );
         }
         step(
@@ -333,7 +335,11 @@ impl Simulation {
             dt,
             StepInput {
                 colliders: env.colliders,
-                accelerations: if wind.is_some() { &self.wind_acc } else { &[] },
+                air_velocities: if wind.is_some() {
+                    &self.air_velocities
+                } else {
+                    &[]
+                },
                 self_collision: self.features.self_collision,
                 tethers: self.tethers.as_ref().map(|(_, t)| t),
             },

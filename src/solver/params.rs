@@ -5,8 +5,13 @@
 
 use glam::Vec3;
 
+use super::air::Aerodynamics;
+
 /// Relaxation weight of the lab rule (seed 000): `x ← (0.2·x + Σx)/(0.2 + n)`.
 pub const LAB_WEIGHT: f32 = 0.2;
+
+/// Default XPBD bending compliance, 1/(N·m): `B` = 1e-4 N·m, a heavy fabric.
+pub const DEFAULT_BENDING_COMPLIANCE: f32 = 1.0e4;
 
 /// Which constraint solver projects the cloth, with its material parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -32,14 +37,20 @@ pub enum Solver {
         /// Dihedral bending stiffness, `[0, 1]`; `0` switches the bending pass off.
         bending: f32,
     },
-    /// Extended PBD (Macklin et al. 2016): compliances (inverse stiffnesses) that give the same
-    /// material whatever the iteration count and time step.
+    /// Extended PBD (Macklin et al. 2016): compliances (inverse stiffnesses) in physical
+    /// units. A converged solve gives the same material at any time step; at the default 10
+    /// substeps × 1 iteration the solve is not converged for stiff settings, so stiffness
+    /// beyond what a substep can enforce is lost (see the README's "Stiffness" section for
+    /// what was measured: cloth-soft bending is enforced, plate-stiff bending is not).
     Xpbd {
         /// Compliance of stretch edges in m/N; `0` is inextensible.
         stretch: f32,
         /// Compliance of shear edges in m/N.
         shear: f32,
-        /// Dihedral bending compliance in rad/(N·m); `f32::INFINITY` switches bending off.
+        /// Bending compliance `1/B` in 1/(N·m), `B` the flexural rigidity per unit width
+        /// (woven fabrics: `B` ≈ 1e-6 to 1e-4 N·m, so 1e4 to 1e6). The isometric model
+        /// makes it a material constant: the same at any mesh resolution. `f32::INFINITY`
+        /// switches bending off.
         bending: f32,
     },
 }
@@ -72,12 +83,14 @@ impl Solver {
 }
 
 impl Default for Solver {
-    /// XPBD with inextensible stretch, slightly compliant shear and soft bending.
+    /// XPBD with inextensible stretch, slightly compliant shear and the bending of a heavy
+    /// fabric (`B` = 1e-4 N·m): a flag hangs in calm air and flutters in wind, a curtain
+    /// folds.
     fn default() -> Self {
         Solver::Xpbd {
             stretch: 0.0,
             shear: 1e-6,
-            bending: 1e-3,
+            bending: DEFAULT_BENDING_COMPLIANCE,
         }
     }
 }
@@ -101,6 +114,9 @@ pub struct SolverParams {
     /// exceeds `½·M·max_speed²`, whatever a hitch, a collider or the wind does to it. Pins are
     /// kinematic and not limited.
     pub max_speed: f32,
+    /// How the cloth meets the air it moves through, with or without wind (PBD and XPBD; the
+    /// lab solver has no air). [`Aerodynamics::NONE`] simulates a vacuum.
+    pub air: Aerodynamics,
 }
 
 impl Default for SolverParams {
@@ -112,6 +128,7 @@ impl Default for SolverParams {
             gravity: Vec3::new(0.0, -9.81, 0.0),
             damping: 0.1,
             max_speed: 100.0,
+            air: Aerodynamics::default(),
         }
     }
 }
@@ -164,7 +181,7 @@ impl SolverParams {
     /// [`Self::MAX_COUNT`], non-finite gravity, negative or NaN damping, stiffness outside
     /// `[0, 1]`, negative or NaN compliance (infinite bending compliance is allowed: it means
     /// no bending), gravity over [`Self::MAX_GRAVITY`], a `max_speed` outside
-    /// `(0, MAX_SPEED]`.
+    /// `(0, MAX_SPEED]`, an air coefficient out of [`Aerodynamics::validate`]'s range.
     pub fn validate(&self) -> Result<(), ParamError> {
         for (name, n) in [("substeps", self.substeps), ("iterations", self.iterations)] {
             if n == 0 || n > Self::MAX_COUNT {
@@ -191,6 +208,7 @@ impl SolverParams {
                 reason: format!("{} must be in (0, {}] m/s", self.max_speed, Self::MAX_SPEED),
             });
         }
+        self.air.validate()?;
         match self.solver {
             Solver::Lab { velocity_keep } => check_range("velocity_keep", velocity_keep, 0.0, 1.0),
             Solver::Pbd {

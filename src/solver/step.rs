@@ -3,8 +3,9 @@
 //! For PBD and XPBD, each of the `S` substeps of length `h = Δt/S` does:
 //!
 //! 1. pins move to their interpolated targets;
-//! 2. every unpinned vertex: `x_prev ← x`, `v ← v/(1 + damping·h) + (g + a)·h`, `x ← x + v·h`
-//!    (`a`: extra per-vertex acceleration such as wind);
+//! 2. every unpinned vertex: `x_prev ← x`, `v ← v/(1 + damping·h) + g·h`, then the air's
+//!    velocity change for this substep's velocity against the air's (see
+//!    [`air_velocity_change`]), then `x ← x + v·h`;
 //! 3. `iterations` times: each part's constraints (in parallel), then the boundary's;
 //! 4. tethers, then self-collision (if on; one pass each);
 //! 5. colliders (if any), each part in parallel;
@@ -13,7 +14,8 @@
 //! Step 2 and the first iteration of step 3 share one parallel region, so a substep with one
 //! iteration and no colliders costs one fork–join. Everything a scene does not use costs
 //! nothing: no collider pass without colliders, no tether or self-collision pass unless set,
-//! no wind term without accelerations, no bending pass at zero bending stiffness.
+//! no air term with [`Aerodynamics::NONE`], no bending pass at zero bending stiffness. Each
+//! vertex's area vector is computed once per step, from the positions at its start.
 //!
 //! Bending is projected in every substep, together with the distances. Solving it less often
 //! (every `k` substeps, as an impulse or as a positional correction over the window) was tried
@@ -21,6 +23,7 @@
 
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
+use super::air::{Aerodynamics, air_velocity_change, vertex_area_vectors};
 use super::batches::{ConstraintBatches, Mode, Part};
 use super::collide::{Collider, ContactImpulse, SubstepPose, collide_vertex, substep_poses};
 use super::lab::{LabScratch, lab_step};
@@ -39,8 +42,9 @@ use super::topology::Topology;
 pub struct StepInput<'a> {
     /// Shapes the cloth collides with.
     pub colliders: &'a [Collider],
-    /// Extra acceleration per vertex (m/s², `w` ignored), e.g. from wind; empty for none.
-    pub accelerations: &'a [Vec4],
+    /// The air's velocity at each vertex (m/s, `w` ignored), e.g. from the wind; empty for
+    /// still air.
+    pub air_velocities: &'a [Vec4],
     /// Self-collision, if on.
     pub self_collision: Option<SelfCollision>,
     /// Long-range attachments to the pins, if any.
@@ -57,6 +61,7 @@ pub struct StepScratch {
     part_impulses: Vec<Vec<ContactImpulse>>,
     impulses: Vec<ContactImpulse>,
     self_collision: SelfCollisionScratch,
+    areas: Vec<Vec4>,
 }
 
 impl StepScratch {
@@ -74,7 +79,10 @@ struct Work<'a> {
     pos: &'a mut [Vec4],
     prev: &'a mut [Vec4],
     vel: &'a mut [Vec4],
-    acc: &'a [Vec4],
+    /// Air velocity per vertex (empty: still air).
+    air: &'a [Vec4],
+    /// Area vector per vertex (empty: no air pass).
+    area: &'a [Vec4],
     impulses: &'a mut Vec<ContactImpulse>,
 }
 
@@ -83,7 +91,8 @@ fn split<'a>(
     mut pos: &'a mut [Vec4],
     mut prev: &'a mut [Vec4],
     mut vel: &'a mut [Vec4],
-    mut acc: &'a [Vec4],
+    mut air: &'a [Vec4],
+    mut area: &'a [Vec4],
     impulses: &'a mut [Vec<ContactImpulse>],
 ) -> Vec<Work<'a>> {
     let mut out = Vec::with_capacity(parts.len());
@@ -92,17 +101,20 @@ fn split<'a>(
         let (p, rest_p) = pos.split_at_mut(n);
         let (q, rest_q) = prev.split_at_mut(n);
         let (v, rest_v) = vel.split_at_mut(n);
-        let (a, rest_a) = acc.split_at(n.min(acc.len()));
+        let (a, rest_a) = air.split_at(n.min(air.len()));
+        let (ar, rest_ar) = area.split_at(n.min(area.len()));
         pos = rest_p;
         prev = rest_q;
         vel = rest_v;
-        acc = rest_a;
+        air = rest_a;
+        area = rest_ar;
         out.push(Work {
             part,
             pos: p,
             prev: q,
             vel: v,
-            acc: a,
+            air: a,
+            area: ar,
             impulses,
         });
     }
@@ -129,6 +141,7 @@ struct Consts {
     max_speed: f32,
     damp: f32,
     gravity: Vec3,
+    air: Aerodynamics,
     mode: Mode,
     bending: bool,
     /// XPBD with several iterations: multipliers carry over between iterations.
@@ -177,7 +190,7 @@ fn run_part(
             .iter_mut()
             .zip(w.pos.iter_mut())
             .zip(w.prev.iter_mut());
-        if w.acc.is_empty() {
+        if w.area.is_empty() {
             for ((v, x), p) in vertices {
                 if x.w > 0.0 {
                     *p = *x;
@@ -186,12 +199,15 @@ fn run_part(
                 }
             }
         } else {
-            for (((v, x), p), a) in vertices.zip(w.acc) {
+            for (i, ((v, x), p)) in vertices.enumerate() {
                 if x.w > 0.0 {
                     *p = *x;
-                    let extra = Vec4::new(a.x, a.y, a.z, 0.0) * c.h;
-                    *v = *v * c.damp + gh + extra;
-                    *x += *v * c.h;
+                    let mut u = *v * c.damp + gh;
+                    let wind = w.air.get(i).map_or(Vec3::ZERO, |a| a.xyz());
+                    u += air_velocity_change(w.area[i].xyz(), u.xyz() - wind, x.w, c.h, &c.air)
+                        .extend(0.0);
+                    *v = u;
+                    *x += u * c.h;
                 }
             }
         }
@@ -271,15 +287,22 @@ pub fn step(
         max_speed: params.max_speed,
         damp: 1.0 / (1.0 + params.damping * h),
         gravity: params.gravity,
+        air: params.air,
         mode: batches.mode(h),
         bending: batches.bending,
         accumulate: batches.mode_is_xpbd && params.iterations > 1,
     };
-    let acc = if input.accelerations.len() == state.len() {
-        input.accelerations
+    let air_velocities = if input.air_velocities.len() == state.len() {
+        input.air_velocities
     } else {
         &[]
     };
+    if params.air.is_none() {
+        scratch.areas.clear();
+    } else {
+        vertex_area_vectors(&state.positions, topology.triangles(), &mut scratch.areas);
+    }
+    let areas = &scratch.areas;
     if let Some(sc) = input.self_collision {
         find_self_collision_pairs(
             &state.positions,
@@ -309,7 +332,8 @@ pub fn step(
             &mut state.positions,
             &mut state.prev,
             &mut state.velocities,
-            acc,
+            air_velocities,
+            areas,
             impulses,
         );
         par.for_each_mut(&mut work, |w| run_part(w, phase, c, colliders, poses));

@@ -110,6 +110,7 @@ fn free_fall_follows_gravity() {
         SolverParams {
             damping: 0.0,
             substeps: 20,
+            air: Aerodynamics::NONE,
             ..Default::default()
         },
     )

@@ -8,7 +8,8 @@
 
 use glam::{Vec2, Vec3};
 
-use super::bending::dihedral_angle;
+use super::bending::{bend_angle, dihedral_weight};
+use super::isometric::hinge_coefficients;
 
 /// What a distance edge resists.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -30,26 +31,50 @@ pub struct Edge {
     pub kind: EdgeKind,
 }
 
-/// A dihedral bending constraint over two triangles `(v0, v1, v2)` and `(v0, v1, v3)` that
+/// A bending constraint (a *hinge*) over two triangles `(v0, v1, v2)` and `(v0, v1, v3)` that
 /// share the edge `v0–v1`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Bend {
     /// `[shared0, shared1, opposite0, opposite1]`.
     pub v: [u32; 4],
-    /// Rest dihedral angle φ0 in radians (π for a flat pair, as in the report).
+    /// Signed rest bend angle ψ0 in radians: 0 for a flat pair (the report's φ0 = π), the
+    /// modelled fold with its direction for [`BendRest::RestShape`] (see
+    /// [`bend_angle`](super::bend_angle)).
     pub rest_angle: f32,
     /// Index of the shared edge in [`Topology::edges`].
     pub edge: u32,
+    /// Isometric bending weights `a_i` from the rest shape (see
+    /// [`hinge_coefficients`](super::hinge_coefficients)).
+    pub coeffs: [f32; 4],
+    /// Dihedral bending weight from the rest shape (see
+    /// [`dihedral_weight`](super::dihedral_weight)).
+    pub weight: f32,
 }
 
 /// Rest angle of the bending constraints.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum BendRest {
-    /// φ0 = π: the cloth wants to be flat (the report's choice).
+    /// ψ0 = 0: the cloth wants to be flat (the report's φ0 = π).
     #[default]
     Flat,
-    /// φ0 = the dihedral angle of the rest mesh: the cloth keeps its modelled folds.
+    /// ψ0 = the signed bend angle of the rest mesh: the cloth keeps its modelled folds, in
+    /// size and direction (uses the dihedral model).
     RestShape,
+}
+
+/// How bending is measured. Both take the same material parameter (a compliance `1/B`, `B`
+/// the flexural rigidity in N·m) and weigh each hinge by its rest geometry, so a setting means
+/// the same cloth at any resolution.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum BendingModel {
+    /// Quadratic isometric bending (Bergou et al. 2006): the hinge's curvature vector is
+    /// linear in the positions, so a projection is exact and cheap. For cloth that is flat at
+    /// rest; with [`BendRest::RestShape`] the dihedral model is used.
+    #[default]
+    Isometric,
+    /// The report's dihedral angle (Müller et al. 2006), signed: the angle itself is
+    /// constrained, also for curved rest shapes; about four times the work per hinge.
+    Dihedral,
 }
 
 /// How vertex masses are spread over the cloth.
@@ -67,6 +92,19 @@ pub enum MassDistribution {
 pub struct TopologyOptions {
     /// Rest angle of bending pairs.
     pub bend_rest: BendRest,
+    /// Bending model.
+    pub bending: BendingModel,
+}
+
+impl TopologyOptions {
+    /// The model actually used: rest-shape bending needs the dihedral angle.
+    #[must_use]
+    pub fn effective_bending(&self) -> BendingModel {
+        match self.bend_rest {
+            BendRest::RestShape => BendingModel::Dihedral,
+            BendRest::Flat => self.bending,
+        }
+    }
 }
 
 /// Largest accepted vertex coordinate magnitude, in metres (10 000 km). At this distance an
@@ -349,14 +387,17 @@ impl Topology {
                 let (c, d) = (half[i].2, half[i + 1].2);
                 if c != d {
                     let v = [a, b, c, d];
+                    let x = v.map(|k| positions[k as usize]);
                     let rest_angle = match options.bend_rest {
-                        BendRest::Flat => core::f32::consts::PI,
-                        BendRest::RestShape => dihedral_angle(v.map(|k| positions[k as usize])),
+                        BendRest::Flat => 0.0,
+                        BendRest::RestShape => bend_angle(x),
                     };
                     bends.push(Bend {
                         v,
                         rest_angle,
                         edge: edge_index,
+                        coeffs: hinge_coefficients(x),
+                        weight: dihedral_weight(x),
                     });
                 }
             }
@@ -420,6 +461,12 @@ impl Topology {
     #[must_use]
     pub fn vertex_count(&self) -> usize {
         self.rest_positions.len()
+    }
+
+    /// The options it was built with.
+    #[must_use]
+    pub fn options(&self) -> TopologyOptions {
+        self.options
     }
 
     /// Rest positions, in the mesh's own space.
@@ -680,15 +727,16 @@ mod tests {
         let boundary = 4 * 3;
         assert_eq!(t.bends().len(), t.edges().len() - boundary);
         for b in t.bends() {
-            assert_eq!(b.rest_angle, core::f32::consts::PI);
+            assert_eq!(b.rest_angle, 0.0);
             let e = t.edges()[b.edge as usize];
             assert_eq!(e.v, [b.v[0], b.v[1]]);
         }
         let rest = g.topology(TopologyOptions {
             bend_rest: BendRest::RestShape,
+            ..Default::default()
         });
         for b in rest.unwrap().bends() {
-            assert!((b.rest_angle - core::f32::consts::PI).abs() < 1e-3);
+            assert!(b.rest_angle.abs() < 1e-3);
         }
     }
 

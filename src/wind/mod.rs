@@ -2,9 +2,10 @@
 //!
 //! Each fixed step, [`ClothWindPlugin`] turns them into a
 //! [`WindField`] (noise generators included) stored in
-//! [`ClothWindField`]; every cloth samples it once per step for per-triangle drag and lift
-//! (see [`solver::wind_accelerations`](crate::solver::wind_accelerations)). No wind resource
-//! and no zones: no wind work at all.
+//! [`ClothWindField`]; every cloth samples it on a coarse [`AirGrid`](crate::solver::AirGrid)
+//! around itself once per step and feels it, every substep, through its own
+//! [`Aerodynamics`](crate::solver::Aerodynamics) (drag, lift, skin friction). No wind resource
+//! and no zones: the cloth still meets still air, and there is no wind sampling at all.
 
 use bevy::prelude::*;
 use bevy::reflect::impl_reflect_opaque;
@@ -49,8 +50,9 @@ pub struct WindZone {
 pub struct ClothWindField {
     /// The field; empty when there is no wind.
     pub field: WindField,
-    /// Seconds of fixed time elapsed.
-    pub time: f32,
+    /// Seconds of fixed time elapsed at the start of this step (`f64`: no precision lost
+    /// and no jump however long the game runs).
+    pub time: f64,
 }
 
 /// Adds [`Wind`] and [`WindZone`] support.
@@ -74,7 +76,7 @@ fn gather_wind(
     mut out: ResMut<ClothWindField>,
     mut reported: Local<bevy::platform::collections::HashSet<Option<Entity>>>,
 ) {
-    out.time = time.elapsed_secs_wrapped();
+    out.time = time.elapsed_secs_f64() - time.delta_secs_f64();
     // An invalid wind (NaN velocity, negative drag, ...) is left out, and said once.
     let mut valid = |source: Option<Entity>, w: &WindParams| match w.validate() {
         Ok(()) => {
