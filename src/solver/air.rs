@@ -1,28 +1,29 @@
-//! Air: how a cloth meets the air it moves through, with or without wind.
-//!
-//! Each free vertex `i` carries a share of the surface: its *area vector* `A_i`, a third of
-//! the area-weighted normals `½(x₁ − x₀) × (x₂ − x₀)` of its triangles (computed at the start
-//! of each step). With `a = |A_i|`, `n = A_i/a`, the vertex velocity `v`, the air velocity `u`
-//! (zero without wind), `v_rel = v − u`, `s = |v_rel|`, `ṽ = v_rel/s` and `c = ṽ·n`, the
-//! force on the vertex is (report §3.7, plus skin friction):
-//!
-//! ```text
-//! F_D = −drag     · s² · a · |c| · ṽ                 pressure drag, against the relative flow
-//! F_L =  lift     · s² · a ·  c  · ((n × ṽ) × ṽ)      lift, across the relative flow
-//! F_F = −friction · s  · a · (v_rel − (v_rel·n) n)   skin friction, along the surface
-//! ```
-//!
-//! The coefficients are `½·ρ·C` in kg/m³ (air: ρ ≈ 1.2 kg/m³). None of the terms depends on
-//! which way `n` points. The force is applied every substep with that substep's velocity, as
-//! a velocity change `Δv = F·h/m` damped to `Δv/(1 + |Δv|/s)`: it never carries a vertex past
-//! the air's speed, whatever the wind or the time step, and is the plain force when
-//! `|Δv| ≪ s`.
+//! Air: how a cloth meets the air it moves through, with or without wind; see
+//! [`Aerodynamics`].
 
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
 use super::params::ParamError;
 
-/// How a cloth meets the air: `½·ρ·C` coefficients in kg/m³ (see the [module docs](self)).
+/// How a cloth meets the air: `½·ρ·C` coefficients in kg/m³.
+///
+/// Each free vertex `i` carries a share of the surface: its *area vector* `A_i`, a third of
+/// the area-weighted normals `½(x₁ − x₀) × (x₂ − x₀)` of its triangles (computed at the start
+/// of each step). With `a = |A_i|`, `n = A_i/a`, the vertex velocity `v`, the air velocity `u`
+/// (zero without wind), `v_rel = v − u`, `s = |v_rel|`, `ṽ = v_rel/s` and `c = ṽ·n`, the
+/// force on the vertex is (report §3.7, plus skin friction):
+///
+/// ```text
+/// F_D = −drag     · s² · a · |c| · ṽ                 pressure drag, against the relative flow
+/// F_L =  lift     · s² · a ·  c  · ((n × ṽ) × ṽ)      lift, across the relative flow
+/// F_F = −friction · s  · a · (v_rel − (v_rel·n) n)   skin friction, along the surface
+/// ```
+///
+/// The coefficients are `½·ρ·C` in kg/m³ (air: ρ ≈ 1.2 kg/m³). None of the terms depends on
+/// which way `n` points. The force is applied every substep with that substep's velocity, as
+/// a velocity change `Δv = F·h/m` damped to `Δv/(1 + |Δv|/s)`: it never carries a vertex past
+/// the air's speed, whatever the wind or the time step, and is the plain force when
+/// `|Δv| ≪ s`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Aerodynamics {
     /// Pressure drag against the relative flow, scaled by how squarely the surface faces it.
@@ -85,7 +86,7 @@ impl Default for Aerodynamics {
 }
 
 /// The air force on a surface element with area vector `area` (normal times area, m²)
-/// moving at `v_rel` relative to the air: `F_D + F_L + F_F` of the [module docs](self), N.
+/// moving at `v_rel` relative to the air: `F_D + F_L + F_F` of [`Aerodynamics`], N.
 #[must_use]
 #[inline]
 pub fn air_force(area: Vec3, v_rel: Vec3, air: &Aerodynamics) -> Vec3 {
