@@ -644,15 +644,11 @@ fn replacing_the_mesh_rebuilds_the_cloth_from_it() {
     assert_eq!(sim(&app, e).simulation().state().len(), 25);
 }
 
-#[test]
-fn a_collider_removed_and_put_back_elsewhere_does_not_sweep_through_the_cloth() {
-    // A curtain in the XY plane; a ball in front of it is removed, moved 1 m to behind it
-    // (inside the teleport distance) and put back. It must appear there, not sweep through.
-    let mut app = app();
+/// A 1 m × 1 m, 12 × 12 curtain hanging in the XY plane from its top edge.
+fn spawn_curtain(app: &mut App) -> Entity {
     let grid = Grid::new(12, 12, 1.0, 1.0);
-    let mesh = add_mesh(&mut app, grid_mesh(&grid));
-    let curtain = app
-        .world_mut()
+    let mesh = add_mesh(app, grid_mesh(&grid));
+    app.world_mut()
         .spawn((
             Mesh3d(mesh),
             Transform::from_xyz(0.0, 1.0, 0.0)
@@ -660,7 +656,26 @@ fn a_collider_removed_and_put_back_elsewhere_does_not_sweep_through_the_cloth() 
             Cloth::default(),
             ClothPins::rest((0..12).map(|i| grid.index(i, 0))),
         ))
-        .id();
+        .id()
+}
+
+fn curtain_positions(app: &App, curtain: Entity) -> Vec<Vec3> {
+    (0..144).map(|v| sim(app, curtain).position(v)).collect()
+}
+
+fn max_distance(a: &[Vec3], b: &[Vec3]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| p.distance(*q))
+        .fold(0.0, f32::max)
+}
+
+#[test]
+fn a_collider_removed_and_put_back_elsewhere_does_not_sweep_through_the_cloth() {
+    // A curtain in the XY plane; a ball in front of it is removed, moved 1 m to behind it
+    // (inside the teleport distance) and put back. It must appear there, not sweep through.
+    let mut app = app();
+    let curtain = spawn_curtain(&mut app);
     let ball = app
         .world_mut()
         .spawn((
@@ -678,14 +693,12 @@ fn a_collider_removed_and_put_back_elsewhere_does_not_sweep_through_the_cloth() 
         .translation
         .z = 0.55;
     run(&mut app, 1);
-    let before: Vec<Vec3> = (0..144).map(|v| sim(&app, curtain).position(v)).collect();
+    let before = curtain_positions(&app, curtain);
     app.world_mut()
         .entity_mut(ball)
         .insert(ClothCollider::sphere(0.2));
     run(&mut app, 1);
-    let moved = (0..144)
-        .map(|v| sim(&app, curtain).position(v).distance(before[v as usize]))
-        .fold(0.0, f32::max);
+    let moved = max_distance(&curtain_positions(&app, curtain), &before);
     assert!(moved < 0.05, "the ball swept the curtain by {moved} m");
 }
 
@@ -695,18 +708,7 @@ fn colliders_follow_the_cloths_teleport_rule() {
     // distance the same jump is a teleport.
     for (teleport, sweeps) in [(DEFAULT_TELEPORT_DISTANCE, true), (1.0, false)] {
         let mut app = app();
-        let grid = Grid::new(12, 12, 1.0, 1.0);
-        let mesh = add_mesh(&mut app, grid_mesh(&grid));
-        let curtain = app
-            .world_mut()
-            .spawn((
-                Mesh3d(mesh),
-                Transform::from_xyz(0.0, 1.0, 0.0)
-                    .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2)),
-                Cloth::default(),
-                ClothPins::rest((0..12).map(|i| grid.index(i, 0))),
-            ))
-            .id();
+        let curtain = spawn_curtain(&mut app);
         let mut collider = ClothCollider::sphere(0.2);
         collider.teleport_distance = teleport;
         let ball = app
@@ -714,16 +716,14 @@ fn colliders_follow_the_cloths_teleport_rule() {
             .spawn((collider, Transform::from_xyz(0.0, 0.7, -0.75)))
             .id();
         run(&mut app, 60);
-        let before: Vec<Vec3> = (0..144).map(|v| sim(&app, curtain).position(v)).collect();
+        let before = curtain_positions(&app, curtain);
         app.world_mut()
             .get_mut::<Transform>(ball)
             .unwrap()
             .translation
             .z = 0.75;
         run(&mut app, 1);
-        let moved = (0..144)
-            .map(|v| sim(&app, curtain).position(v).distance(before[v as usize]))
-            .fold(0.0, f32::max);
+        let moved = max_distance(&curtain_positions(&app, curtain), &before);
         assert_eq!(moved > 0.1, sweeps, "teleport {teleport}: moved {moved}");
     }
 }

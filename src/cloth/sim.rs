@@ -678,19 +678,24 @@ pub(crate) fn sync_cloths(
     for (entity, cloth, mut sim, config, pins, (sc, tethers, tearing)) in &mut cloths {
         let cs = &mut *sim;
         let own = poses.get(entity).unwrap_or_default();
-        if config.is_changed() || cs.settings_error.is_some() {
-            let wanted = features(&cs.sim, sc, tethers, tearing);
-            let params = SolverParams::from(*config);
-            let result = if params == *cs.sim.params() {
-                Ok(())
-            } else {
+        // A changed (or still refused) config is applied with the features; otherwise only
+        // changed features are.
+        let config_due = config.is_changed() || cs.settings_error.is_some();
+        let wanted = features(&cs.sim, sc, tethers, tearing);
+        let params = SolverParams::from(*config);
+        let params_due = config_due && params != *cs.sim.params();
+        let features_due = wanted != *cs.sim.features();
+        if config_due || features_due {
+            let result = if params_due {
                 cs.sim.set_params(params)
+            } else {
+                Ok(())
             }
             .and_then(|()| {
-                if wanted == *cs.sim.features() {
-                    Ok(())
-                } else {
+                if features_due {
                     cs.sim.set_features(wanted)
+                } else {
+                    Ok(())
                 }
             })
             .map_err(|e| ClothError::Solver(SolverError::Params(e)));
@@ -701,21 +706,6 @@ pub(crate) fn sync_cloths(
                 result,
                 "settings",
             );
-        } else {
-            let wanted = features(&cs.sim, sc, tethers, tearing);
-            if wanted != *cs.sim.features() {
-                let result = cs
-                    .sim
-                    .set_features(wanted)
-                    .map_err(|e| ClothError::Solver(SolverError::Params(e)));
-                note_rejection(
-                    &mut commands,
-                    entity,
-                    &mut cs.settings_error,
-                    result,
-                    "settings",
-                );
-            }
         }
         let list = pin_list(&pins, cs.binding.weld());
         if pins.is_changed() || cs.pins_error.is_some() {

@@ -145,11 +145,7 @@ mod tests {
     use glam::Vec3;
 
     fn l(v: Vec3) -> V3<f32> {
-        V3 {
-            x: v.x,
-            y: v.y,
-            z: v.z,
-        }
+        v.into()
     }
 
     fn g(v: V3<f32>) -> Vec3 {

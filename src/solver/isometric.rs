@@ -112,11 +112,7 @@ mod tests {
     use crate::solver::topology::{Grid, TopologyOptions};
 
     fn l(v: Vec3) -> V3<f32> {
-        V3 {
-            x: v.x,
-            y: v.y,
-            z: v.z,
-        }
+        v.into()
     }
 
     fn hinge(lift: f32) -> [Vec3; 4] {

@@ -91,6 +91,16 @@ pub(crate) struct V3<T> {
     pub z: T,
 }
 
+impl From<glam::Vec3> for V3<f32> {
+    fn from(v: glam::Vec3) -> Self {
+        Self {
+            x: v.x,
+            y: v.y,
+            z: v.z,
+        }
+    }
+}
+
 impl<T: Real> V3<T> {
     #[inline(always)]
     pub fn dot(self, o: Self) -> T {

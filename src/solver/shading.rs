@@ -52,21 +52,8 @@ pub fn vertex_tangents(
     let mut bit = vec![Vec3::ZERO; n];
     for t in triangles {
         let [i0, i1, i2] = t.map(|i| i as usize);
-        let (p0, p1, p2) = (
-            positions[i0].xyz(),
-            positions[i1].xyz(),
-            positions[i2].xyz(),
-        );
-        let (uv0, uv1, uv2) = (uvs[i0], uvs[i1], uvs[i2]);
-        let (q0, q1) = (p1 - p0, p2 - p0);
-        let det = (uv1.x - uv0.x) * (uv2.y - uv0.y) - (uv1.y - uv0.y) * (uv2.x - uv0.x);
-        if det.abs() < 1e-20 {
-            continue;
-        }
-        let r = 1.0 / det;
-        let tp = ((uv2.y - uv0.y) * q0 + (uv0.y - uv1.y) * q1) * r;
-        let bp = ((uv0.x - uv2.x) * q0 + (uv1.x - uv0.x) * q1) * r;
-        if tp.is_finite() && bp.is_finite() {
+        let p = [i0, i1, i2].map(|i| positions[i].xyz());
+        if let Some((tp, bp)) = triangle_tangent(p, [uvs[i0], uvs[i1], uvs[i2]]) {
             for i in [i0, i1, i2] {
                 tan[i] += tp;
                 bit[i] += bp;
@@ -74,18 +61,38 @@ pub fn vertex_tangents(
         }
     }
     out.clear();
-    out.extend((0..n).map(|i| {
-        let nrm = normals[i];
-        let t = (tan[i] - nrm * nrm.dot(tan[i]))
-            .try_normalize()
-            .unwrap_or_else(|| nrm.any_orthonormal_vector());
-        let w = if nrm.cross(t).dot(bit[i]) < 0.0 {
-            -1.0
-        } else {
-            1.0
-        };
-        t.extend(w)
-    }));
+    out.extend((0..n).map(|i| finish_tangent(normals[i], tan[i], bit[i], None)));
+}
+
+/// A triangle's unnormalised tangent and bitangent `(T', B')` from its corners and their UVs
+/// (the formula in the module docs); `None` where the UVs are degenerate or the result is not
+/// finite.
+pub(crate) fn triangle_tangent(p: [Vec3; 3], uv: [Vec2; 3]) -> Option<(Vec3, Vec3)> {
+    let [uv0, uv1, uv2] = uv;
+    let (q0, q1) = (p[1] - p[0], p[2] - p[0]);
+    let det = (uv1.x - uv0.x) * (uv2.y - uv0.y) - (uv1.y - uv0.y) * (uv2.x - uv0.x);
+    if det.abs() < 1e-20 {
+        return None;
+    }
+    let r = 1.0 / det;
+    let tp = ((uv2.y - uv0.y) * q0 + (uv0.y - uv1.y) * q1) * r;
+    let bp = ((uv0.x - uv2.x) * q0 + (uv1.x - uv0.x) * q1) * r;
+    (tp.is_finite() && bp.is_finite()).then_some((tp, bp))
+}
+
+/// A vertex's unit tangent with handedness from its unit `normal` and its summed `tan` and
+/// `bit`: `tan` made orthogonal to the normal (any orthogonal unit vector if nothing is
+/// left), `w` = `handedness` if given, else the sign that makes `w·N×T` follow `bit`.
+pub(crate) fn finish_tangent(normal: Vec3, tan: Vec3, bit: Vec3, handedness: Option<f32>) -> Vec4 {
+    let t = (tan - normal * normal.dot(tan))
+        .try_normalize()
+        .unwrap_or_else(|| normal.any_orthonormal_vector());
+    let w = match handedness {
+        Some(h) => h,
+        None if normal.cross(t).dot(bit) < 0.0 => -1.0,
+        None => 1.0,
+    };
+    t.extend(w)
 }
 
 #[cfg(test)]

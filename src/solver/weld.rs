@@ -23,6 +23,7 @@ use std::collections::HashMap;
 
 use glam::{IVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
 
+use super::shading::{finish_tangent, triangle_tangent};
 use super::topology::{Topology, TopologyError, TopologyOptions};
 
 /// Copies whose source normals have a cosine at least this large share a normal (about 8°).
@@ -266,6 +267,8 @@ pub struct MeshShading {
     tan: Vec<Vec3>,
     bit: Vec<Vec3>,
     normals: Vec<Vec3>,
+    /// Last update's normals, the fallback for vertices left in no triangle.
+    old_normals: Vec<Vec3>,
     tangents: Vec<Vec4>,
 }
 
@@ -364,11 +367,13 @@ impl MeshShading {
                 }
             }
         }
-        let old = core::mem::take(&mut self.normals);
+        // Last frame's normals move to the scratch buffer (no allocation per frame).
+        core::mem::swap(&mut self.normals, &mut self.old_normals);
+        self.normals.clear();
         self.normals.extend((0..n).map(|i| {
             self.group_sum[group[i] as usize]
                 .try_normalize()
-                .unwrap_or_else(|| fallback(i, &old))
+                .unwrap_or_else(|| fallback(i, &self.old_normals))
         }));
         let Some(corner_uvs) = &self.corner_uvs else {
             self.tangents.clear();
@@ -380,17 +385,7 @@ impl MeshShading {
         self.bit.resize(n, Vec3::ZERO);
         for &t in drawn {
             let tri = triangles[t as usize];
-            let [uv0, uv1, uv2] = corner_uvs[t as usize];
-            let [p0, p1, p2] = tri.map(at);
-            let (q0, q1) = (p1 - p0, p2 - p0);
-            let det = (uv1.x - uv0.x) * (uv2.y - uv0.y) - (uv1.y - uv0.y) * (uv2.x - uv0.x);
-            if det.abs() < 1e-20 {
-                continue;
-            }
-            let r = 1.0 / det;
-            let tp = ((uv2.y - uv0.y) * q0 + (uv0.y - uv1.y) * q1) * r;
-            let bp = ((uv0.x - uv2.x) * q0 + (uv1.x - uv0.x) * q1) * r;
-            if tp.is_finite() && bp.is_finite() {
+            if let Some((tp, bp)) = triangle_tangent(tri.map(at), corner_uvs[t as usize]) {
                 for v in tri {
                     self.tan[v as usize] += tp;
                     self.bit[v as usize] += bp;
@@ -399,16 +394,13 @@ impl MeshShading {
         }
         self.tangents.clear();
         for i in 0..n {
-            let nrm = self.normals[i];
-            let t = (self.tan[i] - nrm * nrm.dot(self.tan[i]))
-                .try_normalize()
-                .unwrap_or_else(|| nrm.any_orthonormal_vector());
-            let w = match &self.handedness {
-                Some(h) => h[i],
-                None if nrm.cross(t).dot(self.bit[i]) < 0.0 => -1.0,
-                None => 1.0,
-            };
-            self.tangents.push(t.extend(w));
+            let handedness = self.handedness.as_ref().map(|h| h[i]);
+            self.tangents.push(finish_tangent(
+                self.normals[i],
+                self.tan[i],
+                self.bit[i],
+                handedness,
+            ));
         }
     }
 
