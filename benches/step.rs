@@ -8,11 +8,12 @@ use std::hint::black_box;
 use bevy::tasks::TaskPoolBuilder;
 use bevy_cloth::cloth::TaskPoolParallel;
 use bevy_cloth::solver::{
-    Grid, MassDistribution, Pin, Serial, Simulation, Solver, SolverParams, TopologyOptions,
+    BendingSolve, DEFAULT_BENDING_COMPLIANCE, Grid, MassDistribution, Pin, Serial, Simulation,
+    Solver, SolverParams, TopologyOptions,
 };
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 
-fn scene(n: u32, solver: Solver, substeps: u32) -> Simulation {
+fn scene(n: u32, solver: Solver, substeps: u32, bending_solve: BendingSolve) -> Simulation {
     let grid = Grid::new(n, n, 1.0, 1.0);
     let topology = grid.topology(TopologyOptions::default()).unwrap();
     let masses = topology.masses(1.0, MassDistribution::Uniform);
@@ -23,6 +24,7 @@ fn scene(n: u32, solver: Solver, substeps: u32) -> Simulation {
             solver,
             substeps,
             iterations: 1,
+            bending_solve,
             ..Default::default()
         },
     )
@@ -47,18 +49,19 @@ fn bench(c: &mut Criterion) {
         .num_threads(threads.saturating_sub(1).max(1))
         .build();
     let par = TaskPoolParallel(&pool);
+    // The default fabric (B = 1e-4 N·m): projected bending at every size here.
     let xpbd = Solver::Xpbd {
         stretch: 0.0,
         shear: 1e-6,
-        bending: 1e-3,
+        bending: DEFAULT_BENDING_COMPLIANCE,
     };
     let mut g = c.benchmark_group("xpbd_10x1");
     for n in [32u32, 64, 128] {
-        let mut sim = scene(n, xpbd, 10);
+        let mut sim = scene(n, xpbd, 10, BendingSolve::Auto);
         g.bench_with_input(BenchmarkId::new("pool", n), &n, |b, _| {
             b.iter(|| sim.step(black_box(1.0 / 60.0), &par))
         });
-        let mut sim = scene(n, xpbd, 10);
+        let mut sim = scene(n, xpbd, 10, BendingSolve::Auto);
         g.bench_with_input(BenchmarkId::new("serial", n), &n, |b, _| {
             b.iter(|| sim.step(black_box(1.0 / 60.0), &Serial))
         });
@@ -84,8 +87,28 @@ fn bench(c: &mut Criterion) {
             },
         ),
     ] {
-        let mut sim = scene(64, solver, 10);
+        let mut sim = scene(64, solver, 10, BendingSolve::Auto);
         g.bench_function(name, |b| b.iter(|| sim.step(black_box(1.0 / 60.0), &par)));
+    }
+    g.finish();
+    // A stiff sheet (B = 0.1 N·m, saturation far above 0.5): the implicit bending solve
+    // against the projection it replaces.
+    let stiff = Solver::Xpbd {
+        stretch: 0.0,
+        shear: 1e-6,
+        bending: 10.0,
+    };
+    let mut g = c.benchmark_group("stiff_bending_10x1");
+    for n in [32u32, 64] {
+        for (name, solve) in [
+            ("projected", BendingSolve::Projected),
+            ("implicit", BendingSolve::Implicit),
+        ] {
+            let mut sim = scene(n, stiff, 10, solve);
+            g.bench_with_input(BenchmarkId::new(name, n), &n, |b, _| {
+                b.iter(|| sim.step(black_box(1.0 / 60.0), &par))
+            });
+        }
     }
     g.finish();
 }

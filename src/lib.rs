@@ -58,7 +58,8 @@ pub mod prelude {
         VelvetExtension, VelvetMaterial, VelvetPlugin, velvet_material, velvet_material_from,
     };
     pub use crate::solver::{
-        Aerodynamics, BendRest, BendingModel, Grid, MassDistribution, Solver, WindParams,
+        Aerodynamics, BendRest, BendingModel, BendingSolve, Grid, MassDistribution, Solver,
+        WindParams,
     };
     pub use crate::wind::{Wind, WindZone};
 }

@@ -112,8 +112,10 @@ fn a_swinging_curtain_settles_in_air() {
 /// How a 1 × 0.6 m, 100 g flag on a vertical pole moves over 3 s after 3 s of `speed` m/s
 /// wind (or calm): `(departure, tip, droop)`: the RMS distance of its vertices from their
 /// best-fit plane, the RMS motion of the fly end's midpoint about its mean, both as
-/// fractions of the flag's length, and how far the fly end hangs below the hoist's middle.
-fn flag(speed: f32, bending: f32) -> (f32, f32, f32) {
+/// fractions of the flag's length, and how far the fly end hangs below the hoist's middle;
+/// and the flapping (out-of-plane position) of the mid-height row at a quarter, half,
+/// three quarters and the end of its length, one sample per step.
+fn flag(speed: f32, bending: f32) -> (f32, f32, f32, [Vec<f32>; 4]) {
     let (length, height): (f32, f32) = (1.0, 0.6);
     let grid = Grid::new(33, 20, length, height);
     let params = SolverParams {
@@ -153,6 +155,8 @@ fn flag(speed: f32, bending: f32) -> (f32, f32, f32) {
     let fly: Vec<usize> = (0..grid.rows)
         .map(|j| grid.index(grid.columns - 1, j) as usize)
         .collect();
+    let stations = [8, 16, 24, 32].map(|i| grid.index(i, grid.rows / 2) as usize);
+    let mut flaps: [Vec<f32>; 4] = Default::default();
     let mut t = 0.0f64;
     let (mut tips, mut departure) = (Vec::new(), 0.0f32);
     for step in 0..(6 * 60) {
@@ -168,6 +172,9 @@ fn flag(speed: f32, bending: f32) -> (f32, f32, f32) {
             let tip = fly.iter().map(|&i| s.position(i)).sum::<Vec3>() / fly.len() as f32;
             tips.push(tip);
             departure += plane_rms(&(0..s.len()).map(|i| s.position(i)).collect::<Vec<_>>());
+            for (flap, &v) in flaps.iter_mut().zip(&stations) {
+                flap.push(s.position(v).z);
+            }
         }
     }
     let mean = tips.iter().sum::<Vec3>() / tips.len() as f32;
@@ -178,7 +185,31 @@ fn flag(speed: f32, bending: f32) -> (f32, f32, f32) {
         / tips.len() as f32)
         .sqrt();
     let droop = 2.0 - mean.y;
-    (departure / tips.len() as f32 / length, tip / length, droop)
+    (
+        departure / tips.len() as f32 / length,
+        tip / length,
+        droop,
+        flaps,
+    )
+}
+
+/// The delay (in samples, up to `max`) by which `b` follows `a`: the shift with the largest
+/// correlation of the two (means removed).
+fn delay(a: &[f32], b: &[f32], max: usize) -> i32 {
+    let centred = |x: &[f32]| {
+        let m = x.iter().sum::<f32>() / x.len() as f32;
+        x.iter().map(|v| v - m).collect::<Vec<_>>()
+    };
+    let (a, b) = (centred(a), centred(b));
+    let n = a.len() - max;
+    let corr = |k: i32| -> f32 {
+        (max..n)
+            .map(|t| a[t] * b[(t as i32 + k) as usize])
+            .sum::<f32>()
+    };
+    (-(max as i32)..=max as i32)
+        .max_by(|&x, &y| corr(x).total_cmp(&corr(y)))
+        .unwrap_or(0)
 }
 
 /// RMS distance of `points` from their least-squares plane.
@@ -207,7 +238,7 @@ fn plane_rms(points: &[Vec3]) -> f32 {
 #[test]
 fn a_flag_hangs_in_calm_air_and_flutters_in_wind() {
     let bending = bevy_cloth::solver::DEFAULT_BENDING_COMPLIANCE;
-    let (departure, tip, droop) = flag(0.0, bending);
+    let (departure, tip, droop, _) = flag(0.0, bending);
     println!("calm: departure {departure:.3} L, tip {tip:.3} L, droop {droop:.2} m");
     assert!(
         droop > 0.4,
@@ -215,7 +246,7 @@ fn a_flag_hangs_in_calm_air_and_flutters_in_wind() {
     );
     assert!(departure < 0.01, "and stays flat: {departure}");
     for speed in [5.0, 10.0] {
-        let (departure, tip, droop) = flag(speed, bending);
+        let (departure, tip, droop, flaps) = flag(speed, bending);
         println!("{speed} m/s: departure {departure:.3} L, tip {tip:.3} L, droop {droop:.2} m");
         assert!(
             droop < 0.25,
@@ -226,5 +257,19 @@ fn a_flag_hangs_in_calm_air_and_flutters_in_wind() {
             "{speed} m/s: ripples, departure {departure} L"
         );
         assert!(tip > 0.05, "{speed} m/s: the fly end swings, {tip} L");
+        // Waves run from the hoist to the fly: each station further out flaps later than the
+        // one before it (delays in 1/60 s steps, searched within ±0.25 s).
+        let delays: Vec<i32> = flaps.windows(2).map(|w| delay(&w[0], &w[1], 15)).collect();
+        println!("{speed} m/s: delays between the quarter stations {delays:?} steps");
+        assert!(
+            delays.iter().all(|&d| d > 0),
+            "{speed} m/s: waves run from the hoist to the fly: delays {delays:?}"
+        );
+        let total = delays.iter().sum::<i32>() as f32 * DT;
+        let wave_speed = 0.75 / total; // the stations span 0.75 of the 1 m flag
+        assert!(
+            wave_speed < 2.0 * speed,
+            "{speed} m/s: the waves travel with the air, not instantly: {wave_speed} m/s"
+        );
     }
 }

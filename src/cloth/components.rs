@@ -3,12 +3,15 @@
 use bevy::prelude::*;
 use bevy::reflect::impl_reflect_opaque;
 
-use crate::solver::{Aerodynamics, BendRest, BendingModel, MassDistribution, Solver, SolverParams};
+use crate::solver::{
+    Aerodynamics, BendRest, BendingModel, BendingSolve, MassDistribution, Solver, SolverParams,
+};
 
 impl_reflect_opaque!((in bevy_cloth::solver) Solver(Debug, Clone, PartialEq));
 impl_reflect_opaque!((in bevy_cloth::solver) BendRest(Debug, Clone, PartialEq, Default));
 impl_reflect_opaque!((in bevy_cloth::solver) BendingModel(Debug, Clone, PartialEq, Default));
 impl_reflect_opaque!((in bevy_cloth::solver) Aerodynamics(Debug, Clone, PartialEq, Default));
+impl_reflect_opaque!((in bevy_cloth::solver) BendingSolve(Debug, Clone, PartialEq, Default));
 impl_reflect_opaque!((in bevy_cloth::solver) MassDistribution(Debug, Clone, PartialEq, Default));
 
 /// Marks an entity with a [`Mesh3d`] as cloth: the plugin simulates its vertices.
@@ -175,6 +178,8 @@ pub struct ClothConfig {
     /// How the cloth meets the air: drag, lift and skin friction, felt with or without wind
     /// (see [`Aerodynamics`]; [`Aerodynamics::NONE`] for a vacuum).
     pub air: Aerodynamics,
+    /// How XPBD solves isometric bending (see [`BendingSolve`]).
+    pub bending_solve: BendingSolve,
 }
 
 impl Default for ClothConfig {
@@ -193,6 +198,7 @@ impl From<SolverParams> for ClothConfig {
             damping: p.damping,
             max_speed: p.max_speed,
             air: p.air,
+            bending_solve: p.bending_solve,
         }
     }
 }
@@ -207,6 +213,7 @@ impl From<ClothConfig> for SolverParams {
             damping: c.damping,
             max_speed: c.max_speed,
             air: c.air,
+            bending_solve: c.bending_solve,
         }
     }
 }

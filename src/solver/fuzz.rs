@@ -12,9 +12,9 @@ use std::sync::Arc;
 use glam::{Quat, Vec3};
 
 use super::{
-    Aerodynamics, Collider, Environment, Features, MassDistribution, Pin, Pose, SdfGrid,
-    SelfCollision, Serial, Shape, Simulation, Solver, SolverParams, TetherParams, Topology,
-    TopologyOptions, WindField, WindParams,
+    Aerodynamics, BendingSolve, Collider, Environment, Features, MassDistribution, Pin, Pose,
+    SdfGrid, SelfCollision, Serial, Shape, Simulation, Solver, SolverParams, TetherParams,
+    Topology, TopologyOptions, WindField, WindParams,
 };
 
 /// What one fuzz input did.
@@ -140,6 +140,8 @@ pub fn fuzz_one(bytes: &[u8]) -> FuzzOutcome {
         // Default air: drawing its coefficients would change what the corpus's bytes decode
         // to (the stability suite covers extreme coefficients).
         air: Aerodynamics::default(),
+        // Auto: bending as compliant as 1e-3 takes the implicit path on most of these meshes.
+        bending_solve: BendingSolve::Auto,
     };
     let mut sim = match Simulation::new(topology, &masses, params) {
         Ok(s) => s,

@@ -36,6 +36,7 @@ mod bending;
 mod collide;
 mod distance;
 pub mod fuzz;
+mod implicit;
 mod isometric;
 mod lab;
 mod lanes;
@@ -57,11 +58,16 @@ pub use air::{Aerodynamics, air_force, air_velocity_change, vertex_area_vectors}
 pub use batches::{ConstraintBatches, default_part_count};
 pub use bending::{bend_angle, dihedral_angle, dihedral_weight};
 pub use collide::{Collider, ContactImpulse, Pose, Shape};
+pub use implicit::{
+    IMPLICIT_BENDING_AUTO_WORK, IMPLICIT_BENDING_MAX_WORK, IMPLICIT_BENDING_SATURATION,
+};
 pub use isometric::{hinge_coefficients, hinge_curvature};
 pub use lab::{LabScratch, lab_step};
 pub use metrics::{StrainStats, edge_strain, position_distance};
 pub use parallel::{Parallel, Serial};
-pub use params::{DEFAULT_BENDING_COMPLIANCE, LAB_WEIGHT, ParamError, Solver, SolverParams};
+pub use params::{
+    BendingSolve, DEFAULT_BENDING_COMPLIANCE, LAB_WEIGHT, ParamError, Solver, SolverParams,
+};
 pub use sdf::{SdfError, SdfGrid, point_triangle_distance};
 pub use self_collision::{SelfCollision, SelfCollisionScratch, count_self_crossings};
 pub use shading::{vertex_normals, vertex_tangents};
@@ -388,6 +394,7 @@ impl Simulation {
                 // triangles all went with their torn neighbours no longer holds anything.
                 report.torn = vanished_edges(self.topology.edges(), torn.edges());
                 self.topology = torn;
+                self.scratch.implicit.invalidate();
                 self.batches =
                     ConstraintBatches::new(&self.topology, &self.params, self.batches.part_count());
                 self.tethers = None;
@@ -499,6 +506,22 @@ impl Simulation {
     #[must_use]
     pub fn params(&self) -> &SolverParams {
         &self.params
+    }
+
+    /// How far the last step's bending was beyond what one projection per substep carries:
+    /// the largest `B h² Σ w_i a_i²` over the hinges (see [`BendingSolve`]). Below about 0.5
+    /// projected bending is the bending that was set; above it, unless the step solved it
+    /// implicitly ([`Self::implicit_bending`]), the cloth is softer than set. Zero without
+    /// XPBD isometric bending.
+    #[must_use]
+    pub fn bending_saturation(&self) -> f32 {
+        self.scratch.implicit.saturation()
+    }
+
+    /// Whether the last step solved bending implicitly (see [`BendingSolve`]).
+    #[must_use]
+    pub fn implicit_bending(&self) -> bool {
+        self.scratch.implicit.active()
     }
 
     /// The topology.

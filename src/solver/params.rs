@@ -38,19 +38,20 @@ pub enum Solver {
         bending: f32,
     },
     /// Extended PBD (Macklin et al. 2016): compliances (inverse stiffnesses) in physical
-    /// units. A converged solve gives the same material at any time step; at the default 10
-    /// substeps × 1 iteration the solve is not converged for stiff settings, so stiffness
-    /// beyond what a substep can enforce is lost (see the README's "Stiffness" section for
-    /// what was measured: cloth-soft bending is enforced, plate-stiff bending is not).
+    /// units. At the default 10 substeps × 1 iteration, stretch and shear are enforced only
+    /// as far as one Gauss–Seidel sweep per substep carries them (a fine mesh stretches);
+    /// isometric bending is enforced at any resolution and substep count within ±9 %
+    /// (implicitly where a projection could not, see [`BendingSolve`] and the README's
+    /// "Stiffness" section for what was measured).
     Xpbd {
         /// Compliance of stretch edges in m/N; `0` is inextensible.
         stretch: f32,
         /// Compliance of shear edges in m/N.
         shear: f32,
         /// Bending compliance `1/B` in 1/(N·m), `B` the flexural rigidity per unit width
-        /// (woven fabrics: `B` ≈ 1e-6 to 1e-4 N·m, so 1e4 to 1e6). The isometric model
-        /// makes it a material constant: the same at any mesh resolution. `f32::INFINITY`
-        /// switches bending off.
+        /// (woven fabrics: `B` ≈ 1e-6 to 1e-4 N·m, so 1e4 to 1e6). With the isometric model
+        /// it is a material constant: the same cloth at any mesh resolution (tested on a
+        /// cantilever, `tests/stiffness.rs`). `f32::INFINITY` switches bending off.
         bending: f32,
     },
 }
@@ -95,6 +96,27 @@ impl Default for Solver {
     }
 }
 
+/// How XPBD solves isometric bending (see the README's "Stiffness" section).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum BendingSolve {
+    /// Projected while a substep can carry the stiffness, implicit where it cannot (the
+    /// cloth's saturation above [`IMPLICIT_BENDING_SATURATION`]) and the solve is affordable
+    /// (up to [`IMPLICIT_BENDING_AUTO_WORK`], a 64 × 64 grid).
+    ///
+    /// [`IMPLICIT_BENDING_SATURATION`]: super::IMPLICIT_BENDING_SATURATION
+    /// [`IMPLICIT_BENDING_AUTO_WORK`]: super::IMPLICIT_BENDING_AUTO_WORK
+    #[default]
+    Auto,
+    /// Hinge by hinge, in the same sweep as the distances: cheapest, softer than set when the
+    /// saturation is above about 0.5.
+    Projected,
+    /// One sparse linear solve per substep (implicit Euler on the bending energy): the set
+    /// stiffness at any resolution, up to [`IMPLICIT_BENDING_MAX_WORK`].
+    ///
+    /// [`IMPLICIT_BENDING_MAX_WORK`]: super::IMPLICIT_BENDING_MAX_WORK
+    Implicit,
+}
+
 /// Everything a step needs to know about how to solve, apart from the cloth itself.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SolverParams {
@@ -117,6 +139,9 @@ pub struct SolverParams {
     /// How the cloth meets the air it moves through, with or without wind (PBD and XPBD; the
     /// lab solver has no air). [`Aerodynamics::NONE`] simulates a vacuum.
     pub air: Aerodynamics,
+    /// How XPBD solves isometric bending: projected or implicit (PBD, the lab solver and
+    /// dihedral bending always project).
+    pub bending_solve: BendingSolve,
 }
 
 impl Default for SolverParams {
@@ -129,6 +154,7 @@ impl Default for SolverParams {
             damping: 0.1,
             max_speed: 100.0,
             air: Aerodynamics::default(),
+            bending_solve: BendingSolve::Auto,
         }
     }
 }

@@ -6,6 +6,8 @@
 //! 2. every unpinned vertex: `x_prev ← x`, `v ← v/(1 + damping·h) + g·h`, then the air's
 //!    velocity change for this substep's velocity against the air's (see
 //!    [`air_velocity_change`]), then `x ← x + v·h`;
+//!    If bending is solved implicitly (see [`BendingSolve`](super::BendingSolve)), one banded
+//!    solve `(M + h²K) δ = −h²K x̃` follows, and the projections below skip bending;
 //! 3. `iterations` times: each part's constraints (in parallel), then the boundary's;
 //! 4. tethers, then self-collision (if on; one pass each);
 //! 5. colliders (if any), each part in parallel;
@@ -26,6 +28,7 @@ use glam::{Vec3, Vec4, Vec4Swizzles};
 use super::air::{Aerodynamics, air_velocity_change, vertex_area_vectors};
 use super::batches::{ConstraintBatches, Mode, Part};
 use super::collide::{Collider, ContactImpulse, SubstepPose, collide_vertex, substep_poses};
+use super::implicit::ImplicitBending;
 use super::lab::{LabScratch, lab_step};
 use super::parallel::Parallel;
 use super::params::{Solver, SolverParams};
@@ -34,7 +37,7 @@ use super::self_collision::{
 };
 use super::state::ClothState;
 use super::tether::Tethers;
-use super::topology::Topology;
+use super::topology::{BendingModel, Topology};
 
 /// What a step includes besides the cloth's own constraints. `StepInput::default()` is a
 /// cloth alone in the world.
@@ -62,6 +65,7 @@ pub struct StepScratch {
     impulses: Vec<ContactImpulse>,
     self_collision: SelfCollisionScratch,
     areas: Vec<Vec4>,
+    pub(crate) implicit: ImplicitBending,
 }
 
 impl StepScratch {
@@ -281,6 +285,21 @@ pub fn step(
         return;
     }
 
+    // Isometric XPBD bending too stiff for a projection per substep: one implicit solve.
+    let rigidity = match params.solver {
+        Solver::Xpbd { bending, .. } => 1.0 / bending,
+        _ => 0.0,
+    };
+    let implicit = batches.bending
+        && batches.mode_is_xpbd
+        && topology.options().effective_bending() == BendingModel::Isometric
+        && scratch.implicit.prepare(
+            topology,
+            &state.positions,
+            rigidity,
+            h,
+            params.bending_solve,
+        );
     let c = Consts {
         h,
         inv_h: 1.0 / h,
@@ -289,7 +308,7 @@ pub fn step(
         gravity: params.gravity,
         air: params.air,
         mode: batches.mode(h),
-        bending: batches.bending,
+        bending: batches.bending && !implicit,
         accumulate: batches.mode_is_xpbd && params.iterations > 1,
     };
     let air_velocities = if input.air_velocities.len() == state.len() {
@@ -351,10 +370,27 @@ pub fn step(
         substep_poses(colliders, s, substeps, &mut scratch.poses);
         let poses = &scratch.poses;
 
+        if implicit {
+            let phase = Phase {
+                finish_velocity: s > 0,
+                integrate: true,
+                ..Default::default()
+            };
+            run_parts(
+                &mut batches.parts,
+                state,
+                &mut scratch.part_impulses,
+                phase,
+                poses,
+            );
+            scratch
+                .implicit
+                .solve(topology, &mut state.positions, rigidity, h);
+        }
         for it in 0..params.iterations.max(1) {
             let phase = Phase {
-                finish_velocity: it == 0 && s > 0,
-                integrate: it == 0,
+                finish_velocity: it == 0 && s > 0 && !implicit,
+                integrate: it == 0 && !implicit,
                 project: true,
                 collide: false,
             };
