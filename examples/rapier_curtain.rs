@@ -66,7 +66,8 @@ fn setup(
     }
 }
 
-/// Throws a ball at the curtain every 0.8 s, at a different height each time.
+/// Throws a ball at the curtain every 0.8 s of the fixed clock, at one of five heights in
+/// turn (each ball is gone a second after it was thrown, so a few are in the air at most).
 fn throw(
     mut commands: Commands,
     time: Res<Time>,
@@ -75,10 +76,10 @@ fn throw(
     mut materials: Option<ResMut<Assets<StandardMaterial>>>,
 ) {
     let t = time.elapsed_secs();
-    if t < 0.5 + stats.thrown as f32 * 0.8 || stats.thrown >= 5 {
+    if t < 0.5 + stats.thrown as f32 * 0.8 {
         return;
     }
-    let k = stats.thrown as f32;
+    let k = (stats.thrown % 5) as f32;
     let mut ball = commands.spawn((
         Ball { launched: t },
         RigidBody::Dynamic,
@@ -140,12 +141,19 @@ fn report(world: &mut World) -> support::Json {
 fn main() {
     let args = Args::parse();
     let mut app = support::app(&args, "bevy_cloth: rapier curtain", 1.0 / 60.0);
-    app.add_plugins((
-        RapierPhysicsPlugin::<NoUserData>::default(),
+    // Rapier steps in FixedUpdate, one 1/60 s step per fixed step, like the cloth: when frames
+    // are slow both catch up together (rapier's default, a variable step of at most 1/60 s
+    // per frame, would fall behind the cloth and the throwing clock).
+    app.insert_resource(TimestepMode::Fixed {
+        dt: 1.0 / 60.0,
+        substeps: 1,
+    })
+    .add_plugins((
+        RapierPhysicsPlugin::<NoUserData>::default().in_fixed_schedule(),
         ClothRapierPlugin::default(),
     ))
     .init_resource::<Stats>()
     .add_systems(Startup, setup)
-    .add_systems(Update, (throw, measure));
+    .add_systems(FixedUpdate, (throw, measure));
     support::run(app, &args, report);
 }

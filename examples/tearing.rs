@@ -27,6 +27,9 @@ struct Torn {
 
 const N: u32 = 28;
 
+/// How long the hands pull, in seconds.
+const PULL_SECONDS: f32 = 2.5;
+
 fn setup(
     mut commands: Commands,
     mut meshes: ResMut<Assets<Mesh>>,
@@ -96,9 +99,11 @@ fn setup(
     }
 }
 
-/// After a second of hanging, the hands move apart at 0.4 m/s each.
+/// After a second of hanging, the hands move apart at 0.4 m/s each for 2.5 s (by then the
+/// cloth is in two pieces), then hold still. Runs in `FixedUpdate`, on the fixed clock: the
+/// pull is the same however slow the frames are, and the hands stay in view.
 fn pull(time: Res<Time>, mut hands: Query<(&Hand, &mut Transform)>) {
-    let t = (time.elapsed_secs() - 1.0).max(0.0);
+    let t = (time.elapsed_secs() - 1.0).clamp(0.0, PULL_SECONDS);
     for (hand, mut tr) in &mut hands {
         tr.translation.x = hand.0 * (0.7 + 0.4 * t);
     }

@@ -3,7 +3,8 @@
 //! Every example accepts `--headless` (no window, no GPU: `MinimalPlugins`, frames of the fixed
 //! time step), `--frames N` (stop after N frames; windowed runs otherwise go on until closed)
 //! and, windowed, `--screenshot FILE.png` (save the window after `--frames` frames, default 240,
-//! then exit); it ends by printing one JSON line of measurements.
+//! or once the fixed clock passes `--at SECONDS`, then exit); it ends by printing one JSON line
+//! of measurements.
 
 #![allow(dead_code, reason = "each example uses a different part")]
 
@@ -236,6 +237,8 @@ pub fn run(mut app: App, args: &Args, report: fn(&mut World) -> Json) {
     #[derive(Resource)]
     struct Limit {
         frames: Option<u32>,
+        /// Fixed-clock seconds after which to stop (the same moment however slow the frames).
+        at: Option<f64>,
         report: fn(&mut World) -> Json,
         screenshot: Option<String>,
         requested: bool,
@@ -245,7 +248,8 @@ pub fn run(mut app: App, args: &Args, report: fn(&mut World) -> Json) {
     fn stop(world: &mut World) {
         let frames = world.resource::<ClothTiming>().per_frame.len() as u32;
         let limit = world.resource::<Limit>();
-        let due = limit.frames.is_some_and(|m| frames >= m);
+        let clock = world.resource::<Time<Fixed>>().elapsed_secs_f64();
+        let due = limit.frames.is_some_and(|m| frames >= m) || limit.at.is_some_and(|t| clock >= t);
         let (report, shot, requested) = (limit.report, limit.screenshot.clone(), limit.requested);
         if !due {
             return;
@@ -270,9 +274,13 @@ pub fn run(mut app: App, args: &Args, report: fn(&mut World) -> Json) {
         world.write_message(AppExit::Success);
     }
     let screenshot = args.rest.get("screenshot").cloned();
-    let frames = args.frames.or(screenshot.as_ref().map(|_| 240));
+    let at = args.rest.contains_key("at").then(|| args.get("at", 0.0f64));
+    let frames = args
+        .frames
+        .or(screenshot.as_ref().filter(|_| at.is_none()).map(|_| 240));
     app.insert_resource(Limit {
         frames,
+        at,
         report,
         screenshot,
         requested: false,
