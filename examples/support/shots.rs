@@ -67,6 +67,67 @@ pub fn render(
     shots: &[Shot],
     out: Option<&Path>,
 ) -> Vec<Picture> {
+    let (mut app, cameras, targets) = build(size, scene, shots);
+    for _ in 0..frames {
+        app.update();
+    }
+    for &c in &cameras {
+        app.world_mut()
+            .get_mut::<Camera>(c)
+            .expect("camera")
+            .is_active = true;
+    }
+    // A few frames for pipelines, shadow maps and the mesh uploads to settle.
+    for _ in 0..4 {
+        app.update();
+    }
+    if let Some(dir) = out {
+        std::fs::create_dir_all(dir).expect("create the output folder");
+    }
+    let captured: Arc<Mutex<Vec<Option<Image>>>> = Arc::new(Mutex::new(vec![None; shots.len()]));
+    for (k, (image, shot)) in targets.iter().zip(shots).enumerate() {
+        let slot = captured.clone();
+        let mut screenshot = app.world_mut().spawn(Screenshot::image(image.clone()));
+        screenshot.observe(move |shot: On<ScreenshotCaptured>| {
+            slot.lock().expect("lock")[k] = Some(shot.image.clone());
+        });
+        if let Some(dir) = out {
+            screenshot.observe(save_to_disk(dir.join(format!("{}.png", shot.name))));
+        }
+    }
+    for _ in 0..120 {
+        app.update();
+        if captured.lock().expect("lock").iter().all(Option::is_some) {
+            break;
+        }
+    }
+    let images = std::mem::take(&mut *captured.lock().expect("lock"));
+    shots
+        .iter()
+        .zip(images)
+        .map(|(shot, image)| {
+            let image = image.unwrap_or_else(|| panic!("picture {} never arrived", shot.name));
+            if let Some(dir) = out {
+                let path = dir.join(format!("{}.png", shot.name));
+                assert!(path.exists(), "{} was not saved", path.display());
+            }
+            Picture {
+                name: shot.name,
+                width: image.width(),
+                height: image.height(),
+                rgba: image.data.expect("picture without data"),
+            }
+        })
+        .collect()
+}
+
+/// The windowless app with `scene` and one inactive camera per shot rendering into its own
+/// image: `(app, cameras, images)`.
+fn build(
+    size: UVec2,
+    scene: impl FnOnce(&mut App),
+    shots: &[Shot],
+) -> (App, Vec<Entity>, Vec<Handle<Image>>) {
     let mut app = App::new();
     app.add_plugins(
         DefaultPlugins
@@ -123,49 +184,54 @@ pub fn render(
         cameras.push(camera);
         targets.push(image);
     }
+    (app, cameras, targets)
+}
+
+/// Renders `count` pictures of `shot`, one every `every` simulated frames of 1/60 s, after
+/// `frames` frames: the frames of an animation. Panics if a picture does not arrive.
+pub fn render_animation(
+    size: UVec2,
+    frames: u32,
+    scene: impl FnOnce(&mut App),
+    shot: &Shot,
+    count: usize,
+    every: u32,
+) -> Vec<Picture> {
+    let (mut app, cameras, targets) = build(size, scene, core::slice::from_ref(shot));
     for _ in 0..frames {
         app.update();
     }
-    for &c in &cameras {
-        app.world_mut()
-            .get_mut::<Camera>(c)
-            .expect("camera")
-            .is_active = true;
-    }
-    // A few frames for pipelines, shadow maps and the mesh uploads to settle.
+    app.world_mut()
+        .get_mut::<Camera>(cameras[0])
+        .expect("camera")
+        .is_active = true;
     for _ in 0..4 {
         app.update();
     }
-    if let Some(dir) = out {
-        std::fs::create_dir_all(dir).expect("create the output folder");
-    }
-    let captured: Arc<Mutex<Vec<Option<Image>>>> = Arc::new(Mutex::new(vec![None; shots.len()]));
-    for (k, (image, shot)) in targets.iter().zip(shots).enumerate() {
+    let captured: Arc<Mutex<Vec<Option<Image>>>> = Arc::new(Mutex::new(vec![None; count]));
+    for k in 0..count {
         let slot = captured.clone();
-        let mut screenshot = app.world_mut().spawn(Screenshot::image(image.clone()));
-        screenshot.observe(move |shot: On<ScreenshotCaptured>| {
-            slot.lock().expect("lock")[k] = Some(shot.image.clone());
-        });
-        if let Some(dir) = out {
-            screenshot.observe(save_to_disk(dir.join(format!("{}.png", shot.name))));
+        app.world_mut()
+            .spawn(Screenshot::image(targets[0].clone()))
+            .observe(move |shot: On<ScreenshotCaptured>| {
+                slot.lock().expect("lock")[k] = Some(shot.image.clone());
+            });
+        for _ in 0..every.max(1) {
+            app.update();
         }
     }
     for _ in 0..120 {
-        app.update();
         if captured.lock().expect("lock").iter().all(Option::is_some) {
             break;
         }
+        app.update();
     }
     let images = std::mem::take(&mut *captured.lock().expect("lock"));
-    shots
-        .iter()
-        .zip(images)
-        .map(|(shot, image)| {
-            let image = image.unwrap_or_else(|| panic!("picture {} never arrived", shot.name));
-            if let Some(dir) = out {
-                let path = dir.join(format!("{}.png", shot.name));
-                assert!(path.exists(), "{} was not saved", path.display());
-            }
+    images
+        .into_iter()
+        .enumerate()
+        .map(|(k, image)| {
+            let image = image.unwrap_or_else(|| panic!("frame {k} of {} never arrived", shot.name));
             Picture {
                 name: shot.name,
                 width: image.width(),
@@ -301,12 +367,9 @@ fn spawn_velvet_scene(
     commands.spawn((
         WindZone {
             wind: WindParams {
-                velocity: Vec3::new(5.0, 0.0, -1.2),
-                gust_amplitude: 0.4,
-                gust_frequency: 1.5,
-                turbulence: 0.4,
-                turbulence_scale: 1.2,
+                velocity: Vec3::new(7.0, 0.0, -1.4),
                 seed: 3,
+                ..default()
             },
             half_extents: Vec3::new(6.0, 5.0, 6.0),
             falloff: 2.0,
@@ -330,14 +393,9 @@ fn spawn_velvet_scene(
             mass: 0.4,
             ..default()
         },
+        // The default fabric, air and solver, as in the flag example.
         ClothConfig {
             substeps: 12,
-            solver: Solver::Xpbd {
-                stretch: 0.0,
-                shear: 1e-6,
-                bending: 0.5,
-            },
-            damping: 0.2,
             ..default()
         },
         ClothPins::rest((0..grid.rows).map(|j| grid.index(0, j))),
