@@ -68,19 +68,7 @@ pub fn render(
     out: Option<&Path>,
 ) -> Vec<Picture> {
     let (mut app, cameras, targets) = build(size, scene, shots);
-    for _ in 0..frames {
-        app.update();
-    }
-    for &c in &cameras {
-        app.world_mut()
-            .get_mut::<Camera>(c)
-            .expect("camera")
-            .is_active = true;
-    }
-    // A few frames for pipelines, shadow maps and the mesh uploads to settle.
-    for _ in 0..4 {
-        app.update();
-    }
+    warm_up(&mut app, &cameras, frames);
     if let Some(dir) = out {
         std::fs::create_dir_all(dir).expect("create the output folder");
     }
@@ -111,14 +99,37 @@ pub fn render(
                 let path = dir.join(format!("{}.png", shot.name));
                 assert!(path.exists(), "{} was not saved", path.display());
             }
-            Picture {
-                name: shot.name,
-                width: image.width(),
-                height: image.height(),
-                rgba: image.data.expect("picture without data"),
-            }
+            Picture::new(shot.name, image)
         })
         .collect()
+}
+
+impl Picture {
+    fn new(name: &'static str, image: Image) -> Self {
+        Picture {
+            name,
+            width: image.width(),
+            height: image.height(),
+            rgba: image.data.expect("picture without data"),
+        }
+    }
+}
+
+/// Runs `frames` frames with the cameras off, then turns them on and gives pipelines, shadow
+/// maps and the mesh uploads a few frames to settle.
+fn warm_up(app: &mut App, cameras: &[Entity], frames: u32) {
+    for _ in 0..frames {
+        app.update();
+    }
+    for &c in cameras {
+        app.world_mut()
+            .get_mut::<Camera>(c)
+            .expect("camera")
+            .is_active = true;
+    }
+    for _ in 0..4 {
+        app.update();
+    }
 }
 
 /// The windowless app with `scene` and one inactive camera per shot rendering into its own
@@ -198,16 +209,7 @@ pub fn render_animation(
     every: u32,
 ) -> Vec<Picture> {
     let (mut app, cameras, targets) = build(size, scene, core::slice::from_ref(shot));
-    for _ in 0..frames {
-        app.update();
-    }
-    app.world_mut()
-        .get_mut::<Camera>(cameras[0])
-        .expect("camera")
-        .is_active = true;
-    for _ in 0..4 {
-        app.update();
-    }
+    warm_up(&mut app, &cameras, frames);
     let captured: Arc<Mutex<Vec<Option<Image>>>> = Arc::new(Mutex::new(vec![None; count]));
     for k in 0..count {
         let slot = captured.clone();
@@ -232,12 +234,7 @@ pub fn render_animation(
         .enumerate()
         .map(|(k, image)| {
             let image = image.unwrap_or_else(|| panic!("frame {k} of {} never arrived", shot.name));
-            Picture {
-                name: shot.name,
-                width: image.width(),
-                height: image.height(),
-                rgba: image.data.expect("picture without data"),
-            }
+            Picture::new(shot.name, image)
         })
         .collect()
 }
