@@ -37,9 +37,10 @@ use std::time::Instant;
 use bevy::tasks::TaskPoolBuilder;
 use bevy_cloth::cloth::TaskPoolParallel;
 use bevy_cloth::solver::{
-    Aerodynamics, BendingModel, Collider, Environment, Features, Grid, MassDistribution, Pin, Pose,
-    SelfCollision, Shape, Simulation, Solver, SolverParams, TetherParams, TopologyOptions,
-    WindField, WindParams, position_distance,
+    Aerodynamics, BendingModel, Collider, DEFAULT_BENDING_COMPLIANCE, Environment, Features, Grid,
+    ManyItem, MassDistribution, Pin, Pose, SelfCollision, Shape, Simulation, Sleep, Solver,
+    SolverParams, TetherParams, TopologyOptions, WindField, WindParams, position_distance,
+    step_many,
 };
 use glam::Vec4;
 use support::{Args, Json};
@@ -63,12 +64,43 @@ fn list<T: std::str::FromStr + Clone>(args: &Args, key: &str, default: &[T]) -> 
     }
 }
 
-fn solver(name: &str, h: f32) -> Solver {
+/// The bending model of the standard scene: the library's default (isometric, with the
+/// default fabric's `B` = 1e-4 N·m) or the dihedral model with the peer's setting.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Bending {
+    Isometric,
+    Dihedral,
+}
+
+impl Bending {
+    fn parse(args: &Args) -> Self {
+        match args.rest.get("bending").map(String::as_str) {
+            None | Some("isometric") => Bending::Isometric,
+            Some("dihedral") => Bending::Dihedral,
+            Some(other) => {
+                eprintln!("--bending {other:?}: use isometric or dihedral");
+                std::process::exit(2)
+            }
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Bending::Isometric => "isometric",
+            Bending::Dihedral => "dihedral",
+        }
+    }
+}
+
+fn solver(name: &str, h: f32, bending: Bending) -> Solver {
     match name {
         "xpbd" => Solver::Xpbd {
             stretch: 0.0,
             shear: 1e-6,
-            bending: 1e-3,
+            bending: match bending {
+                Bending::Isometric => DEFAULT_BENDING_COMPLIANCE,
+                Bending::Dihedral => 1e-3,
+            },
         },
         "pbd" => Solver::Pbd {
             stretch: 1.0,
@@ -85,21 +117,26 @@ fn solver(name: &str, h: f32) -> Solver {
     }
 }
 
-fn scene(n: u32, name: &str, substeps: u32, iterations: u32) -> Simulation {
+fn scene(n: u32, name: &str, substeps: u32, iterations: u32, bending: Bending) -> Simulation {
     let grid = Grid::new(n, n, 1.0, 1.0);
     let topology = grid
         .topology(TopologyOptions {
-            bending: BendingModel::Dihedral,
+            bending: match bending {
+                Bending::Isometric => BendingModel::Isometric,
+                Bending::Dihedral => BendingModel::Dihedral,
+            },
             ..Default::default()
         })
         .unwrap();
     let masses = topology.masses(1.0, MassDistribution::Uniform);
     let params = SolverParams {
-        solver: solver(name, DT / substeps as f32),
+        solver: solver(name, DT / substeps as f32, bending),
         substeps,
         iterations,
         damping: DAMPING,
         air: Aerodynamics::NONE,
+        // Measured awake: the scene never comes to rest within its 60 frames anyway.
+        sleep: Sleep::NEVER,
         ..Default::default()
     };
     let mut sim = Simulation::new(topology, &masses, params).unwrap();
@@ -231,7 +268,7 @@ fn scene_costs(args: &Args, par: &TaskPoolParallel, threads: usize) {
     for n in list(args, "sizes", &[64u32, 256]) {
         for v in variants {
             let make = || {
-                let mut sim = scene(n, "xpbd", 10, 1);
+                let mut sim = scene(n, "xpbd", 10, 1, Bending::parse(args));
                 let spacing = 1.0 / (n - 1) as f32;
                 sim.set_features(Features {
                     self_collision: v.self_collision.then_some(SelfCollision {
@@ -290,6 +327,85 @@ fn scene_costs(args: &Args, par: &TaskPoolParallel, threads: usize) {
     }
 }
 
+/// Median ms per frame of stepping all of `sims` together with [`step_many`] (best of
+/// `repeat` runs of `frames` frames, fresh cloths each run).
+fn time_many(
+    make: impl Fn() -> Vec<Simulation>,
+    frames: usize,
+    repeat: usize,
+    par: &TaskPoolParallel,
+) -> f64 {
+    let mut best = f64::INFINITY;
+    for _ in 0..repeat.max(1) {
+        let mut sims = make();
+        let mut times = Vec::with_capacity(frames);
+        for _ in 0..frames {
+            let mut items: Vec<ManyItem<'_>> = sims
+                .iter_mut()
+                .map(|sim| ManyItem {
+                    sim,
+                    report: Default::default(),
+                })
+                .collect();
+            let t = Instant::now();
+            step_many(&mut items, DT, &Environment::default(), par);
+            times.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        times.drain(..WARMUP.min(frames / 2));
+        times.sort_by(f64::total_cmp);
+        best = best.min(times[times.len() / 2]);
+    }
+    best
+}
+
+/// `--many`: 64 cloths of 16² against one of 128² (the same vertex count), and one 128² with
+/// 64 × 16² on all threads against one thread, all on the standard scene (XPBD 10 × 1).
+fn many(args: &Args, par: &TaskPoolParallel, threads: usize, bending: Bending) {
+    let frames = args.frames.unwrap_or(60) as usize;
+    let repeat: usize = args.get("repeat", 3);
+    let serial_pool = TaskPoolBuilder::new().num_threads(0).build();
+    let serial = TaskPoolParallel(&serial_pool);
+    let big = || vec![scene(128, "xpbd", 10, 1, bending)];
+    let small = || (0..64).map(|_| scene(16, "xpbd", 10, 1, bending)).collect();
+    let mixed = || {
+        let mut v = big();
+        v.extend(small());
+        v
+    };
+    let one = time_many(big, frames, repeat, par);
+    let sixty_four = time_many(small, frames, repeat, par);
+    let mixed_all = time_many(mixed, frames, repeat, par);
+    let mixed_one = time_many(mixed, frames, repeat, &serial);
+    for (name, ms) in [
+        ("one_128", one),
+        ("64_of_16", sixty_four),
+        ("128_and_64_of_16", mixed_all),
+        ("128_and_64_of_16_one_thread", mixed_one),
+    ] {
+        println!(
+            "{}",
+            Json::default()
+                .str("many", name)
+                .num("ms_per_frame", (ms * 1e4).round() / 1e4)
+                .num(
+                    "threads",
+                    if name.ends_with("one_thread") {
+                        1
+                    } else {
+                        threads as u32
+                    }
+                )
+        );
+    }
+    println!(
+        "{}",
+        Json::default()
+            .str("summary", "many_cloths")
+            .num("ratio_64_of_16_to_one_128", sixty_four / one)
+            .num("mixed_speedup_all_threads", mixed_one / mixed_all)
+    );
+}
+
 fn main() {
     let args = Args::parse();
     let quick = args.rest.contains_key("quick");
@@ -322,6 +438,7 @@ fn main() {
     );
     let reference_substeps: u32 = args.get("reference-substeps", 100);
     let repeat: usize = args.get("repeat", 3);
+    let bending = Bending::parse(&args);
     // The calling thread works too: a pool of threads − 1 keeps one thread per core
     // (with `--threads 1` the pool is empty and parts run one after another).
     let pool = TaskPoolBuilder::new()
@@ -332,10 +449,19 @@ fn main() {
         scene_costs(&args, &par, threads);
         return;
     }
+    if args.rest.contains_key("many") {
+        many(&args, &par, threads, bending);
+        return;
+    }
     let mut rows: Vec<(String, u32, u32, u32, Outcome)> = Vec::new();
 
     for &n in &sizes {
-        let reference = simulate(|| scene(n, "xpbd", reference_substeps, 1), frames, 1, &par);
+        let reference = simulate(
+            || scene(n, "xpbd", reference_substeps, 1, bending),
+            frames,
+            1,
+            &par,
+        );
         for name in &solvers {
             let (default_s, default_i): (&[u32], &[u32]) = match (name.as_str(), quick) {
                 ("lab", true) => (&[1], &[32]),
@@ -345,7 +471,7 @@ fn main() {
             };
             for &s in substeps.as_deref().unwrap_or(default_s) {
                 for &i in iterations.as_deref().unwrap_or(default_i) {
-                    let mut out = simulate(|| scene(n, name, s, i), frames, repeat, &par);
+                    let mut out = simulate(|| scene(n, name, s, i, bending), frames, repeat, &par);
                     let (ref_mean, ref_max) =
                         position_distance(&out.positions, &reference.positions);
                     out.ref_mean = ref_mean;
@@ -353,6 +479,7 @@ fn main() {
                         "{}",
                         Json::default()
                             .str("solver", name)
+                            .str("bending", bending.name())
                             .num("n", n)
                             .num("substeps", s)
                             .num("iterations", i)

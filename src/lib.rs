@@ -58,7 +58,7 @@ pub mod prelude {
         VelvetExtension, VelvetMaterial, VelvetPlugin, velvet_material, velvet_material_from,
     };
     pub use crate::solver::{
-        Aerodynamics, BendRest, BendingModel, BendingSolve, Grid, MassDistribution, Solver,
+        Aerodynamics, BendRest, BendingModel, BendingSolve, Grid, MassDistribution, Sleep, Solver,
         WindParams,
     };
     pub use crate::wind::{Wind, WindZone};

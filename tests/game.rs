@@ -929,3 +929,69 @@ fn a_gltf_banner_with_a_uv_seam_drapes_over_a_gltf_statue() {
         assert_eq!(pos[v], pos[cloth.weld().representative(p) as usize]);
     }
 }
+
+#[test]
+fn a_cloth_at_rest_sleeps_keeps_its_mesh_and_wakes_when_its_pole_moves() {
+    let mut app = app();
+    let pole = app
+        .world_mut()
+        .spawn(Transform::from_xyz(0.0, 2.0, 0.0))
+        .id();
+    let mesh = add_mesh(&mut app, grid_mesh(&GRID));
+    let anchor = |v: u32| ClothPin {
+        vertex: v,
+        anchor: PinAnchor::Entity {
+            entity: pole,
+            offset: GRID.positions()[v as usize],
+        },
+    };
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(0.0, 2.0, 0.0),
+            Cloth::default(),
+            // Damped: comes to rest within seconds.
+            ClothConfig {
+                damping: 2.0,
+                ..default()
+            },
+            ClothPins(vec![anchor(GRID.index(0, 0)), anchor(GRID.index(15, 0))]),
+        ))
+        .id();
+    run(&mut app, 5);
+    let mut frames = 5;
+    while !sim(&app, e).is_sleeping() {
+        run(&mut app, 1);
+        frames += 1;
+        assert!(frames < 1200, "not asleep after 20 s");
+    }
+    // Asleep: the mesh is not rewritten (no asset change) and nothing moves.
+    let before = attr3(mesh_of(&app, e), Mesh::ATTRIBUTE_POSITION);
+    let steps = sim(&app, e).steps();
+    run(&mut app, 30);
+    assert!(sim(&app, e).is_sleeping());
+    assert_eq!(before, attr3(mesh_of(&app, e), Mesh::ATTRIBUTE_POSITION));
+    assert!(sim(&app, e).steps() > steps);
+    // The pole moves: it wakes in the next fixed step and follows.
+    app.world_mut()
+        .get_mut::<Transform>(pole)
+        .unwrap()
+        .translation
+        .z += 0.3;
+    run(&mut app, 2);
+    assert!(!sim(&app, e).is_sleeping());
+    run(&mut app, 120);
+    let after = attr3(mesh_of(&app, e), Mesh::ATTRIBUTE_POSITION);
+    let (top, bottom) = (GRID.index(0, 0) as usize, GRID.index(8, 15) as usize);
+    assert!(
+        (after[top].z - before[top].z - 0.3).abs() < 1e-3,
+        "the pin follows the pole"
+    );
+    assert!(
+        after[bottom].z > before[bottom].z + 0.15,
+        "the cloth follows: {} → {}",
+        before[bottom].z,
+        after[bottom].z
+    );
+}

@@ -4,7 +4,8 @@ use bevy::prelude::*;
 use bevy::reflect::impl_reflect_opaque;
 
 use crate::solver::{
-    Aerodynamics, BendRest, BendingModel, BendingSolve, MassDistribution, Solver, SolverParams,
+    Aerodynamics, BendRest, BendingModel, BendingSolve, MassDistribution, Sleep, Solver,
+    SolverParams,
 };
 
 impl_reflect_opaque!((in bevy_cloth::solver) Solver(Debug, Clone, PartialEq));
@@ -13,6 +14,7 @@ impl_reflect_opaque!((in bevy_cloth::solver) BendingModel(Debug, Clone, PartialE
 impl_reflect_opaque!((in bevy_cloth::solver) Aerodynamics(Debug, Clone, PartialEq, Default));
 impl_reflect_opaque!((in bevy_cloth::solver) BendingSolve(Debug, Clone, PartialEq, Default));
 impl_reflect_opaque!((in bevy_cloth::solver) MassDistribution(Debug, Clone, PartialEq, Default));
+impl_reflect_opaque!((in bevy_cloth::solver) Sleep(Debug, Clone, PartialEq, Default));
 
 /// Marks an entity with a [`Mesh3d`] as cloth: the plugin simulates its vertices.
 ///
@@ -180,6 +182,10 @@ pub struct ClothConfig {
     pub air: Aerodynamics,
     /// How XPBD solves isometric bending (see [`BendingSolve`]).
     pub bending_solve: BendingSolve,
+    /// When the cloth at rest stops being stepped (see [`Sleep`]; [`Sleep::NEVER`] keeps it
+    /// awake). [`ClothSim::is_sleeping`](crate::cloth::ClothSim::is_sleeping) says whether it
+    /// sleeps.
+    pub sleep: Sleep,
 }
 
 impl Default for ClothConfig {
@@ -199,6 +205,7 @@ impl From<SolverParams> for ClothConfig {
             max_speed: p.max_speed,
             air: p.air,
             bending_solve: p.bending_solve,
+            sleep: p.sleep,
         }
     }
 }
@@ -214,6 +221,7 @@ impl From<ClothConfig> for SolverParams {
             max_speed: c.max_speed,
             air: c.air,
             bending_solve: c.bending_solve,
+            sleep: c.sleep,
         }
     }
 }

@@ -5,8 +5,9 @@ use bevy::tasks::{ComputeTaskPool, TaskPool};
 
 use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
 use crate::solver::{
-    Environment, Features, MeshBinding, Parallel, Pin, SelfCollision, Serial, Simulation,
-    SolverError, SolverParams, StateError, TetherParams, TopologyOptions, Weld,
+    Environment, Features, ManyItem, MeshBinding, Parallel, Pin, SelfCollision, Serial, Simulation,
+    SolverError, SolverParams, StateError, StepReport, TetherParams, TopologyOptions, Weld,
+    step_many,
 };
 use crate::wind::ClothWindField;
 
@@ -209,6 +210,14 @@ impl ClothSim {
     pub fn rejected(&self) -> Option<&ClothError> {
         self.settings_error.as_ref().or(self.pins_error.as_ref())
     }
+
+    /// Whether the cloth is asleep: it came to rest, its steps are skipped and its mesh is not
+    /// rewritten until a pin, a collider near it, the wind at it or its settings change
+    /// ([`ClothConfig::sleep`](crate::cloth::ClothConfig::sleep) sets when).
+    #[must_use]
+    pub fn is_sleeping(&self) -> bool {
+        self.sim.is_sleeping()
+    }
 }
 
 /// The mesh a cloth was built from and the cloth's own copy of it (which its [`Mesh3d`] shows
@@ -239,6 +248,11 @@ impl Parallel for TaskPoolParallel<'_> {
                 s.spawn(async move { f(item) });
             }
         });
+    }
+
+    fn threads(&self) -> usize {
+        // The pool's threads and the thread that waits on the scope, which works too.
+        self.0.thread_num() + 1
     }
 }
 
@@ -760,12 +774,25 @@ pub(crate) fn step_cloths(
         time: wind.as_deref().map_or(0.0, |w| w.time),
     };
     let pool = ComputeTaskPool::try_get();
-    for (entity, mut cloth) in &mut cloths {
+    // Big cloths one after another with their parts in parallel, then the small ones in
+    // parallel with each other (`step_many`).
+    let mut list: Vec<(Entity, Mut<ClothSim>)> = cloths.iter_mut().collect();
+    let reports: Vec<StepReport> = {
+        let mut items: Vec<ManyItem<'_>> = list
+            .iter_mut()
+            .map(|(_, c)| ManyItem {
+                sim: &mut c.sim,
+                report: StepReport::default(),
+            })
+            .collect();
+        match pool {
+            Some(pool) => step_many(&mut items, dt, &env, &TaskPoolParallel(pool)),
+            None => step_many(&mut items, dt, &env, &Serial),
+        }
+        items.into_iter().map(|i| i.report).collect()
+    };
+    for ((entity, mut cloth), report) in list.into_iter().zip(reports) {
         let cloth = &mut *cloth;
-        let report = match pool {
-            Some(pool) => cloth.sim.step_in(dt, &env, &TaskPoolParallel(pool)),
-            None => cloth.sim.step_in(dt, &env, &Serial),
-        };
         if report.recovered {
             // The solver already reset to its rest shape where the cloth was created; place
             // the rest shape where the entity is now.
@@ -802,6 +829,7 @@ pub(crate) fn step_cloths(
             });
         }
         cloth.steps += 1;
-        cloth.dirty = true;
+        // A sleeping cloth did not move: its mesh stays as it is.
+        cloth.dirty |= !report.asleep;
     }
 }

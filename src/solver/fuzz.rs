@@ -13,7 +13,7 @@ use glam::{Quat, Vec3};
 
 use super::{
     Aerodynamics, BendingSolve, Collider, Environment, Features, MassDistribution, Pin, Pose,
-    SdfGrid, SelfCollision, Serial, Shape, Simulation, Solver, SolverParams, TetherParams,
+    SdfGrid, SelfCollision, Serial, Shape, Simulation, Sleep, Solver, SolverParams, TetherParams,
     Topology, TopologyOptions, WindField, WindParams,
 };
 
@@ -142,6 +142,8 @@ pub fn fuzz_one(bytes: &[u8]) -> FuzzOutcome {
         air: Aerodynamics::default(),
         // Auto: bending as compliant as 1e-3 takes the implicit path on most of these meshes.
         bending_solve: BendingSolve::Auto,
+        // Default sleep: fuzzed cloths that come to rest fall asleep and must stay finite.
+        sleep: Sleep::default(),
     };
     let mut sim = match Simulation::new(topology, &masses, params) {
         Ok(s) => s,

@@ -9,6 +9,12 @@ pub trait Parallel: Sync {
     /// Calls `f` once for every item; returns when all calls have returned. Items may be
     /// processed in any order and concurrently: `f` must not depend on the order.
     fn for_each_mut<T: Send, F: Fn(&mut T) + Sync>(&self, items: &mut [T], f: F);
+
+    /// How many items can run at once (threads working, the calling one included); used to
+    /// balance work, never for correctness.
+    fn threads(&self) -> usize {
+        1
+    }
 }
 
 /// Runs everything on the calling thread, in order.

@@ -6,6 +6,7 @@
 use glam::Vec3;
 
 use super::air::Aerodynamics;
+use super::sleep::Sleep;
 
 /// Relaxation weight of the lab rule (seed 000): `x ← (0.2·x + Σx)/(0.2 + n)`.
 pub const LAB_WEIGHT: f32 = 0.2;
@@ -142,6 +143,8 @@ pub struct SolverParams {
     /// How XPBD solves isometric bending: projected or implicit (PBD, the lab solver and
     /// dihedral bending always project).
     pub bending_solve: BendingSolve,
+    /// When the cloth at rest stops being stepped ([`Sleep::NEVER`] keeps it always awake).
+    pub sleep: Sleep,
 }
 
 impl Default for SolverParams {
@@ -155,6 +158,7 @@ impl Default for SolverParams {
             max_speed: 100.0,
             air: Aerodynamics::default(),
             bending_solve: BendingSolve::Auto,
+            sleep: Sleep::default(),
         }
     }
 }
@@ -198,6 +202,9 @@ impl SolverParams {
     /// Largest accepted speed limit, m/s (ten times the speed of sound in air: nothing a cloth
     /// survives).
     pub const MAX_SPEED: f32 = 3.5e3;
+    /// Largest accepted [`Sleep::energy`], J/kg (an rms speed of about 1.4 m/s: a cloth
+    /// moving that fast is not at rest).
+    pub const MAX_SLEEP_ENERGY: f32 = 1.0;
 
     /// Checks every parameter and says which one is wrong.
     ///
@@ -235,6 +242,12 @@ impl SolverParams {
             });
         }
         self.air.validate()?;
+        check_range(
+            "sleep.energy",
+            self.sleep.energy,
+            0.0,
+            Self::MAX_SLEEP_ENERGY,
+        )?;
         match self.solver {
             Solver::Lab { velocity_keep } => check_range("velocity_keep", velocity_keep, 0.0, 1.0),
             Solver::Pbd {

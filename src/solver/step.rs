@@ -383,9 +383,7 @@ pub fn step(
                 phase,
                 poses,
             );
-            scratch
-                .implicit
-                .solve(topology, &mut state.positions, rigidity, h);
+            scratch.implicit.solve(topology, &mut state.positions, h);
         }
         for it in 0..params.iterations.max(1) {
             let phase = Phase {

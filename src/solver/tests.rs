@@ -374,3 +374,81 @@ fn simd_and_scalar_projection_agree() {
     );
     assert!(moved > 1e-3);
 }
+
+/// Runs items on scoped OS threads, several at once.
+struct Threads;
+
+impl Parallel for Threads {
+    fn for_each_mut<T: Send, F: Fn(&mut T) + Sync>(&self, items: &mut [T], f: F) {
+        let f = &f;
+        std::thread::scope(|s| {
+            for chunk in items.chunks_mut(3) {
+                s.spawn(move || chunk.iter_mut().for_each(f));
+            }
+        });
+    }
+
+    fn threads(&self) -> usize {
+        4
+    }
+}
+
+#[test]
+fn step_many_gives_each_cloth_what_stepping_it_alone_gives() {
+    // Small cloths and one big enough to be cut into parts, pinned differently.
+    let make = |n: u32, pinned: u32| {
+        let grid = Grid::new(n, n, 1.0, 1.0);
+        let topology = grid.topology(TopologyOptions::default()).unwrap();
+        let masses = topology.masses(1.0, MassDistribution::Uniform);
+        let mut sim = Simulation::new(topology, &masses, SolverParams::default()).unwrap();
+        let rest = grid.positions();
+        sim.state_mut()
+            .set_pins((0..pinned).map(|i| {
+                let v = grid.index(i * (n - 1) / pinned.max(2).saturating_sub(1).max(1), 0);
+                Pin {
+                    vertex: v,
+                    target: rest[v as usize],
+                }
+            }))
+            .unwrap();
+        sim
+    };
+    let sizes = [(70, 2), (8, 1), (12, 2), (16, 3), (9, 2), (20, 2), (8, 2)];
+    let mut together: Vec<Simulation> = sizes.iter().map(|&(n, p)| make(n, p)).collect();
+    let mut alone = together.clone();
+    assert!(together[0].batches().part_count() > 1);
+    let sphere = [Collider::fixed(
+        Shape::Sphere { radius: 0.3 },
+        Pose::at(Vec3::new(0.0, -0.6, 0.0)),
+        0.01,
+        0.3,
+    )];
+    let env = Environment {
+        colliders: &sphere,
+        ..Default::default()
+    };
+    for _ in 0..20 {
+        let mut items: Vec<ManyItem<'_>> = together
+            .iter_mut()
+            .map(|sim| ManyItem {
+                sim,
+                report: StepReport::default(),
+            })
+            .collect();
+        step_many(&mut items, 1.0 / 60.0, &env, &Threads);
+        for sim in &mut alone {
+            sim.step_in(1.0 / 60.0, &env, &Serial);
+        }
+    }
+    for (i, (a, b)) in together.iter().zip(&alone).enumerate() {
+        assert_eq!(a.state().positions, b.state().positions, "cloth {i}");
+        // And they moved.
+        let moved = a
+            .state()
+            .positions
+            .iter()
+            .zip(a.topology().rest_positions())
+            .any(|(p, r)| p.xyz().distance(*r) > 0.01);
+        assert!(moved, "cloth {i}");
+    }
+}

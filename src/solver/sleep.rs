@@ -1,0 +1,449 @@
+//! Cloth at rest costs almost nothing: a cloth whose kinetic energy stays low for a while
+//! stops being stepped until something that could move it changes.
+//!
+//! After each step the solver measures the cloth's mean kinetic energy per kilogram,
+//! `½ Σ mᵢ|vᵢ|² / Σ mᵢ` over its free vertices. When it stays below [`Sleep::energy`] for
+//! [`Sleep::steps`] steps in a row, the cloth falls asleep: its velocities are zeroed and
+//! [`Simulation::step_in`](super::Simulation::step_in) returns at once, leaving positions
+//! exactly as they were. What it remembers when it falls asleep decides when it wakes (in
+//! the step where the change is seen, before that step is taken):
+//!
+//! - a pin is added, removed, or its target moves by more than [`WAKE_DISTANCE`];
+//! - a collider whose bounding ball reaches the cloth's bounds appears, disappears, moves
+//!   (by more than [`WAKE_DISTANCE`] or turns), or changes shape, thickness or friction;
+//! - the air at the cloth (sampled at the centre and the 8 corners of its bounds) changes by
+//!   more than [`WAKE_AIR_SPEED`], for a cloth that feels the air;
+//! - its settings or features change, it is reset, or [`Simulation::wake`] is called
+//!   (moving vertices through `state_mut` alone does not wake it).
+//!
+//! While asleep a step costs the comparison above: the pins, the colliders and nine wind
+//! samples, nothing per vertex.
+//!
+//! [`Simulation::wake`]: super::Simulation::wake
+
+use std::sync::Arc;
+
+use glam::{Vec3, Vec4, Vec4Swizzles};
+
+use super::collide::{Collider, Pose, Shape};
+use super::state::Pin;
+use super::wind::WindField;
+
+/// A pin target or a collider moving more than this (metres) wakes a sleeping cloth.
+pub const WAKE_DISTANCE: f32 = 1e-4;
+
+/// The air at a sleeping cloth changing by more than this (m/s) wakes it.
+pub const WAKE_AIR_SPEED: f32 = 0.05;
+
+/// When a cloth at rest stops being stepped (see [`SolverParams::sleep`](super::SolverParams::sleep)).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sleep {
+    /// Mean kinetic energy per kilogram, J/kg (= m²/s²), below which a step counts as quiet:
+    /// `½ v²` of the mass-weighted mean squared speed. The default, `5e-6`, is an rms speed
+    /// of about 3 mm/s. `0` never sleeps.
+    pub energy: f32,
+    /// Quiet steps in a row after which the cloth sleeps (default 30: half a second at 60 Hz).
+    pub steps: u32,
+}
+
+impl Sleep {
+    /// Never sleeps.
+    pub const NEVER: Sleep = Sleep {
+        energy: 0.0,
+        steps: 0,
+    };
+
+    /// Whether this setting can ever put a cloth to sleep.
+    #[must_use]
+    pub fn enabled(&self) -> bool {
+        self.energy > 0.0 && self.steps > 0
+    }
+}
+
+impl Default for Sleep {
+    fn default() -> Self {
+        Self {
+            energy: 5e-6,
+            steps: 30,
+        }
+    }
+}
+
+/// Mean kinetic energy per kilogram of the free vertices (`w > 0` in `positions`).
+#[must_use]
+pub fn kinetic_energy_per_kg(positions: &[Vec4], velocities: &[Vec4]) -> f32 {
+    let mut energy = 0.0f64;
+    let mut mass = 0.0f64;
+    for (x, v) in positions.iter().zip(velocities) {
+        if x.w > 0.0 {
+            let m = 1.0 / f64::from(x.w);
+            energy += m * f64::from(v.xyz().length_squared());
+            mass += m;
+        }
+    }
+    if mass > 0.0 {
+        (0.5 * energy / mass) as f32
+    } else {
+        0.0
+    }
+}
+
+/// What a sleeping cloth remembers, to notice what would wake it.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct SleepState {
+    /// Quiet steps in a row so far.
+    pub quiet: u32,
+    pub asleep: bool,
+    pins: Vec<Pin>,
+    /// The cloth's bounds when it fell asleep.
+    lo: Vec3,
+    hi: Vec3,
+    colliders: Vec<Collider>,
+    /// Air velocity at the bounds' centre and corners (empty: the cloth ignores the air).
+    air: Vec<Vec3>,
+}
+
+fn pose_moved(a: &Pose, b: &Pose) -> bool {
+    a.translation.distance(b.translation) > WAKE_DISTANCE
+        || a.rotation.dot(b.rotation).abs() < 1.0 - 1e-7
+}
+
+fn same_collider(a: &Collider, b: &Collider) -> bool {
+    let shape = match (&a.shape, &b.shape) {
+        (Shape::Sdf(x), Shape::Sdf(y)) => Arc::ptr_eq(x, y),
+        (x, y) => x == y,
+    };
+    shape
+        && a.thickness == b.thickness
+        && a.friction == b.friction
+        && !pose_moved(&a.start, &b.start)
+        && !pose_moved(&a.end, &b.end)
+}
+
+impl SleepState {
+    /// The colliders of `all` whose bounding ball (at the start or end pose) reaches the box
+    /// `lo..hi`.
+    fn touching(lo: Vec3, hi: Vec3, all: &[Collider]) -> impl Iterator<Item = &Collider> {
+        all.iter().filter(move |c| {
+            let r = c.shape.bounding_radius() + c.thickness + WAKE_DISTANCE;
+            [c.start.translation, c.end.translation].iter().any(|p| {
+                let q = p.clamp(lo, hi);
+                !r.is_finite() || q.distance_squared(*p) <= r * r
+            })
+        })
+    }
+
+    fn air_samples(lo: Vec3, hi: Vec3, wind: &WindField, t: f64, out: &mut Vec<Vec3>) {
+        out.clear();
+        out.push(wind.velocity_at(0.5 * (lo + hi), t));
+        for k in 0..8 {
+            let p = Vec3::new(
+                if k & 1 == 0 { lo.x } else { hi.x },
+                if k & 2 == 0 { lo.y } else { hi.y },
+                if k & 4 == 0 { lo.z } else { hi.z },
+            );
+            out.push(wind.velocity_at(p, t));
+        }
+    }
+
+    /// Puts the cloth to sleep, remembering what would wake it.
+    pub fn fall_asleep(
+        &mut self,
+        positions: &[Vec4],
+        pins: &[Pin],
+        colliders: &[Collider],
+        wind: Option<&WindField>,
+        t: f64,
+    ) {
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for p in positions {
+            lo = lo.min(p.xyz());
+            hi = hi.max(p.xyz());
+        }
+        self.asleep = true;
+        self.quiet = 0;
+        self.lo = lo;
+        self.hi = hi;
+        self.pins.clear();
+        self.pins.extend_from_slice(pins);
+        self.colliders.clear();
+        self.colliders
+            .extend(Self::touching(lo, hi, colliders).cloned());
+        self.air.clear();
+        if let Some(w) = wind {
+            Self::air_samples(lo, hi, w, t, &mut self.air);
+        }
+    }
+
+    /// Whether anything that could move the sleeping cloth changed.
+    pub fn should_wake(
+        &self,
+        pins: &[Pin],
+        colliders: &[Collider],
+        wind: Option<&WindField>,
+        t: f64,
+    ) -> bool {
+        if pins.len() != self.pins.len()
+            || pins
+                .iter()
+                .zip(&self.pins)
+                .any(|(a, b)| a.vertex != b.vertex || a.target.distance(b.target) > WAKE_DISTANCE)
+        {
+            return true;
+        }
+        let mut now = Self::touching(self.lo, self.hi, colliders);
+        let mut then = self.colliders.iter();
+        loop {
+            match (now.next(), then.next()) {
+                (None, None) => break,
+                (Some(a), Some(b)) if same_collider(a, b) => {}
+                _ => return true,
+            }
+        }
+        match wind {
+            None => !self.air.iter().all(|a| a.length() <= WAKE_AIR_SPEED),
+            Some(w) => {
+                let mut air = Vec::with_capacity(9);
+                Self::air_samples(self.lo, self.hi, w, t, &mut air);
+                if self.air.is_empty() {
+                    air.iter().any(|a| a.length() > WAKE_AIR_SPEED)
+                } else {
+                    air.iter()
+                        .zip(&self.air)
+                        .any(|(a, b)| a.distance(*b) > WAKE_AIR_SPEED)
+                }
+            }
+        }
+    }
+
+    /// Wakes the cloth (or keeps it awake) and starts counting quiet steps again.
+    pub fn wake(&mut self) {
+        self.asleep = false;
+        self.quiet = 0;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::solver::{
+        Environment, Grid, MassDistribution, Serial, Simulation, SolverParams, TopologyOptions,
+        WindParams,
+    };
+
+    const DT: f32 = 1.0 / 60.0;
+
+    /// Settings of the test cloths: damped enough to come to rest within seconds (at the
+    /// default 0.1/s a cloth hanging from two corners swings for a minute).
+    fn params() -> SolverParams {
+        SolverParams {
+            damping: 2.0,
+            ..SolverParams::default()
+        }
+    }
+
+    /// A 12² cloth of 0.5 m, pinned at two corners, hanging from rest.
+    fn hanging() -> (Simulation, Grid) {
+        let grid = Grid::new(12, 12, 0.5, 0.5);
+        let topology = grid.topology(TopologyOptions::default()).unwrap();
+        let masses = topology.masses(0.2, MassDistribution::Uniform);
+        let mut sim = Simulation::new(topology, &masses, params()).unwrap();
+        let rest = grid.positions();
+        sim.state_mut()
+            .set_pins([grid.index(0, 0), grid.index(11, 0)].map(|v| Pin {
+                vertex: v,
+                target: rest[v as usize],
+            }))
+            .unwrap();
+        (sim, grid)
+    }
+
+    /// Steps until the cloth sleeps; the step count.
+    fn until_asleep(sim: &mut Simulation, env: &Environment<'_>, limit: usize) -> usize {
+        for i in 0..limit {
+            sim.step_in(DT, env, &Serial);
+            if sim.is_sleeping() {
+                return i + 1;
+            }
+        }
+        panic!(
+            "not asleep after {limit} steps: energy {} J/kg",
+            kinetic_energy_per_kg(&sim.state().positions, &sim.state().velocities)
+        );
+    }
+
+    fn asleep_after_step(sim: &mut Simulation, env: &Environment<'_>) -> bool {
+        let before = sim.state().positions.clone();
+        let report = sim.step_in(DT, env, &Serial);
+        assert_eq!(report.asleep, sim.is_sleeping());
+        if report.asleep {
+            // Bit for bit: nothing moved.
+            assert_eq!(before, sim.state().positions);
+        }
+        report.asleep
+    }
+
+    #[test]
+    fn a_hanging_cloth_comes_to_rest_and_sleeps_without_moving() {
+        let (mut sim, _) = hanging();
+        let env = Environment::default();
+        let steps = until_asleep(&mut sim, &env, 1200);
+        // It swings for a while first (it starts flat and falls).
+        assert!(steps > 60, "asleep after {steps} steps");
+        let energy = kinetic_energy_per_kg(&sim.state().positions, &sim.state().velocities);
+        assert_eq!(energy, 0.0);
+        for _ in 0..100 {
+            assert!(asleep_after_step(&mut sim, &env));
+        }
+        // Never: the same cloth stays awake.
+        let (mut awake, _) = hanging();
+        awake
+            .set_params(SolverParams {
+                sleep: Sleep::NEVER,
+                ..params()
+            })
+            .unwrap();
+        for _ in 0..steps + 100 {
+            awake.step_in(DT, &env, &Serial);
+            assert!(!awake.is_sleeping());
+        }
+    }
+
+    #[test]
+    fn a_moved_pin_wakes_it_and_a_pin_on_its_target_does_not() {
+        let (mut sim, grid) = hanging();
+        let env = Environment::default();
+        until_asleep(&mut sim, &env, 1200);
+        let pins = sim.state().pins.clone();
+        // The plugin sets every target every step: unchanged targets keep it asleep.
+        sim.state_mut()
+            .set_pin_targets(pins.iter().map(|p| p.target));
+        assert!(asleep_after_step(&mut sim, &env));
+        let far = grid.index(11, 11) as usize;
+        let y = sim.state().positions[far].y;
+        sim.state_mut()
+            .set_pin_targets(pins.iter().map(|p| p.target + Vec3::new(0.0, 0.0, 0.05)));
+        assert!(!asleep_after_step(&mut sim, &env));
+        sim.step_in(DT, &env, &Serial);
+        assert_ne!(sim.state().positions[far].y, y);
+        // A pin let go also wakes it.
+        let steps = until_asleep(&mut sim, &env, 1200);
+        assert!(steps > 1);
+        sim.state_mut().set_pins([pins[0]]).unwrap();
+        assert!(!asleep_after_step(&mut sim, &env));
+    }
+
+    #[test]
+    fn colliders_near_it_wake_it_and_colliders_far_away_do_not() {
+        let (mut sim, _) = hanging();
+        let far = Collider::fixed(
+            Shape::Sphere { radius: 0.2 },
+            Pose::at(Vec3::new(10.0, 0.0, 0.0)),
+            0.01,
+            0.5,
+        );
+        let colliders = [far.clone()];
+        let env = Environment {
+            colliders: &colliders,
+            ..Default::default()
+        };
+        until_asleep(&mut sim, &env, 1200);
+        // Far away: moving it, adding another far one changes nothing.
+        let moved_far = [Collider::fixed(
+            Shape::Sphere { radius: 0.2 },
+            Pose::at(Vec3::new(12.0, 0.0, 0.0)),
+            0.01,
+            0.5,
+        )];
+        let env_far = Environment {
+            colliders: &moved_far,
+            ..Default::default()
+        };
+        assert!(asleep_after_step(&mut sim, &env_far));
+        // A ball pushed into the cloth from the side wakes it.
+        let near = [
+            far.clone(),
+            Collider::fixed(
+                Shape::Sphere { radius: 0.1 },
+                Pose::at(Vec3::new(0.0, -0.3, 0.3)),
+                0.01,
+                0.5,
+            ),
+        ];
+        let env_near = Environment {
+            colliders: &near,
+            ..Default::default()
+        };
+        assert!(!asleep_after_step(&mut sim, &env_near));
+        // Resting on it, it sleeps again; taking the ball away wakes it.
+        until_asleep(&mut sim, &env_near, 1200);
+        assert!(asleep_after_step(&mut sim, &env_near));
+        assert!(!asleep_after_step(&mut sim, &env));
+    }
+
+    #[test]
+    fn wind_wakes_a_cloth_that_feels_the_air() {
+        let (mut sim, _) = hanging();
+        let calm = Environment::default();
+        until_asleep(&mut sim, &calm, 1200);
+        let breeze = WindField::new([(
+            WindParams {
+                velocity: Vec3::new(0.0, 0.0, 4.0),
+                ..WindParams::default()
+            },
+            None,
+        )]);
+        let windy = Environment {
+            wind: Some(&breeze),
+            ..Default::default()
+        };
+        let z = sim.state().positions[100].z;
+        assert!(!asleep_after_step(&mut sim, &windy));
+        for _ in 0..10 {
+            sim.step_in(DT, &windy, &Serial);
+        }
+        assert!(sim.state().positions[100].z > z + 1e-3);
+        // In a vacuum the same wind does nothing and does not wake it.
+        let (mut vacuum, _) = hanging();
+        vacuum
+            .set_params(SolverParams {
+                air: crate::solver::Aerodynamics::NONE,
+                ..params()
+            })
+            .unwrap();
+        until_asleep(&mut vacuum, &calm, 1200);
+        assert!(asleep_after_step(&mut vacuum, &windy));
+    }
+
+    #[test]
+    fn changed_settings_wake_it_and_unchanged_ones_do_not() {
+        let (mut sim, _) = hanging();
+        let env = Environment::default();
+        until_asleep(&mut sim, &env, 1200);
+        let params = *sim.params();
+        sim.set_params(params).unwrap();
+        sim.set_features(*sim.features()).unwrap();
+        assert!(asleep_after_step(&mut sim, &env));
+        sim.set_params(SolverParams {
+            gravity: Vec3::new(0.0, -9.81, 3.0),
+            ..params
+        })
+        .unwrap();
+        assert!(!sim.is_sleeping());
+        assert!(!asleep_after_step(&mut sim, &env));
+        until_asleep(&mut sim, &env, 1200);
+        sim.wake();
+        assert!(!asleep_after_step(&mut sim, &env));
+    }
+
+    #[test]
+    fn sleep_energy_out_of_range_is_refused() {
+        for energy in [-1.0, f32::NAN, 2.0] {
+            let p = SolverParams {
+                sleep: Sleep { energy, steps: 30 },
+                ..SolverParams::default()
+            };
+            assert!(p.validate().is_err(), "{energy}");
+        }
+    }
+}
