@@ -1,5 +1,6 @@
 //! Criterion benchmarks of one 1/60 s solver step on the trade-off scene (1 m², 1 kg, two
-//! corner pins), serial and on a task pool with one thread per core.
+//! corner pins), serial and on a task pool with one thread per core; 64 cloths of 16² against
+//! one of 128² (`step_many`); a step of a sleeping cloth.
 //!
 //! `cargo bench --bench step`
 
@@ -8,8 +9,8 @@ use std::hint::black_box;
 use bevy::tasks::TaskPoolBuilder;
 use bevy_cloth::cloth::TaskPoolParallel;
 use bevy_cloth::solver::{
-    BendingSolve, DEFAULT_BENDING_COMPLIANCE, Grid, MassDistribution, Pin, Serial, Simulation,
-    Solver, SolverParams, TopologyOptions,
+    BendingSolve, DEFAULT_BENDING_COMPLIANCE, Environment, Grid, ManyItem, MassDistribution, Pin,
+    Serial, Simulation, Sleep, Solver, SolverParams, StepReport, TopologyOptions, step_many,
 };
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 
@@ -25,6 +26,8 @@ fn scene(n: u32, solver: Solver, substeps: u32, bending_solve: BendingSolve) -> 
             substeps,
             iterations: 1,
             bending_solve,
+            // Measured awake; the `asleep` group measures sleeping.
+            sleep: Sleep::NEVER,
             ..Default::default()
         },
     )
@@ -110,6 +113,51 @@ fn bench(c: &mut Criterion) {
             });
         }
     }
+    g.finish();
+    // The same vertex count as one cloth or as 64 small ones stepped together.
+    let mut g = c.benchmark_group("many_cloths_10x1");
+    for (name, n, count) in [("one_128", 128u32, 1usize), ("64_of_16", 16, 64)] {
+        let mut sims: Vec<Simulation> = (0..count)
+            .map(|_| scene(n, xpbd, 10, BendingSolve::Auto))
+            .collect();
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                let mut items: Vec<ManyItem<'_>> = sims
+                    .iter_mut()
+                    .map(|sim| ManyItem {
+                        sim,
+                        report: StepReport::default(),
+                    })
+                    .collect();
+                step_many(
+                    &mut items,
+                    black_box(1.0 / 60.0),
+                    &Environment::default(),
+                    &par,
+                );
+            })
+        });
+    }
+    g.finish();
+    // A 64² cloth brought to rest (damping 2/s), then asleep: what a step costs then.
+    let mut g = c.benchmark_group("asleep_64");
+    let mut sim = scene(64, xpbd, 10, BendingSolve::Auto);
+    let params = SolverParams {
+        damping: 2.0,
+        sleep: Sleep::default(),
+        ..*sim.params()
+    };
+    sim.set_params(params).unwrap();
+    for _ in 0..60 * 120 {
+        if sim.is_sleeping() {
+            break;
+        }
+        sim.step(1.0 / 60.0, &par);
+    }
+    assert!(sim.is_sleeping(), "the 64² cloth did not come to rest");
+    g.bench_function("asleep", |b| {
+        b.iter(|| sim.step(black_box(1.0 / 60.0), &par))
+    });
     g.finish();
 }
 

@@ -4,9 +4,10 @@
 //! The scene: a 1 m × 1 m cloth of n×n vertices, 1 kg spread evenly, starting flat and
 //! horizontal, pinned at the two corners of one edge, gravity 9.81 m/s², no collisions;
 //! 60 frames of 1/60 s. Stretch is as stiff as each solver allows (XPBD compliance 0, PBD
-//! stiffness 1); XPBD shear 1e-6 and dihedral bending 1e-3 (the model and setting the peer
-//! comparison uses) and 1.0 / 0.5 stiffness for PBD; the lab solver has no bending. No air
-//! (the peer has none).
+//! stiffness 1); XPBD shear 1e-6 and the library's default bending (isometric, the default
+//! fabric's `B` = 1e-4 N·m; `--bending dihedral` takes the dihedral model at compliance 1e-3,
+//! the setting earlier tables used) and 1.0 / 0.5 stiffness for PBD; the lab solver has no
+//! bending. No air (the peer has none).
 //!
 //! Per case: `ms_per_frame` (median wall time of a step over the frames after 10 of warm-up),
 //! `max_strain` and `mean_strain` (|length − rest|/rest over all edges at the end), and
@@ -19,15 +20,27 @@
 //! cargo run --release --example tradeoff -- --quick          # a handful of cases
 //! cargo run --release --example tradeoff -- --sizes 64 --solvers xpbd --substeps 10 --iterations 1
 //! ```
+//! `--peer "PYTHON SCRIPT"` also runs the peer benchmark (pypbd's `pbd_cloth_bench.py`, see
+//! the README) on the same scene in the same run, XPBD × 1 iteration at a few substep counts
+//! per size, prints its JSON lines and, per size, a `against_peer_xpbd_10x1` summary.
+//! `--plot FILE.png` draws max strain against ms per frame (log–log, one curve per size,
+//! ours and the peer's points) into a PNG.
+//!
 //! `--scene-costs` instead measures what each scene feature costs on the 64² and 256² scenes
 //! (XPBD 10 × 1): nothing, a sphere collider under the cloth, wind, self-collision, tethers,
 //! tearing (threshold never reached), and everything at once; with a feature off, its code
 //! does not run, so `plain` is the cost of every scene without it. Tethers also report their
 //! effect on `max_strain`.
 //!
+//! `--many`: 64 cloths of 16² against one of 128² (the same vertex count) stepped together
+//! with `step_many`, and one 128² with 64 × 16² on all threads against one thread.
+//!
+//! `--sleep`: the standard scene with damping 2/s until it sleeps, the median awake step
+//! against the median asleep step.
+//!
 //! Other flags: `--frames N`, `--threads N` (default: all cores), `--repeat N` (runs per case, the
-//! fastest median counts; default 3), `--reference-substeps N`, `--markdown` (also print a
-//! table on stderr).
+//! fastest median counts; default 3), `--reference-substeps N`, `--markdown` (also print
+//! tables on stderr).
 
 #[path = "support/mod.rs"]
 mod support;
@@ -135,7 +148,7 @@ fn scene(n: u32, name: &str, substeps: u32, iterations: u32, bending: Bending) -
         iterations,
         damping: DAMPING,
         air: Aerodynamics::NONE,
-        // Measured awake: the scene never comes to rest within its 60 frames anyway.
+        // Measured awake (`--sleep` measures sleeping).
         sleep: Sleep::NEVER,
         ..Default::default()
     };
@@ -327,6 +340,182 @@ fn scene_costs(args: &Args, par: &TaskPoolParallel, threads: usize) {
     }
 }
 
+/// A peer measurement: the peer's median ms per frame and max strain on the same scene.
+struct PeerPoint {
+    n: u32,
+    substeps: u32,
+    iterations: u32,
+    ms: f64,
+    max_strain: f64,
+}
+
+/// The number after `"key":` in a JSON line (the peer prints flat JSON).
+fn json_number(line: &str, key: &str) -> Option<f64> {
+    let at = line.find(&format!("\"{key}\""))? + key.len() + 2;
+    let rest = line[at..].trim_start().strip_prefix(':')?.trim_start();
+    let end = rest
+        .find(|c: char| !(c.is_ascii_digit() || "+-.eE".contains(c)))
+        .unwrap_or(rest.len());
+    rest[..end].parse().ok()
+}
+
+/// Runs the peer benchmark (`--peer "PYTHON SCRIPT"`: pypbd's `pbd_cloth_bench.py`, see the
+/// README) on the standard scene, XPBD with dihedral bending, and prints its JSON line.
+fn run_peer(
+    peer: &str,
+    n: u32,
+    substeps: u32,
+    iterations: u32,
+    frames: usize,
+    threads: usize,
+) -> Option<PeerPoint> {
+    let mut words = peer.split_whitespace();
+    let program = words.next()?;
+    let out = std::process::Command::new(program)
+        .args(words)
+        .args(["--n", &n.to_string()])
+        .args(["--substeps", &substeps.to_string()])
+        .args(["--iterations", &iterations.to_string()])
+        .args(["--method", "xpbd", "--frames", &frames.to_string()])
+        .env("OMP_NUM_THREADS", threads.to_string())
+        .output();
+    let out = match out {
+        Ok(o) if o.status.success() => o,
+        Ok(o) => {
+            eprintln!("peer failed: {}", String::from_utf8_lossy(&o.stderr));
+            return None;
+        }
+        Err(e) => {
+            eprintln!("cannot run the peer {program:?}: {e}");
+            return None;
+        }
+    };
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text.lines().rev().find(|l| l.starts_with('{'))?;
+    println!("{line}");
+    Some(PeerPoint {
+        n,
+        substeps,
+        iterations,
+        ms: json_number(line, "ms_per_frame_median")?,
+        max_strain: json_number(line, "max_edge_strain")?,
+    })
+}
+
+/// Draws max strain against ms per frame, log–log, one curve per size (ours: XPBD, one
+/// iteration, by substeps) and the peer's points in the same colour.
+fn draw_plot(
+    path: &str,
+    rows: &[(String, u32, u32, u32, Outcome)],
+    peer: &[PeerPoint],
+    threads: usize,
+) -> Result<(), Box<dyn std::error::Error>> {
+    use plotters::prelude::*;
+    plotters::style::register_font(
+        "sans-serif",
+        FontStyle::Normal,
+        bevy::text::DEFAULT_FONT_DATA,
+    )
+    .map_err(|_| "cannot load the font")?;
+    let (w, h) = (960u32, 640u32);
+    let mut buffer = vec![0u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let ours = |r: &&(String, u32, u32, u32, Outcome)| {
+            r.0 == "xpbd" && r.3 == 1 && r.4.nan == 0 && r.4.max_strain > 0.0
+        };
+        let xs = rows
+            .iter()
+            .filter(ours)
+            .map(|r| r.4.ms)
+            .chain(peer.iter().map(|p| p.ms));
+        let ys = rows
+            .iter()
+            .filter(ours)
+            .map(|r| f64::from(r.4.max_strain) * 100.0)
+            .chain(peer.iter().map(|p| p.max_strain * 100.0));
+        let (x0, x1) = xs.fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(x), b.max(x)));
+        let (y0, y1) = ys.fold((f64::MAX, f64::MIN), |(a, b), y| (a.min(y), b.max(y)));
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                // Bevy's built-in font is an ASCII subset: no ² or en dash here.
+                format!("Max strain against time per frame (1 m x 1 m cloth, {threads} threads)"),
+                ("sans-serif", 22),
+            )
+            .margin(16)
+            .x_label_area_size(48)
+            .y_label_area_size(72)
+            .build_cartesian_2d(
+                (x0 * 0.7..x1 * 1.4).log_scale(),
+                (y0.max(0.01) * 0.7..y1 * 1.4).log_scale(),
+            )?;
+        chart
+            .configure_mesh()
+            .x_desc("ms per frame (log)")
+            .y_desc("max strain, % (log)")
+            .label_style(("sans-serif", 16))
+            .draw()?;
+        let mut sizes: Vec<u32> = rows.iter().map(|r| r.1).collect();
+        sizes.dedup();
+        let palette = [
+            RGBColor(30, 90, 200),
+            RGBColor(210, 40, 40),
+            RGBColor(20, 150, 60),
+            RGBColor(150, 60, 180),
+            RGBColor(230, 140, 0),
+            BLACK,
+        ];
+        for (k, &n) in sizes.iter().enumerate() {
+            let colour = palette[k % palette.len()];
+            // In substep order (rows come that way): where more substeps cost less (1 and 2
+            // substeps at 64² solve bending implicitly), the curve turns back.
+            let line: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(ours)
+                .filter(|r| r.1 == n)
+                .map(|r| (r.4.ms, f64::from(r.4.max_strain) * 100.0))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(line.clone(), colour.stroke_width(2)))?
+                .label(format!("ours {n}x{n} (XPBD, 1 iteration, by substeps)"))
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2))
+                });
+            chart.draw_series(line.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
+            let theirs: Vec<(f64, f64)> = peer
+                .iter()
+                .filter(|p| p.n == n)
+                .map(|p| (p.ms, p.max_strain * 100.0))
+                .collect();
+            if !theirs.is_empty() {
+                chart
+                    .draw_series(
+                        theirs
+                            .iter()
+                            .map(|&p| TriangleMarker::new(p, 8, colour.filled())),
+                    )?
+                    .label(format!("pypbd {n}x{n}"))
+                    .legend(move |(x, y)| TriangleMarker::new((x + 10, y), 6, colour.filled()));
+            }
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 15))
+            .position(SeriesLabelPosition::LowerRight)
+            .draw()?;
+        root.present()?;
+    }
+    let file = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut encoder = png::Encoder::new(file, w, h);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.write_header()?.write_image_data(&buffer)?;
+    Ok(())
+}
+
 /// Median ms per frame of stepping all of `sims` together with [`step_many`] (best of
 /// `repeat` runs of `frames` frames, fresh cloths each run).
 fn time_many(
@@ -406,6 +595,70 @@ fn many(args: &Args, par: &TaskPoolParallel, threads: usize, bending: Bending) {
     );
 }
 
+/// `--sleep`: what a cloth at rest costs. The standard scene with damping 2/s (it comes to
+/// rest in seconds) and the default [`Sleep`]: the median awake step over its first frames
+/// against the median step once it sleeps.
+fn sleep_cost(args: &Args, par: &TaskPoolParallel, bending: Bending) {
+    let frames = args.frames.unwrap_or(60) as usize;
+    for n in list(args, "sizes", &[64u32, 256]) {
+        let make = || {
+            let mut sim = scene(n, "xpbd", 10, 1, bending);
+            let params = SolverParams {
+                damping: 2.0,
+                sleep: Sleep::default(),
+                ..*sim.params()
+            };
+            sim.set_params(params).unwrap();
+            sim
+        };
+        let median = |mut t: Vec<f64>| {
+            t.sort_by(f64::total_cmp);
+            t[t.len() / 2]
+        };
+        let mut sim = make();
+        let mut awake = Vec::new();
+        let mut steps = 0;
+        while !sim.is_sleeping() && steps < 60 * 120 {
+            let t = Instant::now();
+            sim.step(DT, par);
+            if steps >= WARMUP && awake.len() < frames {
+                awake.push(t.elapsed().as_secs_f64() * 1e3);
+            }
+            steps += 1;
+        }
+        let asleep_ms = if sim.is_sleeping() {
+            let times = (0..frames.max(100))
+                .map(|_| {
+                    let t = Instant::now();
+                    sim.step(DT, par);
+                    t.elapsed().as_secs_f64() * 1e3
+                })
+                .collect();
+            median(times)
+        } else {
+            f64::NAN
+        };
+        let awake_ms = median(awake);
+        println!(
+            "{}",
+            Json::default()
+                .str(
+                    "sleep",
+                    if sim.is_sleeping() {
+                        "asleep"
+                    } else {
+                        "never slept"
+                    }
+                )
+                .num("n", n)
+                .num("steps_to_sleep", steps as f64)
+                .num("awake_ms_per_frame", (awake_ms * 1e4).round() / 1e4)
+                .num("asleep_ms_per_frame", (asleep_ms * 1e6).round() / 1e6)
+                .num("asleep_over_awake", asleep_ms / awake_ms)
+        );
+    }
+}
+
 fn main() {
     let args = Args::parse();
     let quick = args.rest.contains_key("quick");
@@ -449,11 +702,17 @@ fn main() {
         scene_costs(&args, &par, threads);
         return;
     }
+    if args.rest.contains_key("sleep") {
+        sleep_cost(&args, &par, bending);
+        return;
+    }
     if args.rest.contains_key("many") {
         many(&args, &par, threads, bending);
         return;
     }
     let mut rows: Vec<(String, u32, u32, u32, Outcome)> = Vec::new();
+    let peer = args.rest.get("peer").cloned();
+    let mut peer_points: Vec<PeerPoint> = Vec::new();
 
     for &n in &sizes {
         let reference = simulate(
@@ -515,6 +774,72 @@ fn main() {
                 j = j.str("solver", "none within budget");
             }
             println!("{j}");
+        }
+        if let Some(peer) = &peer {
+            // The peer's curve: fewer points at the big sizes (256² takes ~0.5 s a frame).
+            let peer_substeps: &[u32] = if n <= 64 {
+                &[5, 10, 20, 40]
+            } else if n <= 128 {
+                &[5, 10, 20]
+            } else {
+                &[10]
+            };
+            for &s in peer_substeps {
+                if let Some(p) = run_peer(peer, n, s, 1, frames, threads) {
+                    if s == 10
+                        && let Some(ours) = rows
+                            .iter()
+                            .find(|r| r.0 == "xpbd" && r.1 == n && r.2 == 10 && r.3 == 1)
+                    {
+                        println!(
+                            "{}",
+                            Json::default()
+                                .str("summary", "against_peer_xpbd_10x1")
+                                .num("n", n)
+                                .num("ours_ms", (ours.4.ms * 1e4).round() / 1e4)
+                                .num("peer_ms", p.ms)
+                                .num("speed_ratio", p.ms / ours.4.ms)
+                                .num("ours_max_strain", ours.4.max_strain)
+                                .num("peer_max_strain", p.max_strain)
+                        );
+                    }
+                    peer_points.push(p);
+                }
+            }
+        }
+    }
+    if let Some(path) = args.rest.get("plot") {
+        match draw_plot(path, &rows, &peer_points, threads) {
+            Ok(()) => eprintln!("plot written to {path}"),
+            Err(e) => {
+                eprintln!("cannot draw the plot {path}: {e}");
+                std::process::exit(1)
+            }
+        }
+    }
+    if args.rest.contains_key("markdown") && !peer_points.is_empty() {
+        eprintln!(
+            "| n | ours ms/frame | pypbd ms/frame | ratio | our max strain | pypbd max strain |"
+        );
+        eprintln!("|---|---|---|---|---|---|");
+        for p in peer_points
+            .iter()
+            .filter(|p| p.substeps == 10 && p.iterations == 1)
+        {
+            if let Some(o) = rows
+                .iter()
+                .find(|r| r.0 == "xpbd" && r.1 == p.n && r.2 == 10 && r.3 == 1)
+            {
+                eprintln!(
+                    "| {}² | {:.2} | {:.1} | {:.1}× | {:.0} % | {:.0} % |",
+                    p.n,
+                    o.4.ms,
+                    p.ms,
+                    p.ms / o.4.ms,
+                    o.4.max_strain * 100.0,
+                    p.max_strain * 100.0
+                );
+            }
         }
     }
     if args.rest.contains_key("markdown") {
