@@ -99,8 +99,8 @@ pub(crate) struct SleepState {
     lo: Vec3,
     hi: Vec3,
     colliders: Vec<Collider>,
-    /// Air velocity at the bounds' centre and corners (empty: the cloth ignores the air).
-    air: Vec<Vec3>,
+    /// Air velocity at the bounds' centre and corners (zero where no wind is felt).
+    air: [Vec3; 9],
 }
 
 fn pose_moved(a: &Pose, b: &Pose) -> bool {
@@ -133,17 +133,22 @@ impl SleepState {
         })
     }
 
-    fn air_samples(lo: Vec3, hi: Vec3, wind: &WindField, t: f64, out: &mut Vec<Vec3>) {
-        out.clear();
-        out.push(wind.velocity_at(0.5 * (lo + hi), t));
-        for k in 0..8 {
-            let p = Vec3::new(
-                if k & 1 == 0 { lo.x } else { hi.x },
-                if k & 2 == 0 { lo.y } else { hi.y },
-                if k & 4 == 0 { lo.z } else { hi.z },
-            );
-            out.push(wind.velocity_at(p, t));
-        }
+    /// The air's velocity at the centre and the 8 corners of `lo..hi` (zero without wind).
+    fn air_samples(lo: Vec3, hi: Vec3, wind: Option<&WindField>, t: f64) -> [Vec3; 9] {
+        let Some(wind) = wind else {
+            return [Vec3::ZERO; 9];
+        };
+        core::array::from_fn(|k| {
+            let p = match k {
+                8 => 0.5 * (lo + hi),
+                k => Vec3::new(
+                    if k & 1 == 0 { lo.x } else { hi.x },
+                    if k & 2 == 0 { lo.y } else { hi.y },
+                    if k & 4 == 0 { lo.z } else { hi.z },
+                ),
+            };
+            wind.velocity_at(p, t)
+        })
     }
 
     /// Puts the cloth to sleep, remembering what would wake it.
@@ -169,10 +174,7 @@ impl SleepState {
         self.colliders.clear();
         self.colliders
             .extend(Self::touching(lo, hi, colliders).cloned());
-        self.air.clear();
-        if let Some(w) = wind {
-            Self::air_samples(lo, hi, w, t, &mut self.air);
-        }
+        self.air = Self::air_samples(lo, hi, wind, t);
     }
 
     /// Whether anything that could move the sleeping cloth changed.
@@ -200,20 +202,10 @@ impl SleepState {
                 _ => return true,
             }
         }
-        match wind {
-            None => !self.air.iter().all(|a| a.length() <= WAKE_AIR_SPEED),
-            Some(w) => {
-                let mut air = Vec::with_capacity(9);
-                Self::air_samples(self.lo, self.hi, w, t, &mut air);
-                if self.air.is_empty() {
-                    air.iter().any(|a| a.length() > WAKE_AIR_SPEED)
-                } else {
-                    air.iter()
-                        .zip(&self.air)
-                        .any(|(a, b)| a.distance(*b) > WAKE_AIR_SPEED)
-                }
-            }
-        }
+        Self::air_samples(self.lo, self.hi, wind, t)
+            .iter()
+            .zip(&self.air)
+            .any(|(a, b)| a.distance(*b) > WAKE_AIR_SPEED)
     }
 
     /// Wakes the cloth (or keeps it awake) and starts counting quiet steps again.
