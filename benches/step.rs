@@ -10,7 +10,7 @@ use bevy::tasks::TaskPoolBuilder;
 use bevy_cloth::cloth::TaskPoolParallel;
 use bevy_cloth::solver::{
     BendingSolve, DEFAULT_BENDING_COMPLIANCE, Environment, Grid, ManyItem, MassDistribution, Pin,
-    Serial, Simulation, Sleep, Solver, SolverParams, StepReport, TopologyOptions, step_many,
+    Serial, Simulation, Sleep, Solver, SolverParams, TopologyOptions, step_many,
 };
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 
@@ -122,13 +122,7 @@ fn bench(c: &mut Criterion) {
             .collect();
         g.bench_function(name, |b| {
             b.iter(|| {
-                let mut items: Vec<ManyItem<'_>> = sims
-                    .iter_mut()
-                    .map(|sim| ManyItem {
-                        sim,
-                        report: StepReport::default(),
-                    })
-                    .collect();
+                let mut items = ManyItem::each(&mut sims);
                 step_many(
                     &mut items,
                     black_box(1.0 / 60.0),

@@ -529,13 +529,7 @@ fn time_many(
         let mut sims = make();
         let mut times = Vec::with_capacity(frames);
         for _ in 0..frames {
-            let mut items: Vec<ManyItem<'_>> = sims
-                .iter_mut()
-                .map(|sim| ManyItem {
-                    sim,
-                    report: Default::default(),
-                })
-                .collect();
+            let mut items = ManyItem::each(&mut sims);
             let t = Instant::now();
             step_many(&mut items, DT, &Environment::default(), par);
             times.push(t.elapsed().as_secs_f64() * 1e3);

@@ -73,7 +73,7 @@ pub use params::{
 pub use sdf::{SdfError, SdfGrid, point_triangle_distance};
 pub use self_collision::{SelfCollision, SelfCollisionScratch, count_self_crossings};
 pub use shading::{vertex_normals, vertex_tangents};
-pub use sleep::{Sleep, WAKE_AIR_SPEED, WAKE_DISTANCE, kinetic_energy_per_kg};
+pub use sleep::{Sleep, WAKE_AIR_SPEED, WAKE_DISTANCE};
 pub use state::{ClothState, Pin, StateError};
 pub use step::{StepInput, StepScratch, step};
 pub use tear::overstretched_edges;
@@ -248,6 +248,18 @@ pub struct ManyItem<'a> {
     pub sim: &'a mut Simulation,
     /// Its step's report (set by [`step_many`]).
     pub report: StepReport,
+}
+
+impl<'a> ManyItem<'a> {
+    /// One item per simulation of `sims`, reports empty.
+    pub fn each(sims: &'a mut [Simulation]) -> Vec<Self> {
+        sims.iter_mut()
+            .map(|sim| ManyItem {
+                sim,
+                report: StepReport::default(),
+            })
+            .collect()
+    }
 }
 
 /// Steps several cloths by `dt` in one environment, using every thread `par` has.
@@ -481,7 +493,7 @@ impl Simulation {
             self.sleep.quiet = 0;
             return;
         }
-        let energy = kinetic_energy_per_kg(&self.state.positions, &self.state.velocities);
+        let energy = self.state.kinetic_energy_per_kg();
         if energy >= sleep.energy {
             self.sleep.quiet = 0;
             return;
@@ -493,7 +505,8 @@ impl Simulation {
                     *v = Vec4::ZERO;
                 }
             }
-            let t = env.time + f64::from(dt);
+            // The air sampled as `should_wake` samples it: at the middle of a step.
+            let t = env.time + 0.5 * f64::from(dt);
             self.sleep.fall_asleep(
                 &self.state.positions,
                 &self.state.pins,

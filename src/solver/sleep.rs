@@ -69,25 +69,6 @@ impl Default for Sleep {
     }
 }
 
-/// Mean kinetic energy per kilogram of the free vertices (`w > 0` in `positions`).
-#[must_use]
-pub fn kinetic_energy_per_kg(positions: &[Vec4], velocities: &[Vec4]) -> f32 {
-    let mut energy = 0.0f64;
-    let mut mass = 0.0f64;
-    for (x, v) in positions.iter().zip(velocities) {
-        if x.w > 0.0 {
-            let m = 1.0 / f64::from(x.w);
-            energy += m * f64::from(v.xyz().length_squared());
-            mass += m;
-        }
-    }
-    if mass > 0.0 {
-        (0.5 * energy / mass) as f32
-    } else {
-        0.0
-    }
-}
-
 /// What a sleeping cloth remembers, to notice what would wake it.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct SleepState {
@@ -260,7 +241,7 @@ mod tests {
         }
         panic!(
             "not asleep after {limit} steps: energy {} J/kg",
-            kinetic_energy_per_kg(&sim.state().positions, &sim.state().velocities)
+            sim.state().kinetic_energy_per_kg()
         );
     }
 
@@ -282,7 +263,7 @@ mod tests {
         let steps = until_asleep(&mut sim, &env, 1200);
         // It swings for a while first (it starts flat and falls).
         assert!(steps > 60, "asleep after {steps} steps");
-        let energy = kinetic_energy_per_kg(&sim.state().positions, &sim.state().velocities);
+        let energy = sim.state().kinetic_energy_per_kg();
         assert_eq!(energy, 0.0);
         for _ in 0..100 {
             assert!(asleep_after_step(&mut sim, &env));

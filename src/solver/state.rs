@@ -324,6 +324,23 @@ impl ClothState {
             .map(|(v, p)| 0.5 * f64::from(v.xyz().length_squared()) / f64::from(p.w))
             .sum()
     }
+
+    /// [`Self::kinetic_energy`] over the mass of the free vertices, J/kg (0 with none free):
+    /// what [`Sleep::energy`](super::Sleep::energy) is compared with.
+    #[must_use]
+    pub fn kinetic_energy_per_kg(&self) -> f32 {
+        let mass: f64 = self
+            .positions
+            .iter()
+            .filter(|p| p.w > 0.0)
+            .map(|p| 1.0 / f64::from(p.w))
+            .sum();
+        if mass > 0.0 {
+            (self.kinetic_energy() / mass) as f32
+        } else {
+            0.0
+        }
+    }
 }
 
 #[cfg(test)]

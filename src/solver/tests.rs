@@ -428,13 +428,7 @@ fn step_many_gives_each_cloth_what_stepping_it_alone_gives() {
         ..Default::default()
     };
     for _ in 0..20 {
-        let mut items: Vec<ManyItem<'_>> = together
-            .iter_mut()
-            .map(|sim| ManyItem {
-                sim,
-                report: StepReport::default(),
-            })
-            .collect();
+        let mut items = ManyItem::each(&mut together);
         step_many(&mut items, 1.0 / 60.0, &env, &Threads);
         for sim in &mut alone {
             sim.step_in(1.0 / 60.0, &env, &Serial);
