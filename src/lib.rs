@@ -40,6 +40,7 @@
 
 pub mod cloth;
 pub mod collider;
+pub mod gpu;
 pub mod render;
 pub mod solver;
 pub mod wind;

@@ -31,9 +31,9 @@
 //! ```
 
 mod air;
-mod batches;
+pub(crate) mod batches;
 mod bending;
-mod collide;
+pub(crate) mod collide;
 mod distance;
 pub mod fuzz;
 mod implicit;

@@ -1,0 +1,1006 @@
+//! The cloth step as WGSL compute kernels on any `wgpu` device (`step.wgsl`).
+//!
+//! [`GpuKernels`] holds the compiled pipelines (one per stage of [`solver::step`]); a
+//! [`GpuCloth`] holds one cloth's buffers, built from the CPU solver's own
+//! [`Simulation`]: the same partitioned, coloured constraints, the same pins and colliders.
+//! [`GpuCloth::record`] records `k` steps into a command encoder: per step the pins' start,
+//! the area vectors, then per substep pins, integration, every colour of every part and of
+//! the boundary (`iterations` times), the colliders; the velocities at the end.
+//!
+//! Constraints of one colour share no vertex, so each colour is one dispatch with one
+//! invocation per constraint; colour `c` of every part goes in one dispatch, because parts
+//! share no vertex either. Constraints the colouring left over run in one invocation, in
+//! order. The result is the CPU's Gauss–Seidel order colour for colour: the two differ only
+//! by f32 rounding (fused multiply–adds, `sqrt`, division), which `tests/gpu_parity.rs`
+//! bounds.
+//!
+//! What runs on the GPU is what [`GpuCloth::supports`] accepts; the rest of the model
+//! (implicit bending, dihedral bending, self-collision, tethers, tearing, baked SDF colliders,
+//! the lab solver) stays on the CPU backend, which says why when it keeps a cloth.
+//!
+//! [`solver::step`]: crate::solver::step
+
+use core::num::NonZeroU64;
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Vec3, Vec4};
+use wgpu::util::DeviceExt;
+
+use crate::solver::batches::{ConstraintBatches, Part};
+use crate::solver::collide::substep_poses;
+use crate::solver::{Collider, Shape, Simulation, Solver, SolverParams};
+
+/// The WGSL of every kernel.
+pub const STEP_WGSL: &str = include_str!("step.wgsl");
+
+/// Invocations per workgroup of the per-vertex and per-constraint kernels.
+const WORKGROUP: u32 = 64;
+
+/// Stride of the dynamic-offset uniform tables (the largest alignment WebGPU allows).
+const TABLE_STRIDE: u64 = 256;
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct Params {
+    gravity_h: [f32; 4],
+    inv_h: f32,
+    damp: f32,
+    max_speed: f32,
+    inv_h2: f32,
+    air: [f32; 4],
+    n: u32,
+    pins: u32,
+    colliders: u32,
+    accumulate: u32,
+    xpbd: u32,
+    distances: u32,
+    tri_base: u32,
+    lambdas: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct SubstepEntry {
+    substep: u32,
+    pin_base: u32,
+    pose_base: u32,
+    _pad0: u32,
+    t: f32,
+    _pad1: [f32; 3],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct RangeEntry {
+    first: u32,
+    count: u32,
+    _pad: [u32; 2],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct GpuDistance {
+    a: u32,
+    b: u32,
+    rest: f32,
+    param: f32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct GpuBend {
+    v: [u32; 4],
+    a: [f32; 4],
+    param: [f32; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct GpuPin {
+    vertex: u32,
+    _pad: [u32; 3],
+    target: [f32; 4],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct GpuCollider {
+    from_t: [f32; 4],
+    from_r: [f32; 4],
+    to_t: [f32; 4],
+    to_r: [f32; 4],
+    shape: [f32; 4],
+    misc: [f32; 4],
+}
+
+/// Which kernel a pass of the projection runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum PassKind {
+    DistanceColour,
+    DistanceSerial,
+    BendColour,
+    BendSerial,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Pass {
+    kind: PassKind,
+    first: u32,
+    count: u32,
+}
+
+/// Why a cloth cannot run on the GPU backend (it stays on the CPU).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct GpuUnsupported(pub String);
+
+impl core::fmt::Display for GpuUnsupported {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for GpuUnsupported {}
+
+/// The compiled step kernels for one device. Build once, share between cloths.
+#[derive(Debug)]
+pub struct GpuKernels {
+    layout: wgpu::BindGroupLayout,
+    pins_begin: wgpu::ComputePipeline,
+    areas: wgpu::ComputePipeline,
+    pins_substep: wgpu::ComputePipeline,
+    integrate: wgpu::ComputePipeline,
+    lambda_clear: wgpu::ComputePipeline,
+    distance_colour: wgpu::ComputePipeline,
+    distance_serial: wgpu::ComputePipeline,
+    bend_colour: wgpu::ComputePipeline,
+    bend_serial: wgpu::ComputePipeline,
+    collide: wgpu::ComputePipeline,
+    finish: wgpu::ComputePipeline,
+    pins_finish: wgpu::ComputePipeline,
+}
+
+/// Storage buffers the kernels bind at once (WebGPU's default limit is 8).
+pub const STORAGE_BUFFERS: u32 = 7;
+
+fn uniform_entry(binding: u32, dynamic: bool, size: u64) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: dynamic,
+            min_binding_size: NonZeroU64::new(size),
+        },
+        count: None,
+    }
+}
+
+fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+impl GpuKernels {
+    /// Whether `limits` allow the kernels: storage buffers per stage, workgroup size.
+    ///
+    /// # Errors
+    /// The first limit that is too small, in words.
+    pub fn check_limits(limits: &wgpu::Limits) -> Result<(), GpuUnsupported> {
+        if limits.max_storage_buffers_per_shader_stage < STORAGE_BUFFERS {
+            return Err(GpuUnsupported(format!(
+                "the adapter allows {} storage buffers per shader stage, the cloth kernels need {STORAGE_BUFFERS}",
+                limits.max_storage_buffers_per_shader_stage
+            )));
+        }
+        if limits.max_compute_invocations_per_workgroup < WORKGROUP
+            || limits.max_compute_workgroup_size_x < WORKGROUP
+        {
+            return Err(GpuUnsupported(format!(
+                "the adapter's workgroups are smaller than the {WORKGROUP} invocations the cloth kernels use"
+            )));
+        }
+        if limits.min_uniform_buffer_offset_alignment as u64 > TABLE_STRIDE {
+            return Err(GpuUnsupported(format!(
+                "the adapter aligns uniform offsets to {} bytes, more than {TABLE_STRIDE}",
+                limits.min_uniform_buffer_offset_alignment
+            )));
+        }
+        Ok(())
+    }
+
+    /// Compiles the kernels on `device`.
+    #[must_use]
+    pub fn new(device: &wgpu::Device) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("cloth_step"),
+            source: wgpu::ShaderSource::Wgsl(STEP_WGSL.into()),
+        });
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("cloth_step"),
+            entries: &[
+                uniform_entry(0, false, size_of::<Params>() as u64),
+                uniform_entry(1, true, size_of::<SubstepEntry>() as u64),
+                storage_entry(2, false),
+                storage_entry(3, true),
+                storage_entry(4, true),
+                storage_entry(5, false),
+                storage_entry(6, true),
+                storage_entry(7, true),
+                uniform_entry(8, true, size_of::<RangeEntry>() as u64),
+                storage_entry(9, true),
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("cloth_step"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        Self {
+            pins_begin: pipeline("pins_begin"),
+            areas: pipeline("areas"),
+            pins_substep: pipeline("pins_substep"),
+            integrate: pipeline("integrate"),
+            lambda_clear: pipeline("lambda_clear"),
+            distance_colour: pipeline("distance_colour"),
+            distance_serial: pipeline("distance_serial"),
+            bend_colour: pipeline("bend_colour"),
+            bend_serial: pipeline("bend_serial"),
+            collide: pipeline("collide"),
+            finish: pipeline("finish"),
+            pins_finish: pipeline("pins_finish"),
+            layout,
+        }
+    }
+}
+
+/// What one frame's steps feel besides the cloth itself: the same inputs the CPU step takes.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GpuStepInput<'a> {
+    /// Shapes the cloth collides with (analytic shapes only; see [`GpuCloth::supports`]).
+    pub colliders: &'a [Collider],
+    /// The air's velocity at each vertex (`w` ignored); empty for still air.
+    pub air_velocities: &'a [Vec4],
+}
+
+/// One cloth's buffers on the GPU.
+#[derive(Debug)]
+pub struct GpuCloth {
+    n: u32,
+    pins: u32,
+    substeps: u32,
+    iterations: u32,
+    passes: Vec<Pass>,
+    lambdas: u32,
+    distances: u32,
+    tri_base: u32,
+    params: wgpu::Buffer,
+    substep_table: wgpu::Buffer,
+    substep_capacity: u32,
+    range_table: wgpu::Buffer,
+    state: wgpu::Buffer,
+    distance_buf: wgpu::Buffer,
+    bend_buf: wgpu::Buffer,
+    lambda: wgpu::Buffer,
+    pin_buf: wgpu::Buffer,
+    pin_capacity: u32,
+    collider_buf: wgpu::Buffer,
+    collider_capacity: u32,
+    topo: wgpu::Buffer,
+    bind_group: Option<wgpu::BindGroup>,
+    /// Steps and colliders the last [`GpuCloth::prepare`] wrote for.
+    prepared: (u32, u32),
+    /// Whether the air acts (area vectors are needed).
+    air_on: bool,
+}
+
+/// Appends a part's or the boundary's distance constraints (global vertex indices).
+fn push_distances(part: &Part, range: core::ops::Range<usize>, out: &mut Vec<GpuDistance>) {
+    let base = part.range.start as u32;
+    let d = &part.distance;
+    for i in range {
+        out.push(GpuDistance {
+            a: d.a[i] + base,
+            b: d.b[i] + base,
+            rest: d.rest[i],
+            param: d.param[i],
+        });
+    }
+}
+
+fn push_bends(part: &Part, range: core::ops::Range<usize>, out: &mut Vec<GpuBend>) {
+    let base = part.range.start as u32;
+    let b = &part.bending;
+    for i in range {
+        out.push(GpuBend {
+            v: [0, 1, 2, 3].map(|k| b.v[k][i] + base),
+            a: [0, 1, 2, 3].map(|k| b.a[k][i]),
+            param: [b.param[i], 0.0, 0.0, 0.0],
+        });
+    }
+}
+
+/// Constraints in GPU order and the passes of one iteration.
+fn flatten(
+    batches: &ConstraintBatches,
+    bending: bool,
+) -> (Vec<GpuDistance>, Vec<GpuBend>, Vec<Pass>) {
+    let mut dist = Vec::new();
+    let mut bend = Vec::new();
+    let mut passes = Vec::new();
+    let pass = |kind, first: usize, end: usize, passes: &mut Vec<Pass>| {
+        if end > first {
+            passes.push(Pass {
+                kind,
+                first: first as u32,
+                count: (end - first) as u32,
+            });
+        }
+    };
+    // The parts: colour c of every part in one pass (parts share no vertex); each part's
+    // distances before its bending, as on the CPU.
+    let parts = &batches.parts;
+    let colours = parts
+        .iter()
+        .map(|p| p.distance.colours.independent.len())
+        .max()
+        .unwrap_or(0);
+    for c in 0..colours {
+        let first = dist.len();
+        for p in parts {
+            if let Some(r) = p.distance.colours.independent.get(c) {
+                push_distances(p, r.clone(), &mut dist);
+            }
+        }
+        pass(PassKind::DistanceColour, first, dist.len(), &mut passes);
+    }
+    let first = dist.len();
+    for p in parts {
+        push_distances(p, p.distance.colours.sequential.clone(), &mut dist);
+    }
+    pass(PassKind::DistanceSerial, first, dist.len(), &mut passes);
+    if bending {
+        let colours = parts
+            .iter()
+            .map(|p| p.bending.colours.independent.len())
+            .max()
+            .unwrap_or(0);
+        for c in 0..colours {
+            let first = bend.len();
+            for p in parts {
+                if let Some(r) = p.bending.colours.independent.get(c) {
+                    push_bends(p, r.clone(), &mut bend);
+                }
+            }
+            pass(PassKind::BendColour, first, bend.len(), &mut passes);
+        }
+        let first = bend.len();
+        for p in parts {
+            push_bends(p, p.bending.colours.sequential.clone(), &mut bend);
+        }
+        pass(PassKind::BendSerial, first, bend.len(), &mut passes);
+    }
+    // The boundary, after the parts.
+    let b = &batches.boundary;
+    for r in &b.distance.colours.independent {
+        let first = dist.len();
+        push_distances(b, r.clone(), &mut dist);
+        pass(PassKind::DistanceColour, first, dist.len(), &mut passes);
+    }
+    let first = dist.len();
+    push_distances(b, b.distance.colours.sequential.clone(), &mut dist);
+    pass(PassKind::DistanceSerial, first, dist.len(), &mut passes);
+    if bending {
+        for r in &b.bending.colours.independent {
+            let first = bend.len();
+            push_bends(b, r.clone(), &mut bend);
+            pass(PassKind::BendColour, first, bend.len(), &mut passes);
+        }
+        let first = bend.len();
+        push_bends(b, b.bending.colours.sequential.clone(), &mut bend);
+        pass(PassKind::BendSerial, first, bend.len(), &mut passes);
+    }
+    (dist, bend, passes)
+}
+
+/// Per vertex the triangles it belongs to, in triangle order, then the triangles:
+/// `[offsets (n + 1) | incident triangles | 3 vertices per triangle]` and the triangles' start.
+fn incidence(n: usize, triangles: &[[u32; 3]]) -> (Vec<u32>, u32) {
+    let mut count = vec![0u32; n + 1];
+    for t in triangles {
+        for &v in t {
+            count[v as usize] += 1;
+        }
+    }
+    let mut out = Vec::with_capacity(n + 1 + 6 * triangles.len());
+    let mut at = (n + 1) as u32;
+    for c in &count[..n] {
+        out.push(at);
+        at += c;
+    }
+    out.push(at);
+    out.resize(at as usize, 0);
+    let mut fill: Vec<u32> = out[..n].to_vec();
+    for (i, t) in triangles.iter().enumerate() {
+        for &v in t {
+            out[fill[v as usize] as usize] = i as u32;
+            fill[v as usize] += 1;
+        }
+    }
+    let tri_base = out.len() as u32;
+    out.extend(triangles.iter().flatten());
+    (out, tri_base)
+}
+
+fn storage(
+    device: &wgpu::Device,
+    label: &str,
+    bytes: &[u8],
+    extra: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    // Bindings may not be empty: at least one 16-byte element.
+    let zero = [0u8; 16];
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: if bytes.is_empty() { &zero } else { bytes },
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+    })
+}
+
+fn empty(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size.max(16),
+        usage,
+        mapped_at_creation: false,
+    })
+}
+
+fn pose_t(p: &crate::solver::Pose) -> [f32; 4] {
+    p.translation.extend(p.scale).to_array()
+}
+
+fn gpu_collider(
+    c: &Collider,
+    from: &crate::solver::Pose,
+    to: &crate::solver::Pose,
+    reach2: f32,
+) -> GpuCollider {
+    let (kind, shape) = match &c.shape {
+        Shape::Sphere { radius } => (0.0, [*radius, 0.0, 0.0, 0.0]),
+        Shape::Cuboid { half_extents } => (1.0, half_extents.extend(0.0).to_array()),
+        Shape::Capsule {
+            half_height,
+            radius,
+        } => (2.0, [*half_height, *radius, 0.0, 0.0]),
+        // Planes (and, refused earlier, SDF grids).
+        Shape::Plane | Shape::Sdf(_) => (3.0, [0.0; 4]),
+    };
+    GpuCollider {
+        from_t: pose_t(from),
+        from_r: from.rotation.to_array(),
+        to_t: pose_t(to),
+        to_r: to.rotation.to_array(),
+        shape,
+        // An infinite reach (a plane) as the largest finite one: GPUs need not honour ∞.
+        misc: [c.thickness, c.friction, reach2.min(f32::MAX), kind],
+    }
+}
+
+fn whole(b: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
+    b.as_entire_binding()
+}
+
+fn table(b: &wgpu::Buffer, size: usize) -> wgpu::BindingResource<'_> {
+    wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+        buffer: b,
+        offset: 0,
+        size: NonZeroU64::new(size as u64),
+    })
+}
+
+impl GpuCloth {
+    /// Whether `sim`, with its current settings and features, can run on the GPU kernels.
+    ///
+    /// # Errors
+    /// What keeps it on the CPU, in words.
+    pub fn supports(sim: &Simulation) -> Result<(), GpuUnsupported> {
+        let no = |s: &str| Err(GpuUnsupported(s.to_owned()));
+        let params = sim.params();
+        if let Solver::Lab { .. } = params.solver {
+            return no("the lab solver runs on the CPU only");
+        }
+        let features = sim.features();
+        if features.self_collision.is_some() {
+            return no("self-collision runs on the CPU only");
+        }
+        if features.tethers.is_some() {
+            return no("tethers run on the CPU only");
+        }
+        if features.tear_threshold.is_some() {
+            return no("tearing runs on the CPU only");
+        }
+        if sim.batches().bending && !sim.batches().boundary.bending.iso {
+            return no("dihedral bending runs on the CPU only");
+        }
+        if sim.implicit_bending() {
+            return no("bending this stiff is solved implicitly, on the CPU only");
+        }
+        Ok(())
+    }
+
+    /// Whether the GPU can collide with `collider` (analytic shapes; not baked SDF grids).
+    #[must_use]
+    pub fn supports_collider(collider: &Collider) -> bool {
+        !matches!(collider.shape, Shape::Sdf(_))
+    }
+
+    /// Uploads `sim`'s constraints and state.
+    ///
+    /// # Errors
+    /// As [`GpuCloth::supports`].
+    pub fn new(
+        device: &wgpu::Device,
+        kernels: &GpuKernels,
+        sim: &Simulation,
+    ) -> Result<Self, GpuUnsupported> {
+        Self::supports(sim)?;
+        let n = sim.state().len();
+        let batches = sim.batches();
+        let (dist, bend, passes) = flatten(batches, batches.bending);
+        let (topo, tri_base) = incidence(n, sim.topology().triangles());
+        let pins = sim.state().pins().len() as u32;
+        let usage_uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
+        let range_entries: Vec<u8> = passes
+            .iter()
+            .flat_map(|p| {
+                let mut e = vec![0u8; TABLE_STRIDE as usize];
+                e[..size_of::<RangeEntry>()].copy_from_slice(bytemuck::bytes_of(&RangeEntry {
+                    first: p.first,
+                    count: p.count,
+                    _pad: [0; 2],
+                }));
+                e
+            })
+            .collect();
+        let range_table = if range_entries.is_empty() {
+            empty(device, "cloth_ranges", TABLE_STRIDE, usage_uniform)
+        } else {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("cloth_ranges"),
+                contents: &range_entries,
+                usage: usage_uniform,
+            })
+        };
+        let lambdas = (dist.len() + bend.len()) as u32;
+        let state_len = (5 * n + pins as usize) as u64 * 16;
+        let params = sim.params();
+        let mut cloth = Self {
+            n: n as u32,
+            pins,
+            substeps: params.substeps.max(1),
+            iterations: params.iterations.max(1),
+            lambdas,
+            distances: dist.len() as u32,
+            tri_base,
+            params: empty(
+                device,
+                "cloth_params",
+                size_of::<Params>() as u64,
+                usage_uniform,
+            ),
+            substep_table: empty(device, "cloth_substeps", TABLE_STRIDE, usage_uniform),
+            substep_capacity: 1,
+            range_table,
+            state: empty(
+                device,
+                "cloth_state",
+                state_len,
+                wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_DST
+                    | wgpu::BufferUsages::COPY_SRC,
+            ),
+            distance_buf: storage(
+                device,
+                "cloth_distances",
+                bytemuck::cast_slice(&dist),
+                wgpu::BufferUsages::empty(),
+            ),
+            bend_buf: storage(
+                device,
+                "cloth_bends",
+                bytemuck::cast_slice(&bend),
+                wgpu::BufferUsages::empty(),
+            ),
+            lambda: empty(
+                device,
+                "cloth_lambda",
+                u64::from(lambdas) * 16,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            ),
+            pin_buf: empty(
+                device,
+                "cloth_pins",
+                32,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            ),
+            pin_capacity: 0,
+            collider_buf: empty(
+                device,
+                "cloth_colliders",
+                96,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            ),
+            collider_capacity: 0,
+            topo: storage(
+                device,
+                "cloth_topology",
+                bytemuck::cast_slice(&topo),
+                wgpu::BufferUsages::empty(),
+            ),
+            bind_group: None,
+            prepared: (0, 0),
+            air_on: false,
+            passes,
+        };
+        cloth.bind(device, kernels);
+        Ok(cloth)
+    }
+
+    fn bind(&mut self, device: &wgpu::Device, kernels: &GpuKernels) {
+        self.bind_group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("cloth_step"),
+            layout: &kernels.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: whole(&self.params),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: table(&self.substep_table, size_of::<SubstepEntry>()),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: whole(&self.state),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: whole(&self.distance_buf),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: whole(&self.bend_buf),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: whole(&self.lambda),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: whole(&self.pin_buf),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: whole(&self.collider_buf),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 8,
+                    resource: table(&self.range_table, size_of::<RangeEntry>()),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 9,
+                    resource: whole(&self.topo),
+                },
+            ],
+        }));
+    }
+
+    /// Number of vertices.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.n as usize
+    }
+
+    /// Whether the cloth has no vertex.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// The state buffer: `[positions | substep starts | velocities | area vectors | air |
+    /// pin starts]`, `vec4<f32>` each, [`Self::len`] per region (what a mesh-writing kernel
+    /// reads).
+    #[must_use]
+    pub fn state_buffer(&self) -> &wgpu::Buffer {
+        &self.state
+    }
+
+    /// Replaces the GPU state with `sim`'s positions and velocities (and pins' vertices).
+    pub fn upload_state(&self, queue: &wgpu::Queue, sim: &Simulation) {
+        let s = sim.state();
+        let mut data = Vec::with_capacity(3 * s.len());
+        data.extend_from_slice(&s.positions);
+        data.extend_from_slice(&s.positions);
+        data.extend_from_slice(&s.velocities);
+        queue.write_buffer(&self.state, 0, bytemuck::cast_slice(&data));
+    }
+
+    /// Writes what `steps` steps of `dt` seconds need: parameters, substeps, pin targets
+    /// (`pin_targets[k]`: every pin's target at the end of step `k`, in `sim`'s pin order),
+    /// collider poses and air. Grows buffers (and rebinds) when needed.
+    ///
+    /// # Panics
+    /// If `pin_targets` does not have one entry per step with one target per pin.
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "a frame's steps take all they need explicitly"
+    )]
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        kernels: &GpuKernels,
+        sim: &Simulation,
+        dt: f32,
+        pin_targets: &[Vec<Vec3>],
+        input: GpuStepInput<'_>,
+    ) {
+        let steps = pin_targets.len() as u32;
+        assert!(
+            pin_targets.iter().all(|p| p.len() == self.pins as usize),
+            "one target per pin"
+        );
+        let params: &SolverParams = sim.params();
+        let substeps = params.substeps.max(1);
+        let h = dt / substeps as f32;
+        let colliders: Vec<&Collider> = input
+            .colliders
+            .iter()
+            .filter(|c| Self::supports_collider(c))
+            .collect();
+        let c = colliders.len() as u32;
+        let mut rebind = false;
+        // Tables and per-step inputs, grown to fit.
+        let sub_needed = (steps * substeps).max(1);
+        if sub_needed > self.substep_capacity {
+            self.substep_capacity = sub_needed.next_power_of_two();
+            self.substep_table = empty(
+                device,
+                "cloth_substeps",
+                u64::from(self.substep_capacity) * TABLE_STRIDE,
+                wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            );
+            rebind = true;
+        }
+        let pins_needed = steps * self.pins;
+        if pins_needed > self.pin_capacity {
+            self.pin_capacity = pins_needed.next_power_of_two();
+            self.pin_buf = empty(
+                device,
+                "cloth_pins",
+                u64::from(self.pin_capacity) * size_of::<GpuPin>() as u64,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            );
+            rebind = true;
+        }
+        let colliders_needed = steps * substeps * c;
+        if colliders_needed > self.collider_capacity {
+            self.collider_capacity = colliders_needed.next_power_of_two();
+            self.collider_buf = empty(
+                device,
+                "cloth_colliders",
+                u64::from(self.collider_capacity) * size_of::<GpuCollider>() as u64,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            );
+            rebind = true;
+        }
+        if rebind || self.bind_group.is_none() {
+            self.bind(device, kernels);
+        }
+        let (air, xpbd) = (params.air, matches!(params.solver, Solver::Xpbd { .. }));
+        let air_on = !air.is_none();
+        let p = Params {
+            gravity_h: (params.gravity * h).extend(h).to_array(),
+            inv_h: 1.0 / h,
+            damp: 1.0 / (1.0 + params.damping * h),
+            max_speed: params.max_speed,
+            inv_h2: 1.0 / (h * h),
+            air: [
+                air.drag,
+                air.lift,
+                air.friction,
+                if air_on { 1.0 } else { 0.0 },
+            ],
+            n: self.n,
+            pins: self.pins,
+            colliders: c,
+            accumulate: u32::from(xpbd && params.iterations > 1),
+            xpbd: u32::from(xpbd),
+            distances: self.distances,
+            tri_base: self.tri_base,
+            lambdas: self.lambdas,
+        };
+        queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&p));
+        let mut table = vec![0u8; (sub_needed as u64 * TABLE_STRIDE) as usize];
+        for k in 0..steps {
+            for s in 0..substeps {
+                let j = (k * substeps + s) as usize;
+                let e = SubstepEntry {
+                    substep: s,
+                    pin_base: k * self.pins,
+                    pose_base: (k * substeps + s) * c,
+                    t: (s + 1) as f32 / substeps as f32,
+                    ..Default::default()
+                };
+                let at = j * TABLE_STRIDE as usize;
+                table[at..at + size_of::<SubstepEntry>()].copy_from_slice(bytemuck::bytes_of(&e));
+            }
+        }
+        queue.write_buffer(&self.substep_table, 0, &table);
+        let pins: Vec<GpuPin> = pin_targets
+            .iter()
+            .flat_map(|targets| {
+                sim.state()
+                    .pins()
+                    .iter()
+                    .zip(targets)
+                    .map(|(pin, t)| GpuPin {
+                        vertex: pin.vertex,
+                        _pad: [0; 3],
+                        target: t.extend(0.0).to_array(),
+                    })
+            })
+            .collect();
+        if !pins.is_empty() {
+            queue.write_buffer(&self.pin_buf, 0, bytemuck::cast_slice(&pins));
+        }
+        if c > 0 {
+            let owned: Vec<Collider> = colliders.iter().map(|c| (*c).clone()).collect();
+            let mut poses = Vec::new();
+            let mut out = Vec::with_capacity(colliders_needed as usize);
+            for _ in 0..steps {
+                for s in 0..substeps {
+                    substep_poses(&owned, s, substeps, &mut poses);
+                    for (col, pose) in owned.iter().zip(&poses) {
+                        out.push(gpu_collider(col, &pose.from, &pose.to, pose.reach2));
+                    }
+                }
+            }
+            queue.write_buffer(&self.collider_buf, 0, bytemuck::cast_slice(&out));
+        }
+        let n = self.n as usize;
+        let air_at = (4 * n * 16) as u64;
+        if input.air_velocities.len() == n {
+            queue.write_buffer(
+                &self.state,
+                air_at,
+                bytemuck::cast_slice(input.air_velocities),
+            );
+        } else if n > 0 {
+            queue.write_buffer(&self.state, air_at, &vec![0u8; n * 16]);
+        }
+        self.substeps = substeps;
+        self.iterations = params.iterations.max(1);
+        self.prepared = (steps, c);
+        self.air_on = air_on;
+    }
+
+    /// Records the steps [`Self::prepare`] wrote for into `encoder` (one compute pass).
+    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, kernels: &GpuKernels) {
+        let (steps, _) = self.prepared;
+        let Some(bg) = &self.bind_group else {
+            return;
+        };
+        if steps == 0 || self.n == 0 {
+            return;
+        }
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("cloth_step"),
+            timestamp_writes: None,
+        });
+        let groups = |count: u32| count.div_ceil(WORKGROUP);
+        let vertex_groups = groups(self.n);
+        let pin_groups = groups(self.pins);
+        let sub_offset = |k: u32, s: u32| ((k * self.substeps + s) as u64 * TABLE_STRIDE) as u32;
+        for k in 0..steps {
+            let first = sub_offset(k, 0);
+            pass.set_bind_group(0, bg, &[first, 0]);
+            if self.pins > 0 {
+                pass.set_pipeline(&kernels.pins_begin);
+                pass.dispatch_workgroups(pin_groups, 1, 1);
+            }
+            if self.air_on {
+                pass.set_pipeline(&kernels.areas);
+                pass.dispatch_workgroups(vertex_groups, 1, 1);
+            }
+            for s in 0..self.substeps {
+                let so = sub_offset(k, s);
+                pass.set_bind_group(0, bg, &[so, 0]);
+                if self.pins > 0 {
+                    pass.set_pipeline(&kernels.pins_substep);
+                    pass.dispatch_workgroups(pin_groups, 1, 1);
+                }
+                pass.set_pipeline(&kernels.integrate);
+                pass.dispatch_workgroups(vertex_groups, 1, 1);
+                if self.iterations > 1 && self.lambdas > 0 {
+                    pass.set_pipeline(&kernels.lambda_clear);
+                    pass.dispatch_workgroups(groups(self.lambdas), 1, 1);
+                }
+                for _ in 0..self.iterations {
+                    for (i, p) in self.passes.iter().enumerate() {
+                        let ro = (i as u64 * TABLE_STRIDE) as u32;
+                        pass.set_bind_group(0, bg, &[so, ro]);
+                        let (pipeline, groups) = match p.kind {
+                            PassKind::DistanceColour => (&kernels.distance_colour, groups(p.count)),
+                            PassKind::DistanceSerial => (&kernels.distance_serial, 1),
+                            PassKind::BendColour => (&kernels.bend_colour, groups(p.count)),
+                            PassKind::BendSerial => (&kernels.bend_serial, 1),
+                        };
+                        pass.set_pipeline(pipeline);
+                        pass.dispatch_workgroups(groups, 1, 1);
+                    }
+                }
+                if self.prepared.1 > 0 {
+                    pass.set_bind_group(0, bg, &[so, 0]);
+                    pass.set_pipeline(&kernels.collide);
+                    pass.dispatch_workgroups(vertex_groups, 1, 1);
+                }
+            }
+            let last = sub_offset(k, self.substeps - 1);
+            pass.set_bind_group(0, bg, &[last, 0]);
+            pass.set_pipeline(&kernels.finish);
+            pass.dispatch_workgroups(vertex_groups, 1, 1);
+            if self.pins > 0 {
+                pass.set_pipeline(&kernels.pins_finish);
+                pass.dispatch_workgroups(pin_groups, 1, 1);
+            }
+        }
+    }
+
+    /// Reads positions and velocities back (blocking: for tests, tools and opt-in readback).
+    #[must_use]
+    pub fn read_state(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> (Vec<Vec4>, Vec<Vec4>) {
+        let n = self.n as u64;
+        let size = 3 * n * 16;
+        if n == 0 {
+            return (Vec::new(), Vec::new());
+        }
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("cloth_readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+        encoder.copy_buffer_to_buffer(&self.state, 0, &staging, 0, size);
+        queue.submit([encoder.finish()]);
+        staging.map_async(wgpu::MapMode::Read, .., |r| {
+            if let Err(e) = r {
+                bevy::log::error!("cloth readback failed: {e}");
+            }
+        });
+        let _ = device.poll(wgpu::PollType::wait_indefinitely());
+        let all: Vec<Vec4> = bytemuck::pod_collect_to_vec(&staging.get_mapped_range(..));
+        staging.unmap();
+        let n = n as usize;
+        (all[..n].to_vec(), all[2 * n..3 * n].to_vec())
+    }
+}
