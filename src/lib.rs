@@ -31,6 +31,7 @@
 //! - [`collider`]: shapes cloth collides with; with the `rapier` feature, the bevy_rapier3d
 //!   bridge and two-way coupling.
 //! - [`wind`]: global and local wind.
+//! - [`gpu`]: the GPU backend: the step as WGSL compute kernels in the render graph.
 //! - [`render`]: the velvet material (two-sided, report §3.4) and its CPU reference BRDF.
 //!
 //! # Headless
@@ -55,6 +56,7 @@ pub mod prelude {
     #[cfg(feature = "rapier")]
     pub use crate::collider::rapier::ClothRapierPlugin;
     pub use crate::collider::{ClothCollider, ClothContactImpulse, ColliderShape};
+    pub use crate::gpu::{ClothBackend, ClothBackendInUse, ClothGpuPlugin};
     pub use crate::render::{
         VelvetExtension, VelvetMaterial, VelvetPlugin, velvet_material, velvet_material_from,
     };

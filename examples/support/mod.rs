@@ -59,6 +59,19 @@ impl Args {
         out
     }
 
+    /// `--backend cpu|gpu|auto` (default cpu).
+    pub fn backend(&self) -> ClothBackend {
+        match self.rest.get("backend").map(String::as_str) {
+            None | Some("cpu") => ClothBackend::Cpu,
+            Some("gpu") => ClothBackend::Gpu,
+            Some("auto") => ClothBackend::Auto,
+            Some(other) => {
+                eprintln!("--backend: expected cpu, gpu or auto, got {other:?}");
+                std::process::exit(2)
+            }
+        }
+    }
+
     /// A `--key value` parsed as `T`, or `default`.
     pub fn get<T: std::str::FromStr>(&self, key: &str, default: T) -> T {
         match self.rest.get(key) {
@@ -144,7 +157,25 @@ fn assets() -> AssetPlugin {
 /// `MinimalPlugins` plus transforms, assets and meshes, stepping one fixed step per frame.
 pub fn app(args: &Args, title: &str, fixed_step: f64) -> App {
     let mut app = App::new();
-    if args.headless {
+    let backend = args.backend();
+    if args.headless && backend != ClothBackend::Cpu {
+        // The GPU backend needs a renderer: every default plugin but the window.
+        app.add_plugins(
+            DefaultPlugins
+                .build()
+                .disable::<bevy::winit::WinitPlugin>()
+                .set(WindowPlugin {
+                    primary_window: None,
+                    exit_condition: bevy::window::ExitCondition::DontExit,
+                    ..default()
+                })
+                .set(assets()),
+        )
+        .add_plugins(bevy::app::ScheduleRunnerPlugin::run_loop(Duration::ZERO))
+        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+            fixed_step,
+        )));
+    } else if args.headless {
         app.add_plugins((MinimalPlugins, TransformPlugin, assets(), MeshPlugin))
             .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
                 fixed_step,
@@ -164,25 +195,33 @@ pub fn app(args: &Args, title: &str, fixed_step: f64) -> App {
         .add_plugins(VelvetPlugin)
         .add_systems(Update, dress_cloths);
     }
-    app.add_plugins(ClothPlugins::default())
-        .insert_resource(Time::<Fixed>::from_seconds(fixed_step))
-        .init_resource::<ClothTiming>()
-        .add_systems(
-            FixedPostUpdate,
-            (
-                timing_start.before(ClothSystems::Prepare),
-                timing_stop.after(ClothSystems::Simulate),
-            ),
-        )
-        .add_systems(Last, timing_frame);
+    app.add_plugins(ClothPlugins::default().set(ClothGpuPlugin {
+        default_backend: backend,
+    }))
+    .insert_resource(Time::<Fixed>::from_seconds(fixed_step))
+    .init_resource::<ClothTiming>()
+    .add_systems(
+        FixedPostUpdate,
+        (
+            timing_start.before(ClothSystems::Prepare),
+            timing_stop.after(ClothSystems::Simulate),
+        ),
+    )
+    .add_systems(Last, timing_frame);
     app
 }
 
 /// What every example reports about its cloths.
 pub fn cloth_report(world: &mut World) -> Json {
-    let mut q = world.query::<&ClothSim>();
+    let mut q = world.query::<(&ClothSim, Option<&ClothBackendInUse>)>();
     let (mut vertices, mut max_strain, mut nan, mut steps) = (0usize, 0.0f32, 0usize, 0u64);
-    for c in q.iter(world) {
+    let mut gpu = 0;
+    for (c, backend) in q.iter(world) {
+        if backend.is_some_and(|b| b.gpu) {
+            // Its results stay on the GPU: the main world has its starting state only.
+            gpu += 1;
+            continue;
+        }
         let s = c.simulation();
         vertices += s.state().len();
         max_strain = max_strain.max(s.strain().max);
@@ -206,6 +245,8 @@ pub fn cloth_report(world: &mut World) -> Json {
         .num("max_strain", max_strain)
         .num("nan_count", nan as f64)
         .num("ms_per_frame", median)
+        .num("gpu_cloths", gpu as f64)
+        .str("backend", if gpu > 0 { "gpu" } else { "cpu" })
 }
 
 /// Headless runs first update the app until this returns true (assets loaded), then run
@@ -218,6 +259,10 @@ pub struct WaitUntil(pub fn(&World) -> bool);
 pub fn run(mut app: App, args: &Args, report: fn(&mut World) -> Json) {
     if args.headless {
         let frames = args.frames.unwrap_or(300);
+        // A renderer (the GPU backend) finishes setting up on other threads.
+        while app.plugins_state() == bevy::app::PluginsState::Adding {
+            bevy::tasks::tick_global_task_pools_on_main_thread();
+        }
         app.finish();
         app.cleanup();
         // Assets load on other threads: wait (at most 30 s) until the example says it is ready.

@@ -12,7 +12,7 @@ mod components;
 mod mesh;
 mod plugin;
 mod pose;
-mod sim;
+pub(crate) mod sim;
 mod writeback;
 
 pub use components::{

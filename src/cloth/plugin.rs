@@ -15,6 +15,7 @@ use super::{
     ClothTorn, PinAnchor,
 };
 use crate::collider::ClothColliderPlugin;
+use crate::gpu::ClothGpuPlugin;
 use crate::wind::ClothWindPlugin;
 
 /// The phases of cloth simulation, in order.
@@ -113,6 +114,7 @@ impl Plugin for ClothPlugin {
 /// | [`ClothPlugin`] | creates, steps and writes back every [`Cloth`] on the CPU |
 /// | [`ClothColliderPlugin`] | [`ClothCollider`](crate::collider::ClothCollider)s: shapes, mesh SDFs, contact impulses |
 /// | [`ClothWindPlugin`] | the [`Wind`](crate::wind::Wind) resource and [`WindZone`](crate::wind::WindZone)s |
+/// | [`ClothGpuPlugin`] | cloths that ask for it ([`ClothBackend`](crate::gpu::ClothBackend)) stepped by GPU kernels in the render graph |
 ///
 /// The rapier bridge (`ClothRapierPlugin`, cargo feature `rapier`) is not in the group: add it
 /// to opt in.
@@ -150,5 +152,6 @@ impl PluginGroup for ClothPlugins {
             .add(ClothWindPlugin {
                 schedule: self.schedule,
             })
+            .add(ClothGpuPlugin::default())
     }
 }

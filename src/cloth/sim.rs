@@ -753,11 +753,14 @@ pub(crate) fn sync_cloths(
 }
 
 /// Advances every valid cloth by one fixed step among the colliders and the wind.
+/// Cloths the CPU steps: valid, and not on the GPU backend.
+type CpuCloths = (Without<ClothInvalid>, Without<crate::gpu::ClothOnGpu>);
+
 pub(crate) fn step_cloths(
     time: Res<Time>,
     colliders: Option<Res<ClothColliders>>,
     wind: Option<Res<ClothWindField>>,
-    mut cloths: Query<(Entity, &mut ClothSim), Without<ClothInvalid>>,
+    mut cloths: Query<(Entity, &mut ClothSim), CpuCloths>,
     mut impulses: Query<&mut ClothContactImpulse>,
     mut torn: MessageWriter<ClothTorn>,
     poses: FixedPoses,

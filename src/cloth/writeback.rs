@@ -17,7 +17,7 @@ use super::ClothSim;
 
 pub(crate) fn write_back(
     mut meshes: Option<ResMut<Assets<Mesh>>>,
-    mut cloths: Query<(&mut ClothSim, &GlobalTransform)>,
+    mut cloths: Query<(&mut ClothSim, &GlobalTransform), Without<crate::gpu::ClothOnGpu>>,
 ) {
     let Some(meshes) = meshes.as_deref_mut() else {
         return;

@@ -517,6 +517,13 @@ impl Simulation {
         }
     }
 
+    /// The air's velocity at each vertex at time `t` (seconds), sampled from `field` around
+    /// the positions the cloth has now (the GPU backend's air input).
+    pub(crate) fn sample_air(&mut self, field: &WindField, t: f64, out: &mut Vec<Vec4>) {
+        self.air_grid
+            .air_velocities(field, &self.state.positions, t, out);
+    }
+
     /// Whether the cloth is asleep: at rest, and skipped by [`Self::step_in`] until something
     /// that could move it changes (see [`Sleep`]).
     #[must_use]

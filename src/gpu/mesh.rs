@@ -1,0 +1,232 @@
+//! Writing a GPU cloth into its mesh's vertex slab (`mesh.wgsl`): positions and normals in
+//! the entity's local space, straight from the state buffer, with no copy through the CPU.
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Affine3A, Mat4};
+use wgpu::util::DeviceExt;
+
+use crate::solver::Weld;
+
+/// The WGSL of the mesh-writing kernel.
+pub const MESH_WGSL: &str = include_str!("mesh.wgsl");
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct MeshParams {
+    to_local: [f32; 16],
+    normal_x: [f32; 4],
+    normal_y: [f32; 4],
+    normal_z: [f32; 4],
+    base: u32,
+    stride: u32,
+    normal_offset: u32,
+    vertices: u32,
+    groups_at: u32,
+    offsets_at: u32,
+    triangles_at: u32,
+    flip: f32,
+}
+
+/// Where a mesh keeps positions and normals in its interleaved vertex buffer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VertexLayout {
+    /// Bytes per vertex.
+    pub stride: u32,
+    /// Byte offset of the position (`Float32x3`).
+    pub position: u32,
+    /// Byte offset of the normal (`Float32x3`).
+    pub normal: u32,
+}
+
+/// The compiled mesh-writing kernel.
+#[derive(Debug)]
+pub struct MeshKernel {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl MeshKernel {
+    /// Compiles the kernel on `device`.
+    #[must_use]
+    pub fn new(device: &wgpu::Device) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("cloth_mesh"),
+            source: wgpu::ShaderSource::Wgsl(MESH_WGSL.into()),
+        });
+        let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("cloth_mesh"),
+            entries: &[
+                entry(0, wgpu::BufferBindingType::Uniform),
+                entry(1, wgpu::BufferBindingType::Storage { read_only: true }),
+                entry(2, wgpu::BufferBindingType::Storage { read_only: true }),
+                entry(3, wgpu::BufferBindingType::Storage { read_only: false }),
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("cloth_mesh"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("cloth_mesh"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("write_mesh"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Self { layout, pipeline }
+    }
+}
+
+/// One cloth mesh's kernel inputs.
+#[derive(Debug)]
+pub struct MeshWriter {
+    params: wgpu::Buffer,
+    topo: wgpu::Buffer,
+    layout: VertexLayout,
+    vertices: u32,
+    header: [u32; 3],
+}
+
+impl MeshWriter {
+    /// The mesh's weld (mesh vertex → particle, normal groups) and its drawn triangles (mesh
+    /// vertex indices, three per triangle).
+    #[must_use]
+    pub fn new(device: &wgpu::Device, weld: &Weld, drawn: &[u32], layout: VertexLayout) -> Self {
+        let m = weld.vertex_count();
+        let (group, groups) = weld.normal_groups();
+        let mut topo: Vec<u32> = weld.particles().to_vec();
+        let groups_at = topo.len() as u32;
+        topo.extend_from_slice(group);
+        // Per group, the drawn triangles touching it (once per corner in the group, as the
+        // CPU sums them).
+        let mut count = vec![0u32; groups + 1];
+        for t in drawn.chunks_exact(3) {
+            for &v in t {
+                count[group[v as usize] as usize] += 1;
+            }
+        }
+        let offsets_at = topo.len() as u32;
+        let mut at = offsets_at + groups as u32 + 1;
+        for c in &count[..groups] {
+            topo.push(at);
+            at += c;
+        }
+        topo.push(at);
+        let mut fill: Vec<u32> = topo[offsets_at as usize..offsets_at as usize + groups].to_vec();
+        topo.resize(at as usize, 0);
+        for (i, t) in drawn.chunks_exact(3).enumerate() {
+            for &v in t {
+                let g = group[v as usize] as usize;
+                topo[fill[g] as usize] = i as u32;
+                fill[g] += 1;
+            }
+        }
+        let triangles_at = topo.len() as u32;
+        topo.extend_from_slice(drawn);
+        let topo = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("cloth_mesh_topology"),
+            contents: bytemuck::cast_slice(&topo),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("cloth_mesh_params"),
+            size: size_of::<MeshParams>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Self {
+            params,
+            topo,
+            layout,
+            vertices: m as u32,
+            header: [groups_at, offsets_at, triangles_at],
+        }
+    }
+
+    /// Records the write of `state` (a [`GpuCloth`](super::GpuCloth)'s state buffer) into
+    /// `slab` from vertex `first` on, placed by `transform` (the entity's world transform).
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "a record call takes all it needs explicitly"
+    )]
+    pub fn record(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        kernel: &MeshKernel,
+        encoder: &mut wgpu::CommandEncoder,
+        state: &wgpu::Buffer,
+        slab: &wgpu::Buffer,
+        first: u32,
+        transform: Affine3A,
+    ) {
+        if self.vertices == 0 {
+            return;
+        }
+        let to_local = Mat4::from(transform.inverse());
+        let linear = transform.matrix3;
+        let flip = if linear.determinant() < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        let normal = linear.transpose();
+        let floats = self.layout.stride / 4;
+        let p = MeshParams {
+            to_local: to_local.to_cols_array(),
+            normal_x: normal.x_axis.extend(0.0).to_array(),
+            normal_y: normal.y_axis.extend(0.0).to_array(),
+            normal_z: normal.z_axis.extend(0.0).to_array(),
+            base: first * floats + self.layout.position / 4,
+            stride: floats,
+            normal_offset: (self.layout.normal as i64 - self.layout.position as i64) as u32 / 4,
+            vertices: self.vertices,
+            groups_at: self.header[0],
+            offsets_at: self.header[1],
+            triangles_at: self.header[2],
+            flip,
+        };
+        queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&p));
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("cloth_mesh"),
+            layout: &kernel.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: self.params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: state.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: self.topo.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: slab.as_entire_binding(),
+                },
+            ],
+        });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("cloth_mesh"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&kernel.pipeline);
+        pass.set_bind_group(0, &bind_group, &[]);
+        pass.dispatch_workgroups(self.vertices.div_ceil(64), 1, 1);
+    }
+}
