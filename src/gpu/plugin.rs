@@ -66,7 +66,8 @@ pub struct ClothGpuSupport {
     pub unavailable: Option<String>,
 }
 
-/// Runs cloths on the GPU (see the [module](self) docs for the frame flow).
+/// Runs cloths on the GPU: their steps go to the render world, run as compute passes in the
+/// `RenderGraph` schedule before the camera driver, and land in the mesh's vertex slab.
 ///
 /// Part of [`ClothPlugins`](crate::cloth::ClothPlugins) with `default_backend: Cpu`: nothing
 /// changes until a cloth asks for [`ClothBackend::Gpu`] or [`ClothBackend::Auto`], or the
