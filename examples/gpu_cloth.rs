@@ -1,5 +1,6 @@
-//! A large cloth falls onto a sphere and a box and settles on the floor, stepped on the GPU
-//! inside Bevy's render graph (or on the CPU, to compare).
+//! A large cloth falls onto a sphere, a box and a torus mesh (a baked SDF collider) and
+//! settles on the floor, stepped on the GPU inside Bevy's render graph (or on the CPU, to
+//! compare).
 //!
 //! ```text
 //! cargo run --release --example gpu_cloth                      # 256², GPU
@@ -54,6 +55,12 @@ fn setup(
             ClothCollider::cuboid(Vec3::new(0.3, 0.35, 0.3)),
             Cuboid::new(0.6, 0.7, 0.6).mesh().build(),
             Vec3::new(0.6, 0.35, 0.2),
+        ),
+        (
+            // A mesh collider: the torus's own mesh, baked into a signed distance field.
+            ClothCollider::mesh(32),
+            Torus::new(0.12, 0.32).mesh().build(),
+            Vec3::new(0.05, 0.1, -0.6),
         ),
     ];
     for (collider, mesh, at) in obstacles {

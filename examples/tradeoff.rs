@@ -38,6 +38,13 @@
 //! `--sleep`: the standard scene with damping 2/s until it sleeps, the median awake step
 //! against the median asleep step.
 //!
+//! `--backend gpu`: the standard scene (XPBD 10 × 1) at 64², 128², 256² and 512² (`--sizes`),
+//! without and with self-collision, on the CPU and on the GPU kernels (`src/gpu`) in the same
+//! run, on the first wgpu adapter: CPU ms per frame, GPU wall time per frame (submit to done),
+//! GPU time per stage from timestamp queries where the adapter has them, and the max strain
+//! of both. What the GPU cannot run (self-collision) says so. On llvmpipe (software Vulkan)
+//! the GPU figures check correctness, not speed.
+//!
 //! Other flags: `--frames N`, `--threads N` (default: all cores), `--repeat N` (runs per case, the
 //! fastest median counts; default 3), `--reference-substeps N`, `--markdown` (also print
 //! tables on stderr).
@@ -49,13 +56,14 @@ use std::time::Instant;
 
 use bevy::tasks::TaskPoolBuilder;
 use bevy_cloth::cloth::TaskPoolParallel;
+use bevy_cloth::gpu::{GpuCloth, GpuKernels, GpuStage, GpuStepInput};
 use bevy_cloth::solver::{
     Aerodynamics, BendingModel, Collider, DEFAULT_BENDING_COMPLIANCE, Environment, Features, Grid,
     ManyItem, MassDistribution, Pin, Pose, SelfCollision, Shape, Simulation, Sleep, Solver,
     SolverParams, TetherParams, TopologyOptions, WindField, WindParams, position_distance,
     step_many,
 };
-use glam::Vec4;
+use glam::{Vec3, Vec4};
 use support::{Args, Json};
 
 const DT: f32 = 1.0 / 60.0;
@@ -704,6 +712,10 @@ fn main() {
         many(&args, &par, threads, bending);
         return;
     }
+    if args.rest.get("backend").map(String::as_str) == Some("gpu") {
+        gpu_table(&args, &par, bending);
+        return;
+    }
     let mut rows: Vec<(String, u32, u32, u32, Outcome)> = Vec::new();
     let peer = args.rest.get("peer").cloned();
     let mut peer_points: Vec<PeerPoint> = Vec::new();
@@ -848,6 +860,256 @@ fn main() {
                 o.max_strain * 100.0,
                 o.mean_strain * 100.0,
                 o.ref_mean * 1e3
+            );
+        }
+    }
+}
+
+/// A wgpu device for `--backend gpu` (timestamp queries when the adapter has them).
+fn gpu_device() -> Result<(wgpu::Adapter, wgpu::Device, wgpu::Queue, bool), String> {
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
+    let adapter = bevy::tasks::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+        power_preference: wgpu::PowerPreference::HighPerformance,
+        ..Default::default()
+    }))
+    .map_err(|e| e.to_string())?;
+    let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+    let (device, queue) = bevy::tasks::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_features: if timestamps {
+            wgpu::Features::TIMESTAMP_QUERY
+        } else {
+            wgpu::Features::empty()
+        },
+        required_limits: adapter.limits(),
+        ..Default::default()
+    }))
+    .map_err(|e| e.to_string())?;
+    Ok((adapter, device, queue, timestamps))
+}
+
+/// What the GPU did with one scene.
+struct GpuOutcome {
+    wall_ms: f64,
+    /// Median per frame of each stage's timestamped time (ms), when timestamps exist.
+    stages: Vec<(GpuStage, f64)>,
+    max_strain: f32,
+    nan: usize,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
+}
+
+/// Runs `sim` for `frames` frames of one step on the GPU kernels.
+fn simulate_gpu(
+    gpu: &(wgpu::Device, wgpu::Queue, GpuKernels, bool),
+    sim: &Simulation,
+    frames: usize,
+) -> Result<GpuOutcome, String> {
+    let (device, queue, kernels, timestamps) = gpu;
+    let mut cloth = GpuCloth::new(device, kernels, sim).map_err(|e| e.0)?;
+    cloth.upload_state(queue, sim);
+    let targets: Vec<Vec3> = sim.state().pins().iter().map(|p| p.target).collect();
+    const QUERIES: u32 = 4096;
+    let queries = timestamps.then(|| {
+        device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("tradeoff"),
+            ty: wgpu::QueryType::Timestamp,
+            count: QUERIES,
+        })
+    });
+    let bytes = u64::from(QUERIES) * 8;
+    let resolve = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("tradeoff_resolve"),
+        size: bytes,
+        usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("tradeoff_timestamps"),
+        size: bytes,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let period = f64::from(queue.get_timestamp_period()) * 1e-6;
+    let mut walls = Vec::new();
+    let mut per_stage: Vec<Vec<f64>> = vec![Vec::new(); GpuStage::ALL.len()];
+    let mut ran = [false; GpuStage::ALL.len()];
+    for frame in 0..frames {
+        cloth.prepare(
+            device,
+            queue,
+            kernels,
+            sim,
+            DT,
+            core::slice::from_ref(&targets),
+            GpuStepInput::default(),
+        );
+        let mut encoder = device.create_command_encoder(&Default::default());
+        let stages = match &queries {
+            Some(q) => {
+                let stages = cloth.record_profiled(&mut encoder, kernels, q);
+                let used = 2 * stages.len() as u32;
+                assert!(used <= QUERIES, "more passes than queries");
+                encoder.resolve_query_set(q, 0..used, &resolve, 0);
+                encoder.copy_buffer_to_buffer(&resolve, 0, &staging, 0, u64::from(used) * 8);
+                stages
+            }
+            None => {
+                cloth.record(&mut encoder, kernels);
+                Vec::new()
+            }
+        };
+        let t = Instant::now();
+        queue.submit([encoder.finish()]);
+        let _ = device.poll(wgpu::PollType::wait_indefinitely());
+        let wall = t.elapsed().as_secs_f64() * 1e3;
+        if !stages.is_empty() {
+            staging.map_async(wgpu::MapMode::Read, .., |_| {});
+            let _ = device.poll(wgpu::PollType::wait_indefinitely());
+            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&staging.get_mapped_range(..));
+            staging.unmap();
+            if frame >= WARMUP.min(frames / 2) {
+                let mut sums = vec![0.0; GpuStage::ALL.len()];
+                for (i, stage) in stages.iter().enumerate() {
+                    let dt = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period;
+                    sums[*stage as usize] += dt;
+                    ran[*stage as usize] = true;
+                }
+                for (all, s) in per_stage.iter_mut().zip(sums) {
+                    all.push(s);
+                }
+            }
+        }
+        if frame >= WARMUP.min(frames / 2) {
+            walls.push(wall);
+        }
+    }
+    let (pos, vel) = cloth.read_state(device, queue);
+    let mut check = sim.clone();
+    check.state_mut().positions.copy_from_slice(&pos);
+    let nan = pos.iter().chain(&vel).filter(|v| !v.is_finite()).count();
+    Ok(GpuOutcome {
+        wall_ms: median(walls),
+        stages: GpuStage::ALL
+            .iter()
+            .zip(per_stage)
+            .filter(|(s, v)| ran[**s as usize] && !v.is_empty())
+            .map(|(s, v)| (*s, median(v)))
+            .collect(),
+        max_strain: check.strain().max,
+        nan,
+    })
+}
+
+/// `--backend gpu`: CPU and GPU side by side on the standard scene, with and without
+/// self-collision.
+fn gpu_table(args: &Args, par: &TaskPoolParallel, bending: Bending) {
+    let sizes: Vec<u32> = list(args, "sizes", &[64, 128, 256, 512]);
+    let frames = args.frames.unwrap_or(60) as usize;
+    let (adapter, device, queue, timestamps) = match gpu_device() {
+        Ok(d) => d,
+        Err(e) => {
+            eprintln!("--backend gpu: no wgpu adapter ({e}); install mesa-vulkan-drivers");
+            std::process::exit(1)
+        }
+    };
+    let info = adapter.get_info();
+    let software = info.device_type == wgpu::DeviceType::Cpu;
+    eprintln!(
+        "GPU: {} ({:?}, {:?}); timestamps: {timestamps}{}",
+        info.name,
+        info.backend,
+        info.device_type,
+        if software {
+            " — a software adapter: these GPU figures check correctness, not speed"
+        } else {
+            ""
+        }
+    );
+    let kernels = GpuKernels::new(&device);
+    let gpu = (device, queue, kernels, timestamps);
+    let mut table = Vec::new();
+    for &n in &sizes {
+        for self_collision in [false, true] {
+            let make = || {
+                let mut sim = scene(n, "xpbd", 10, 1, bending);
+                if self_collision {
+                    sim.set_features(Features {
+                        // The edge length, as `--scene-costs` uses.
+                        self_collision: Some(SelfCollision {
+                            thickness: 1.0 / (n - 1) as f32,
+                            friction: 0.2,
+                        }),
+                        ..Default::default()
+                    })
+                    .unwrap();
+                }
+                sim
+            };
+            // Big CPU cases once: they take seconds.
+            let cpu_frames = if n >= 512 { frames.min(20) } else { frames };
+            let cpu = simulate(make, cpu_frames, if n >= 256 { 1 } else { 3 }, par);
+            let sim = make();
+            let gpu_out = simulate_gpu(&gpu, &sim, frames);
+            let mut j = Json::default()
+                .str("backend_table", "xpbd_10x1")
+                .num("n", n)
+                .str("self_collision", if self_collision { "on" } else { "off" })
+                .num("cpu_ms_per_frame", (cpu.ms * 1e4).round() / 1e4)
+                .num("cpu_max_strain", cpu.max_strain)
+                .str("adapter", &info.name)
+                .str(
+                    "adapter_kind",
+                    if software { "software" } else { "hardware" },
+                );
+            match &gpu_out {
+                Ok(g) => {
+                    j = j
+                        .num("gpu_wall_ms_per_frame", (g.wall_ms * 1e4).round() / 1e4)
+                        .num("gpu_max_strain", g.max_strain)
+                        .num("gpu_nan_count", g.nan as f64);
+                    let total: f64 = g.stages.iter().map(|s| s.1).sum();
+                    if !g.stages.is_empty() {
+                        j = j.num("gpu_timestamp_ms_per_frame", (total * 1e4).round() / 1e4);
+                    }
+                    for (stage, ms) in &g.stages {
+                        j = j.num(
+                            &format!("gpu_{}_ms", stage.name()),
+                            (ms * 1e4).round() / 1e4,
+                        );
+                    }
+                }
+                Err(why) => j = j.str("gpu", &format!("not on the GPU: {why}")),
+            }
+            println!("{j}");
+            table.push((n, self_collision, cpu, gpu_out));
+        }
+    }
+    if args.rest.contains_key("markdown") {
+        eprintln!(
+            "| n | self-collision | CPU ms/frame | GPU wall ms/frame | GPU timestamps ms/frame | CPU max strain | GPU max strain |"
+        );
+        eprintln!("|---|---|---|---|---|---|---|");
+        for (n, sc, cpu, g) in &table {
+            let (wall, ts, strain) = match g {
+                Ok(g) => (
+                    format!("{:.2}", g.wall_ms),
+                    if g.stages.is_empty() {
+                        "—".to_string()
+                    } else {
+                        format!("{:.2}", g.stages.iter().map(|s| s.1).sum::<f64>())
+                    },
+                    format!("{:.0} %", g.max_strain * 100.0),
+                ),
+                Err(_) => ("CPU only".into(), "—".into(), "—".into()),
+            };
+            eprintln!(
+                "| {n}² | {} | {:.2} | {wall} | {ts} | {:.0} % | {strain} |",
+                if *sc { "on" } else { "off" },
+                cpu.ms,
+                cpu.max_strain * 100.0
             );
         }
     }

@@ -56,7 +56,7 @@ pub mod prelude {
     #[cfg(feature = "rapier")]
     pub use crate::collider::rapier::ClothRapierPlugin;
     pub use crate::collider::{ClothCollider, ClothContactImpulse, ColliderShape};
-    pub use crate::gpu::{ClothBackend, ClothBackendInUse, ClothGpuPlugin};
+    pub use crate::gpu::{ClothBackend, ClothBackendInUse, ClothGpuPlugin, ClothReadback};
     pub use crate::render::{
         VelvetExtension, VelvetMaterial, VelvetPlugin, velvet_material, velvet_material_from,
     };

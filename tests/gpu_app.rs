@@ -32,6 +32,16 @@ fn spawn(app: &mut App, backend: Option<ClothBackend>, tearing: bool) -> Entity 
     e.id()
 }
 
+/// Height of the vertex in the middle of the far edge (the pins hold the near corners).
+fn centre_y(app: &App, e: Entity) -> f32 {
+    let grid = Grid::new(12, 12, 1.0, 1.0);
+    let sim = app.world().get::<ClothSim>(e).expect("simulated");
+    sim.simulation()
+        .state()
+        .position(sim.particle(grid.index(6, 11)) as usize)
+        .y
+}
+
 fn in_use(app: &App, e: Entity) -> ClothBackendInUse {
     app.world()
         .get::<ClothBackendInUse>(e)
@@ -115,10 +125,12 @@ fn with_a_renderer_gpu_cloths_leave_the_cpu_and_the_rest_say_why() {
         !u.gpu && u.reason.as_deref().is_some_and(|r| r.contains("tearing")),
         "{u:?}"
     );
-    // The CPU stepped the CPU cloths only; the GPU cloth's steps were queued for the GPU.
+    // The CPU stepped the CPU cloths only; the GPU cloth's steps were queued for the GPU and
+    // its main-world state (no `ClothReadback`) is still the one it started from.
     let steps = |app: &App, e| app.world().get::<ClothSim>(e).unwrap().steps();
-    assert!(steps(&app, cpu) >= 5 && steps(&app, torn) >= 5);
-    assert_eq!(steps(&app, gpu), 0);
+    assert!(steps(&app, cpu) >= 5 && steps(&app, torn) >= 5 && steps(&app, gpu) >= 5);
+    assert_eq!(centre_y(&app, gpu), 1.0);
+    assert!(centre_y(&app, cpu) < 0.99);
     assert!(
         app.world()
             .get::<bevy_cloth::gpu::ClothOnGpu>(gpu)
@@ -129,4 +141,120 @@ fn with_a_renderer_gpu_cloths_leave_the_cpu_and_the_rest_say_why() {
     common::run(&mut app, 6);
     assert!(!in_use(&app, gpu).gpu);
     assert!(steps(&app, gpu) >= 3);
+}
+
+/// `ClothReadback` brings the GPU's state into `ClothSim` (a frame or two late); leaving the
+/// GPU, with or without it, the CPU goes on from where the GPU cloth was, not from where it
+/// started.
+#[test]
+fn readback_and_switching_to_the_cpu_carry_the_gpu_state() {
+    if common::gpu_or_skip("readback_and_switching_to_the_cpu_carry_the_gpu_state").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    let read = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    app.world_mut().entity_mut(read).insert(ClothReadback);
+    let blind = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    let cpu = spawn(&mut app, Some(ClothBackend::Cpu), false);
+    common::run(&mut app, 40);
+    assert!(in_use(&app, read).gpu && in_use(&app, blind).gpu);
+    // The free edge swung down on the GPU, as on the CPU.
+    let (r, c) = (centre_y(&app, read), centre_y(&app, cpu));
+    eprintln!(
+        "after 40 frames: read back {r}, CPU {c}, blind {}",
+        centre_y(&app, blind)
+    );
+    assert!(r < 0.7 && c < 0.7, "read back {r}, CPU {c}");
+    assert_eq!(centre_y(&app, blind), 1.0, "no readback, no change");
+    let strain = app
+        .world()
+        .get::<ClothSim>(read)
+        .unwrap()
+        .simulation()
+        .strain();
+    assert!(strain.max < 0.3, "read-back strain {strain:?}");
+    // Both leave the GPU: the CPU takes over from the GPU's state.
+    for e in [read, blind] {
+        app.world_mut().entity_mut(e).insert(ClothBackend::Cpu);
+    }
+    common::run(&mut app, 8);
+    for e in [read, blind] {
+        assert!(!in_use(&app, e).gpu);
+        let y = centre_y(&app, e);
+        assert!(y < 0.7, "the CPU restarted cloth {e} from its start: {y}");
+        assert!(app.world().get::<ClothSim>(e).unwrap().recoveries() == 0);
+    }
+}
+
+/// New settings on a GPU cloth go on from the GPU's state; an edit of the state through
+/// `simulation_mut` restarts it from the edit; a state the GPU turns NaN is caught and reset
+/// to the rest pose as on the CPU.
+#[test]
+fn settings_edits_and_bad_states_on_the_gpu() {
+    if common::gpu_or_skip("settings_edits_and_bad_states_on_the_gpu").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    // No readback: the main world's state stays the start until the cloth leaves the GPU.
+    let e = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    common::run(&mut app, 40);
+    // New damping: the GPU buffers are rebuilt and carry the hanging shape over (had they
+    // restarted from the main world's state, the cloth would be near flat again).
+    app.world_mut().get_mut::<ClothConfig>(e).unwrap().damping = 0.5;
+    common::run(&mut app, 2);
+    app.world_mut().entity_mut(e).insert(ClothBackend::Cpu);
+    common::run(&mut app, 6);
+    assert!(!in_use(&app, e).gpu);
+    let y = centre_y(&app, e);
+    assert!(
+        y < 0.7,
+        "new settings restarted the cloth from its start: {y}"
+    );
+    // Back on the GPU, with readback. An edit wins: the rest pose, flat, read back as such.
+    app.world_mut()
+        .entity_mut(e)
+        .insert((ClothBackend::Gpu, ClothReadback));
+    common::run(&mut app, 20);
+    assert!(in_use(&app, e).gpu);
+    assert!(centre_y(&app, e) < 0.7);
+    app.world_mut()
+        .get_mut::<ClothSim>(e)
+        .unwrap()
+        .simulation_mut()
+        .reset_to_rest();
+    common::run(&mut app, 4);
+    let y = centre_y(&app, e);
+    assert!(y > 0.9, "the edit did not reach the GPU: {y}");
+    // A NaN velocity put in by hand reaches the GPU; the guard catches it.
+    common::run(&mut app, 20);
+    {
+        let mut sim = app.world_mut().get_mut::<ClothSim>(e).unwrap();
+        let s = sim.simulation_mut().state_mut();
+        s.velocities[30].x = f32::NAN;
+    }
+    common::run(&mut app, 10);
+    let sim = app.world().get::<ClothSim>(e).unwrap();
+    assert_eq!(
+        sim.recoveries(),
+        1,
+        "the NaN was not caught (or caught twice)"
+    );
+    assert!(sim.simulation().state().is_finite());
+    assert!(in_use(&app, e).gpu, "it stays on the GPU");
+}
+
+/// Removing `Cloth` from a GPU cloth takes its GPU twin away too.
+#[test]
+fn removing_a_gpu_cloth_removes_its_gpu_state() {
+    if common::gpu_or_skip("removing_a_gpu_cloth_removes_its_gpu_state").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    let e = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    common::run(&mut app, 5);
+    assert!(app.world().get::<bevy_cloth::gpu::ClothOnGpu>(e).is_some());
+    app.world_mut().entity_mut(e).remove::<Cloth>();
+    common::run(&mut app, 3);
+    assert!(app.world().get::<bevy_cloth::gpu::ClothOnGpu>(e).is_none());
+    assert!(app.world().get::<ClothSim>(e).is_none());
 }

@@ -17,22 +17,33 @@ mod common;
 use bevy::math::{Quat, Vec3, Vec4};
 use bevy_cloth::gpu::{GpuCloth, GpuKernels, GpuStepInput};
 use bevy_cloth::prelude::Grid;
+use std::sync::Arc;
+
 use bevy_cloth::solver::{
-    Collider, Pin, Pose, Serial, Shape, Simulation, Solver, SolverParams, StepInput, StepScratch,
-    TopologyOptions, step,
+    BendingModel, Collider, Features, Pin, Pose, SdfGrid, Serial, Shape, Simulation, Solver,
+    SolverParams, StepInput, StepScratch, TetherParams, Tethers, TopologyOptions, step,
 };
 
 const DT: f32 = 1.0 / 60.0;
 
 /// A `n`×`n` grid one metre wide, `place`d, 1 g per vertex.
 fn sim(n: u32, params: SolverParams, place: impl Fn(Vec3) -> Vec3) -> Simulation {
+    sim_with(n, params, TopologyOptions::default(), place)
+}
+
+fn sim_with(
+    n: u32,
+    params: SolverParams,
+    options: TopologyOptions,
+    place: impl Fn(Vec3) -> Vec3,
+) -> Simulation {
     let g = Grid::new(n, n, 1.0, 1.0);
     let positions: Vec<Vec3> = g.positions().into_iter().map(place).collect();
     let t = bevy_cloth::solver::Topology::from_triangles(
         &positions,
         Some(&g.uvs()),
         &g.indices(),
-        TopologyOptions::default(),
+        options,
     )
     .unwrap();
     let masses = vec![0.001; positions.len()];
@@ -58,6 +69,11 @@ fn compare(
     let mut batches = sim.batches().clone();
     let params = *sim.params();
     let mut scratch = StepScratch::default();
+    // The CPU's tethers as `Simulation` builds them: from the pinned vertices.
+    let tethers = sim.features().tethers.map(|p| {
+        let pins: Vec<u32> = state.pins().iter().map(|p| p.vertex).collect();
+        Tethers::build(&topology, &pins, p)
+    });
     let mut errors = Vec::new();
     let start = state.positions.clone();
     let mut k = 0;
@@ -76,6 +92,7 @@ fn compare(
                 StepInput {
                     colliders: &colliders,
                     air_velocities: &air,
+                    tethers: tethers.as_ref(),
                     ..Default::default()
                 },
                 &mut scratch,
@@ -103,6 +120,10 @@ fn compare(
         assert!(
             pos.iter().chain(&vel).all(|v| v.is_finite()),
             "GPU state not finite"
+        );
+        assert!(
+            !cloth.read_failed(device, queue),
+            "the guard flagged a finite state"
         );
         let mut worst = 0.0f32;
         for (g, c) in pos.iter().zip(&state.positions) {
@@ -290,11 +311,11 @@ fn several_iterations_and_steps_per_frame_match_the_cpu() {
 #[test]
 fn unsupported_settings_are_refused_with_a_reason() {
     let mut s = sim(8, SolverParams::default(), |p| p);
-    assert!(GpuCloth::supports(&s).is_ok());
+    assert!(GpuCloth::supports(&s, DT).is_ok());
     let mut f = *s.features();
     f.tear_threshold = Some(1.5);
     s.set_features(f).unwrap();
-    let e = GpuCloth::supports(&s).unwrap_err();
+    let e = GpuCloth::supports(&s, DT).unwrap_err();
     assert!(e.0.contains("tearing"), "{e}");
     let lab = sim(
         8,
@@ -306,5 +327,181 @@ fn unsupported_settings_are_refused_with_a_reason() {
         },
         |p| p,
     );
-    assert!(GpuCloth::supports(&lab).unwrap_err().0.contains("lab"));
+    assert!(GpuCloth::supports(&lab, DT).unwrap_err().0.contains("lab"));
+    // Isometric bending this stiff: the CPU solves it implicitly, so the GPU refuses it.
+    let stiff = sim(
+        16,
+        SolverParams {
+            solver: Solver::Xpbd {
+                stretch: 0.0,
+                shear: 1e-6,
+                bending: 1e-3,
+            },
+            ..Default::default()
+        },
+        |p| p,
+    );
+    assert!(stiff.wants_implicit_bending(DT));
+    let e = GpuCloth::supports(&stiff, DT).unwrap_err();
+    assert!(e.0.contains("implicitly"), "{e}");
+}
+
+/// Dihedral bending (the signed-angle hinges, `atan2` on both sides) with tethers to two
+/// moving pinned corners, XPBD 8×2: multipliers of dihedral hinges carried over iterations,
+/// and every free vertex pulled back within reach of its pins after the projections.
+#[test]
+fn dihedral_bending_and_tethers_match_the_cpu() {
+    let Some(g) = gpu("dihedral_bending_and_tethers_match_the_cpu") else {
+        return;
+    };
+    let params = SolverParams {
+        solver: Solver::Xpbd {
+            stretch: 1e-5,
+            shear: 1e-4,
+            bending: 2.0,
+        },
+        substeps: 8,
+        iterations: 2,
+        ..Default::default()
+    };
+    let options = TopologyOptions {
+        bending: BendingModel::Dihedral,
+        ..Default::default()
+    };
+    let n = 30;
+    let mut s = sim_with(n, params, options, |p| {
+        Vec3::new(p.x, 1.0 - (p.z + 0.5), 0.1 * p.x)
+    });
+    // Flat at rest, bent at the start: the hinges work from the first step. (A cloth that
+    // starts exactly flat picks the side each hinge folds to from rounding noise, so the two
+    // sides fold apart within a few frames: a bifurcation, not a kernel difference.)
+    let rest = s.topology().rest_positions().to_vec();
+    let bent: Vec<Vec3> = rest
+        .iter()
+        .map(|p| *p + Vec3::Z * (0.15 * (6.0 * p.x).sin() * (4.0 * p.y).cos()))
+        .collect();
+    s.reset_to(&bent);
+    assert_eq!(
+        s.topology().options().effective_bending(),
+        BendingModel::Dihedral
+    );
+    s.set_features(Features {
+        tethers: Some(TetherParams {
+            slack: 0.02,
+            ..Default::default()
+        }),
+        ..Default::default()
+    })
+    .unwrap();
+    let start = corners(&mut s, n);
+    let errors = compare(
+        &g,
+        &mut s,
+        30,
+        1,
+        |k| {
+            let shift = Vec3::new(0.0, 0.4 * (k as f32 * 0.25).sin(), 0.02 * k as f32);
+            start.iter().map(|p| *p + shift).collect()
+        },
+        |_| (Vec::new(), Vec::new()),
+    );
+    eprintln!("dihedral + tethers, worst per frame: {errors:?}");
+    assert!(errors[0] < 2e-5, "first step: {}", errors[0]);
+    let worst = errors.iter().copied().fold(0.0, f32::max);
+    assert!(worst < 2e-3, "worst {worst}");
+}
+
+/// A closed box mesh baked into an SDF grid, rotated, scaled and moving, with friction: the
+/// trilinear samples and gradients, and the outside-the-grid branch for the vertices far
+/// from it, on both sides.
+#[test]
+fn cloth_on_a_baked_mesh_collider_matches_the_cpu() {
+    let Some(g) = gpu("cloth_on_a_baked_mesh_collider_matches_the_cpu") else {
+        return;
+    };
+    let e = Vec3::new(0.3, 0.15, 0.25);
+    let corners_of = |i: u32| {
+        Vec3::new(
+            if i & 1 == 0 { -e.x } else { e.x },
+            if i & 2 == 0 { -e.y } else { e.y },
+            if i & 4 == 0 { -e.z } else { e.z },
+        )
+    };
+    let positions: Vec<Vec3> = (0..8).map(corners_of).collect();
+    let indices = [
+        0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4, 2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6,
+        1, 3, 5, 3, 7, 5,
+    ];
+    let grid = Arc::new(SdfGrid::from_mesh(&positions, &indices, 16).unwrap());
+    let params = SolverParams {
+        substeps: 6,
+        ..Default::default()
+    };
+    let mut s = sim(32, params, |p| p * 1.2 + Vec3::new(0.0, 0.35, 0.0));
+    let shapes = |k: usize| {
+        let x = 0.1 * (k as f32 * 0.15).sin();
+        vec![Collider {
+            shape: Shape::Sdf(grid.clone()),
+            start: Pose {
+                translation: Vec3::new(x, 0.0, 0.0),
+                rotation: Quat::from_rotation_y(0.4),
+                scale: 1.1,
+            },
+            end: Pose {
+                translation: Vec3::new(x + 0.01, 0.0, 0.0),
+                rotation: Quat::from_rotation_y(0.42),
+                scale: 1.1,
+            },
+            thickness: 0.01,
+            friction: 0.4,
+        }]
+    };
+    let errors = compare(
+        &g,
+        &mut s,
+        40,
+        1,
+        |_| Vec::new(),
+        |k| (shapes(k), Vec::new()),
+    );
+    eprintln!("SDF collider, worst per frame: {errors:?}");
+    assert!(errors[0] < 2e-5, "first step: {}", errors[0]);
+    let worst = errors.iter().copied().fold(0.0, f32::max);
+    assert!(worst < 5e-3, "worst {worst}");
+}
+
+/// A NaN that reaches the GPU state (here through a pin target, which the plugin never sends)
+/// is flagged by the guard kernel at the end of the step; a fresh upload clears the flag.
+#[test]
+fn a_non_finite_state_is_flagged() {
+    let Some((device, queue, kernels)) = gpu("a_non_finite_state_is_flagged") else {
+        return;
+    };
+    let n = 8;
+    let mut s = sim(n, SolverParams::default(), |p| p);
+    let start = corners(&mut s, n);
+    let mut cloth = GpuCloth::new(&device, &kernels, &s).unwrap();
+    cloth.upload_state(&queue, &s);
+    let run = |cloth: &mut GpuCloth, targets: Vec<Vec3>| {
+        cloth.prepare(
+            &device,
+            &queue,
+            &kernels,
+            &s,
+            DT,
+            &[targets],
+            GpuStepInput::default(),
+        );
+        let mut encoder = device.create_command_encoder(&Default::default());
+        cloth.record(&mut encoder, &kernels);
+        queue.submit([encoder.finish()]);
+    };
+    run(&mut cloth, start.clone());
+    assert!(!cloth.read_failed(&device, &queue));
+    let mut bad = start.clone();
+    bad[0].x = f32::NAN;
+    run(&mut cloth, bad);
+    assert!(cloth.read_failed(&device, &queue), "NaN not flagged");
+    cloth.upload_state(&queue, &s);
+    assert!(!cloth.read_failed(&device, &queue), "upload keeps the flag");
 }

@@ -174,7 +174,9 @@ pub fn app(args: &Args, title: &str, fixed_step: f64) -> App {
         .add_plugins(bevy::app::ScheduleRunnerPlugin::run_loop(Duration::ZERO))
         .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
             fixed_step,
-        )));
+        )))
+        // The report reads GPU cloths' state back.
+        .add_systems(Update, read_back_cloths);
     } else if args.headless {
         app.add_plugins((MinimalPlugins, TransformPlugin, assets(), MeshPlugin))
             .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
@@ -211,16 +213,28 @@ pub fn app(args: &Args, title: &str, fixed_step: f64) -> App {
     app
 }
 
+/// Headless runs on a renderer: every cloth's GPU state comes back for the report.
+fn read_back_cloths(
+    mut commands: Commands,
+    cloths: Query<Entity, (With<Cloth>, Without<ClothReadback>)>,
+) {
+    for e in &cloths {
+        commands.entity(e).insert(ClothReadback);
+    }
+}
+
 /// What every example reports about its cloths.
 pub fn cloth_report(world: &mut World) -> Json {
-    let mut q = world.query::<(&ClothSim, Option<&ClothBackendInUse>)>();
+    let mut q = world.query::<(&ClothSim, Option<&ClothBackendInUse>, Has<ClothReadback>)>();
     let (mut vertices, mut max_strain, mut nan, mut steps) = (0usize, 0.0f32, 0usize, 0u64);
     let mut gpu = 0;
-    for (c, backend) in q.iter(world) {
+    for (c, backend, read_back) in q.iter(world) {
         if backend.is_some_and(|b| b.gpu) {
-            // Its results stay on the GPU: the main world has its starting state only.
             gpu += 1;
-            continue;
+            if !read_back {
+                // Its results stay on the GPU: the main world has its starting state only.
+                continue;
+            }
         }
         let s = c.simulation();
         vertices += s.state().len();

@@ -121,6 +121,8 @@ pub struct ClothSim {
     pub(crate) indices_dirty: bool,
     torn_edges: usize,
     recoveries: u32,
+    /// Calls of [`ClothSim::simulation_mut`] so far (a GPU cloth restarts from an edited state).
+    pub(crate) edits: u64,
     /// A config or feature change that was refused (the last valid settings run meanwhile).
     settings_error: Option<ClothError>,
     /// A pin list that was refused (the last valid pins hold meanwhile).
@@ -136,10 +138,52 @@ impl ClothSim {
     }
 
     /// Mutable access, e.g. to [`ClothState::reset`](crate::solver::ClothState::reset) the
-    /// cloth. Changes are written to the mesh at the next write-back.
+    /// cloth. Changes are written to the mesh at the next write-back; a cloth on the GPU
+    /// restarts from the state as edited here.
     pub fn simulation_mut(&mut self) -> &mut Simulation {
         self.dirty = true;
+        self.edits += 1;
         &mut self.sim
+    }
+
+    /// After a NaN or infinite state: the rest pose, placed where the entity is now
+    /// (`placement`, when known), counted and logged.
+    pub(crate) fn recover(&mut self, entity: Entity, placement: Option<GlobalTransform>) {
+        self.sim.reset_to_rest();
+        if let Some(t) = placement {
+            let placed: Vec<Vec3> = self
+                .rest_local
+                .iter()
+                .map(|p| t.transform_point(*p))
+                .collect();
+            self.sim.reset_to(&placed);
+        }
+        self.recoveries += 1;
+        self.binding.retain(self.sim.topology());
+        self.indices_dirty = true;
+        self.dirty = true;
+        warn!(
+            "cloth {entity}: its state became NaN or infinite at step {}; reset to the rest \
+             pose (recovery {})",
+            self.steps, self.recoveries
+        );
+    }
+
+    /// Counts steps the GPU took.
+    pub(crate) fn count_steps(&mut self, steps: u64) {
+        self.steps += steps;
+    }
+
+    /// Takes positions (`xyz`; the inverse masses stay) and velocities read back from the GPU.
+    pub(crate) fn take_gpu_state(&mut self, positions: &[Vec4], velocities: &[Vec4]) {
+        let state = self.sim.state_mut();
+        if positions.len() != state.len() || velocities.len() != state.len() {
+            return;
+        }
+        for (x, g) in state.positions.iter_mut().zip(positions) {
+            *x = g.truncate().extend(x.w);
+        }
+        state.velocities.copy_from_slice(velocities);
     }
 
     /// The cloth's own mesh asset (a copy of the source mesh).
@@ -568,6 +612,7 @@ pub(crate) fn init_cloths(
                         indices_dirty: false,
                         torn_edges: 0,
                         recoveries: 0,
+                        edits: 0,
                         settings_error: None,
                         pins_error: None,
                     },
@@ -635,6 +680,7 @@ pub(crate) fn on_cloth_removed(
     commands
         .entity(entity)
         .try_remove::<(ClothSim, ClothSource, ClothInvalid)>();
+    crate::gpu::forget_gpu_cloth(&mut commands, entity);
 }
 
 /// The optional components of a cloth entity.
@@ -753,8 +799,12 @@ pub(crate) fn sync_cloths(
 }
 
 /// Advances every valid cloth by one fixed step among the colliders and the wind.
-/// Cloths the CPU steps: valid, and not on the GPU backend.
-type CpuCloths = (Without<ClothInvalid>, Without<crate::gpu::ClothOnGpu>);
+/// Cloths the CPU steps: valid, and neither on the GPU backend nor waiting for its last state.
+type CpuCloths = (
+    Without<ClothInvalid>,
+    Without<crate::gpu::ClothOnGpu>,
+    Without<crate::gpu::ClothLeavingGpu>,
+);
 
 pub(crate) fn step_cloths(
     time: Res<Time>,
@@ -799,22 +849,7 @@ pub(crate) fn step_cloths(
         if report.recovered {
             // The solver already reset to its rest shape where the cloth was created; place
             // the rest shape where the entity is now.
-            if let Some(t) = poses.get(entity) {
-                let placed: Vec<Vec3> = cloth
-                    .rest_local
-                    .iter()
-                    .map(|p| t.transform_point(*p))
-                    .collect();
-                cloth.sim.reset_to(&placed);
-            }
-            cloth.recoveries += 1;
-            cloth.binding.retain(cloth.sim.topology());
-            cloth.indices_dirty = true;
-            warn!(
-                "cloth {entity}: its state became NaN or infinite at step {}; reset to the rest \
-                 pose (recovery {})",
-                cloth.steps, cloth.recoveries
-            );
+            cloth.recover(entity, poses.get(entity));
         }
         add_impulses(colliders, cloth.sim.impulses(), &mut impulses);
         if !report.torn.is_empty() {

@@ -15,9 +15,15 @@ use bevy::prelude::*;
 
 use super::ClothSim;
 
+/// Cloths whose mesh the CPU writes: not on the GPU, nor waiting for their last GPU state.
+type CpuWritten = (
+    Without<crate::gpu::ClothOnGpu>,
+    Without<crate::gpu::ClothLeavingGpu>,
+);
+
 pub(crate) fn write_back(
     mut meshes: Option<ResMut<Assets<Mesh>>>,
-    mut cloths: Query<(&mut ClothSim, &GlobalTransform), Without<crate::gpu::ClothOnGpu>>,
+    mut cloths: Query<(&mut ClothSim, &GlobalTransform), CpuWritten>,
 ) {
     let Some(meshes) = meshes.as_deref_mut() else {
         return;

@@ -15,8 +15,8 @@
 //! bounds.
 //!
 //! What runs on the GPU is what [`GpuCloth::supports`] accepts; the rest of the model
-//! (implicit bending, dihedral bending, self-collision, tethers, tearing, baked SDF colliders,
-//! the lab solver) stays on the CPU backend, which says why when it keeps a cloth.
+//! (implicit bending, self-collision, tearing, the lab solver) stays on the CPU backend,
+//! which says why when it keeps a cloth.
 //!
 //! [`solver::step`]: crate::solver::step
 
@@ -26,9 +26,11 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Vec3, Vec4};
 use wgpu::util::DeviceExt;
 
+use std::sync::Arc;
+
 use crate::solver::batches::{ConstraintBatches, Part};
 use crate::solver::collide::substep_poses;
-use crate::solver::{Collider, Shape, Simulation, Solver, SolverParams};
+use crate::solver::{Collider, SdfGrid, Shape, Simulation, Solver, SolverParams, Tethers};
 
 /// The WGSL of every kernel.
 pub const STEP_WGSL: &str = include_str!("step.wgsl");
@@ -56,6 +58,10 @@ struct Params {
     distances: u32,
     tri_base: u32,
     lambdas: u32,
+    tether_base: u32,
+    status: u32,
+    dihedral: u32,
+    _pad: u32,
 }
 
 #[repr(C)]
@@ -111,6 +117,7 @@ struct GpuCollider {
     to_r: [f32; 4],
     shape: [f32; 4],
     misc: [f32; 4],
+    grid: [u32; 4],
 }
 
 /// Which kernel a pass of the projection runs.
@@ -127,6 +134,76 @@ struct Pass {
     kind: PassKind,
     first: u32,
     count: u32,
+}
+
+/// A stage of the GPU step, as [`GpuCloth::record_profiled`] times it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum GpuStage {
+    /// Pins' start positions and the air's area vectors, once per step.
+    Begin,
+    /// Pins moved and vertices integrated, per substep.
+    Integrate,
+    /// Stretch and shear constraints.
+    Distance,
+    /// Bending hinges.
+    Bending,
+    /// Tethers.
+    Tethers,
+    /// Colliders.
+    Collide,
+    /// End-of-step velocities and the NaN guard.
+    Finish,
+}
+
+impl GpuStage {
+    /// Every stage, in step order.
+    pub const ALL: [GpuStage; 7] = [
+        GpuStage::Begin,
+        GpuStage::Integrate,
+        GpuStage::Distance,
+        GpuStage::Bending,
+        GpuStage::Tethers,
+        GpuStage::Collide,
+        GpuStage::Finish,
+    ];
+
+    /// A short lowercase name.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            GpuStage::Begin => "begin",
+            GpuStage::Integrate => "integrate",
+            GpuStage::Distance => "distance",
+            GpuStage::Bending => "bending",
+            GpuStage::Tethers => "tethers",
+            GpuStage::Collide => "collide",
+            GpuStage::Finish => "finish",
+        }
+    }
+}
+
+/// One recorded command of a step.
+enum Cmd<'k> {
+    /// A run of one stage starts (a pass boundary when profiling).
+    Stage(GpuStage),
+    /// Bind with these dynamic offsets (substep, range).
+    Bind([u32; 2]),
+    /// Dispatch a pipeline over this many workgroups.
+    Run(&'k wgpu::ComputePipeline, u32),
+}
+
+/// Replays `cmds` into `pass` with the cloth's bind group `group`.
+fn replay(pass: &mut wgpu::ComputePass<'_>, group: &wgpu::BindGroup, cmds: &[Cmd<'_>]) {
+    for c in cmds {
+        match c {
+            Cmd::Stage(_) => {}
+            Cmd::Bind(offsets) => pass.set_bind_group(0, group, offsets),
+            Cmd::Run(pipeline, groups) => {
+                pass.set_pipeline(pipeline);
+                pass.dispatch_workgroups(*groups, 1, 1);
+            }
+        }
+    }
 }
 
 /// Why a cloth cannot run on the GPU backend (it stays on the CPU).
@@ -155,12 +232,15 @@ pub struct GpuKernels {
     bend_colour: wgpu::ComputePipeline,
     bend_serial: wgpu::ComputePipeline,
     collide: wgpu::ComputePipeline,
+    tethers: wgpu::ComputePipeline,
     finish: wgpu::ComputePipeline,
     pins_finish: wgpu::ComputePipeline,
+    guard: wgpu::ComputePipeline,
+    carry: wgpu::ComputePipeline,
 }
 
 /// Storage buffers the kernels bind at once (WebGPU's default limit is 8).
-pub const STORAGE_BUFFERS: u32 = 7;
+pub const STORAGE_BUFFERS: u32 = 8;
 
 fn uniform_entry(binding: u32, dynamic: bool, size: u64) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
@@ -236,6 +316,7 @@ impl GpuKernels {
                 storage_entry(7, true),
                 uniform_entry(8, true, size_of::<RangeEntry>() as u64),
                 storage_entry(9, true),
+                storage_entry(10, true),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -264,8 +345,11 @@ impl GpuKernels {
             bend_colour: pipeline("bend_colour"),
             bend_serial: pipeline("bend_serial"),
             collide: pipeline("collide"),
+            tethers: pipeline("tethers"),
             finish: pipeline("finish"),
             pins_finish: pipeline("pins_finish"),
+            guard: pipeline("guard"),
+            carry: pipeline("carry"),
             layout,
         }
     }
@@ -274,7 +358,7 @@ impl GpuKernels {
 /// What one frame's steps feel besides the cloth itself: the same inputs the CPU step takes.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GpuStepInput<'a> {
-    /// Shapes the cloth collides with (analytic shapes only; see [`GpuCloth::supports`]).
+    /// Shapes the cloth collides with (every shape, baked SDF grids included).
     pub colliders: &'a [Collider],
     /// The air's velocity at each vertex (`w` ignored); empty for still air.
     pub air_velocities: &'a [Vec4],
@@ -291,6 +375,8 @@ pub struct GpuCloth {
     lambdas: u32,
     distances: u32,
     tri_base: u32,
+    tether_base: u32,
+    dihedral: bool,
     params: wgpu::Buffer,
     substep_table: wgpu::Buffer,
     substep_capacity: u32,
@@ -304,6 +390,9 @@ pub struct GpuCloth {
     collider_buf: wgpu::Buffer,
     collider_capacity: u32,
     topo: wgpu::Buffer,
+    /// Every baked grid the colliders use, back to back, and the grids it holds.
+    sdf_buf: wgpu::Buffer,
+    sdf_grids: Vec<Arc<SdfGrid>>,
     bind_group: Option<wgpu::BindGroup>,
     /// Steps and colliders the last [`GpuCloth::prepare`] wrote for.
     prepared: (u32, u32),
@@ -325,13 +414,19 @@ fn push_distances(part: &Part, range: core::ops::Range<usize>, out: &mut Vec<Gpu
     }
 }
 
+/// Appends hinges: isometric ones with their four weights, dihedral ones with their rest
+/// angle in `a[0]`.
 fn push_bends(part: &Part, range: core::ops::Range<usize>, out: &mut Vec<GpuBend>) {
     let base = part.range.start as u32;
     let b = &part.bending;
     for i in range {
         out.push(GpuBend {
             v: [0, 1, 2, 3].map(|k| b.v[k][i] + base),
-            a: [0, 1, 2, 3].map(|k| b.a[k][i]),
+            a: if b.iso {
+                [0, 1, 2, 3].map(|k| b.a[k][i])
+            } else {
+                [b.rest[i], 0.0, 0.0, 0.0]
+            },
             param: [b.param[i], 0.0, 0.0, 0.0],
         });
     }
@@ -449,6 +544,29 @@ fn incidence(n: usize, triangles: &[[u32; 3]]) -> (Vec<u32>, u32) {
     (out, tri_base)
 }
 
+/// Appends the tethers to `topo`: per vertex the start of its records (absolute indices,
+/// `n + 1` of them), then `(pin, max length as bits)` per record, grouped by vertex in the
+/// CPU's order. Returns where the offsets start.
+fn append_tethers(topo: &mut Vec<u32>, n: usize, tethers: &Tethers) -> u32 {
+    let base = topo.len() as u32;
+    let records = base + n as u32 + 1;
+    let mut count = vec![0u32; n];
+    for (v, _, _) in tethers.entries() {
+        count[v as usize] += 1;
+    }
+    let mut at = records;
+    for c in &count {
+        topo.push(at);
+        at += 2 * c;
+    }
+    topo.push(at);
+    for (_, pin, max_len) in tethers.entries() {
+        topo.push(pin);
+        topo.push(max_len.to_bits());
+    }
+    base
+}
+
 fn storage(
     device: &wgpu::Device,
     label: &str,
@@ -482,6 +600,7 @@ fn gpu_collider(
     from: &crate::solver::Pose,
     to: &crate::solver::Pose,
     reach2: f32,
+    grid: [u32; 4],
 ) -> GpuCollider {
     let (kind, shape) = match &c.shape {
         Shape::Sphere { radius } => (0.0, [*radius, 0.0, 0.0, 0.0]),
@@ -490,8 +609,8 @@ fn gpu_collider(
             half_height,
             radius,
         } => (2.0, [*half_height, *radius, 0.0, 0.0]),
-        // Planes (and, refused earlier, SDF grids).
-        Shape::Plane | Shape::Sdf(_) => (3.0, [0.0; 4]),
+        Shape::Plane => (3.0, [0.0; 4]),
+        Shape::Sdf(g) => (4.0, g.origin().extend(g.cell()).to_array()),
     };
     GpuCollider {
         from_t: pose_t(from),
@@ -501,6 +620,7 @@ fn gpu_collider(
         shape,
         // An infinite reach (a plane) as the largest finite one: GPUs need not honour ∞.
         misc: [c.thickness, c.friction, reach2.min(f32::MAX), kind],
+        grid,
     }
 }
 
@@ -517,11 +637,23 @@ fn table(b: &wgpu::Buffer, size: usize) -> wgpu::BindingResource<'_> {
 }
 
 impl GpuCloth {
-    /// Whether `sim`, with its current settings and features, can run on the GPU kernels.
+    /// Whether `sim`, with its current settings and features, can run on the GPU kernels in
+    /// steps of `dt` seconds (which decide whether stiff bending needs the implicit solve).
     ///
     /// # Errors
     /// What keeps it on the CPU, in words.
-    pub fn supports(sim: &Simulation) -> Result<(), GpuUnsupported> {
+    pub fn supports(sim: &Simulation, dt: f32) -> Result<(), GpuUnsupported> {
+        Self::supports_model(sim)?;
+        if sim.wants_implicit_bending(dt) {
+            return Err(GpuUnsupported(
+                "bending this stiff is solved implicitly, on the CPU only".to_owned(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// [`Self::supports`] without the step length: what the kernels can run at all.
+    fn supports_model(sim: &Simulation) -> Result<(), GpuUnsupported> {
         let no = |s: &str| Err(GpuUnsupported(s.to_owned()));
         let params = sim.params();
         if let Solver::Lab { .. } = params.solver {
@@ -531,42 +663,40 @@ impl GpuCloth {
         if features.self_collision.is_some() {
             return no("self-collision runs on the CPU only");
         }
-        if features.tethers.is_some() {
-            return no("tethers run on the CPU only");
-        }
         if features.tear_threshold.is_some() {
             return no("tearing runs on the CPU only");
-        }
-        if sim.batches().bending && !sim.batches().boundary.bending.iso {
-            return no("dihedral bending runs on the CPU only");
-        }
-        if sim.implicit_bending() {
-            return no("bending this stiff is solved implicitly, on the CPU only");
         }
         Ok(())
     }
 
-    /// Whether the GPU can collide with `collider` (analytic shapes; not baked SDF grids).
-    #[must_use]
-    pub fn supports_collider(collider: &Collider) -> bool {
-        !matches!(collider.shape, Shape::Sdf(_))
-    }
-
-    /// Uploads `sim`'s constraints and state.
+    /// Uploads `sim`'s constraints and state. Check [`GpuCloth::supports`] first: bending
+    /// the CPU would solve implicitly is projected here.
     ///
     /// # Errors
-    /// As [`GpuCloth::supports`].
+    /// What the kernels cannot run at all (as [`GpuCloth::supports`]).
     pub fn new(
         device: &wgpu::Device,
         kernels: &GpuKernels,
         sim: &Simulation,
     ) -> Result<Self, GpuUnsupported> {
-        Self::supports(sim)?;
+        Self::supports_model(sim)?;
         let n = sim.state().len();
         let batches = sim.batches();
         let (dist, bend, passes) = flatten(batches, batches.bending);
-        let (topo, tri_base) = incidence(n, sim.topology().triangles());
+        let (mut topo, tri_base) = incidence(n, sim.topology().triangles());
         let pins = sim.state().pins().len() as u32;
+        let tether_base = match sim.features().tethers {
+            Some(params) => {
+                let pinned: Vec<u32> = sim.state().pins().iter().map(|p| p.vertex).collect();
+                let tethers = Tethers::build(sim.topology(), &pinned, params);
+                if tethers.is_empty() {
+                    0
+                } else {
+                    append_tethers(&mut topo, n, &tethers)
+                }
+            }
+            None => 0,
+        };
         let usage_uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
         let range_entries: Vec<u8> = passes
             .iter()
@@ -590,7 +720,8 @@ impl GpuCloth {
             })
         };
         let lambdas = (dist.len() + bend.len()) as u32;
-        let state_len = (5 * n + pins as usize) as u64 * 16;
+        // The regions, then the status.
+        let state_len = (5 * n + pins as usize + 1) as u64 * 16;
         let params = sim.params();
         let mut cloth = Self {
             n: n as u32,
@@ -600,6 +731,8 @@ impl GpuCloth {
             lambdas,
             distances: dist.len() as u32,
             tri_base,
+            tether_base,
+            dihedral: batches.bending && !batches.boundary.bending.iso,
             params: empty(
                 device,
                 "cloth_params",
@@ -635,6 +768,13 @@ impl GpuCloth {
                 u64::from(lambdas) * 16,
                 wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             ),
+            sdf_buf: empty(
+                device,
+                "cloth_sdf",
+                16,
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            ),
+            sdf_grids: Vec::new(),
             pin_buf: empty(
                 device,
                 "cloth_pins",
@@ -645,7 +785,7 @@ impl GpuCloth {
             collider_buf: empty(
                 device,
                 "cloth_colliders",
-                96,
+                size_of::<GpuCollider>() as u64,
                 wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             ),
             collider_capacity: 0,
@@ -709,6 +849,10 @@ impl GpuCloth {
                     binding: 9,
                     resource: whole(&self.topo),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 10,
+                    resource: whole(&self.sdf_buf),
+                },
             ],
         }));
     }
@@ -726,21 +870,44 @@ impl GpuCloth {
     }
 
     /// The state buffer: `[positions | substep starts | velocities | area vectors | air |
-    /// pin starts]`, `vec4<f32>` each, [`Self::len`] per region (what a mesh-writing kernel
-    /// reads).
+    /// pin starts | status]`, `vec4<f32>` each, [`Self::len`] per region (what a mesh-writing
+    /// kernel reads). The status's `x` turns 1 at the end of a step that left a NaN or
+    /// infinite position or velocity (see [`Self::status_offset`]).
     #[must_use]
     pub fn state_buffer(&self) -> &wgpu::Buffer {
         &self.state
     }
 
-    /// Replaces the GPU state with `sim`'s positions and velocities (and pins' vertices).
+    /// Byte offset of the status `vec4` in [`Self::state_buffer`].
+    #[must_use]
+    pub fn status_offset(&self) -> u64 {
+        (5 * u64::from(self.n) + u64::from(self.pins)) * 16
+    }
+
+    /// Replaces the GPU state with `sim`'s positions and velocities (and pins' vertices), and
+    /// clears the status.
     pub fn upload_state(&self, queue: &wgpu::Queue, sim: &Simulation) {
         let s = sim.state();
-        let mut data = Vec::with_capacity(3 * s.len());
-        data.extend_from_slice(&s.positions);
-        data.extend_from_slice(&s.positions);
-        data.extend_from_slice(&s.velocities);
+        self.upload(queue, &s.positions, &s.velocities);
+    }
+
+    /// Replaces the GPU state with `positions` (`w`: inverse mass, 0 when pinned) and
+    /// `velocities`, one per vertex, and clears the status.
+    ///
+    /// # Panics
+    /// If either has not [`Self::len`] entries.
+    pub fn upload(&self, queue: &wgpu::Queue, positions: &[Vec4], velocities: &[Vec4]) {
+        let n = self.n as usize;
+        assert!(
+            positions.len() == n && velocities.len() == n,
+            "one position and one velocity per vertex"
+        );
+        let mut data = Vec::with_capacity(3 * n);
+        data.extend_from_slice(positions);
+        data.extend_from_slice(positions);
+        data.extend_from_slice(velocities);
         queue.write_buffer(&self.state, 0, bytemuck::cast_slice(&data));
+        queue.write_buffer(&self.state, self.status_offset(), &[0u8; 16]);
     }
 
     /// Writes what `steps` steps of `dt` seconds need: parameters, substeps, pin targets
@@ -771,13 +938,9 @@ impl GpuCloth {
         let params: &SolverParams = sim.params();
         let substeps = params.substeps.max(1);
         let h = dt / substeps as f32;
-        let colliders: Vec<&Collider> = input
-            .colliders
-            .iter()
-            .filter(|c| Self::supports_collider(c))
-            .collect();
+        let colliders = input.colliders;
         let c = colliders.len() as u32;
-        let mut rebind = false;
+        let mut rebind = self.upload_grids(device, queue, colliders);
         // Tables and per-step inputs, grown to fit.
         let sub_needed = (steps * substeps).max(1);
         if sub_needed > self.substep_capacity {
@@ -831,6 +994,10 @@ impl GpuCloth {
             ],
             n: self.n,
             pins: self.pins,
+            tether_base: self.tether_base,
+            status: 5 * self.n + self.pins,
+            dihedral: u32::from(self.dihedral),
+            _pad: 0,
             colliders: c,
             accumulate: u32::from(xpbd && params.iterations > 1),
             xpbd: u32::from(xpbd),
@@ -873,14 +1040,14 @@ impl GpuCloth {
             queue.write_buffer(&self.pin_buf, 0, bytemuck::cast_slice(&pins));
         }
         if c > 0 {
-            let owned: Vec<Collider> = colliders.iter().map(|c| (*c).clone()).collect();
+            let grids: Vec<[u32; 4]> = colliders.iter().map(|c| self.grid_of(c)).collect();
             let mut poses = Vec::new();
             let mut out = Vec::with_capacity(colliders_needed as usize);
             for _ in 0..steps {
                 for s in 0..substeps {
-                    substep_poses(&owned, s, substeps, &mut poses);
-                    for (col, pose) in owned.iter().zip(&poses) {
-                        out.push(gpu_collider(col, &pose.from, &pose.to, pose.reach2));
+                    substep_poses(colliders, s, substeps, &mut poses);
+                    for ((col, pose), grid) in colliders.iter().zip(&poses).zip(&grids) {
+                        out.push(gpu_collider(col, &pose.from, &pose.to, pose.reach2, *grid));
                     }
                 }
             }
@@ -903,86 +1070,256 @@ impl GpuCloth {
         self.air_on = air_on;
     }
 
-    /// Records the steps [`Self::prepare`] wrote for into `encoder` (one compute pass).
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, kernels: &GpuKernels) {
-        let (steps, _) = self.prepared;
+    /// Records taking over the positions and velocities of `from`, the state buffer of an
+    /// earlier [`GpuCloth`] of the same cloth with as many vertices, keeping this one's inverse
+    /// masses (its pins): how new settings go on from where the GPU cloth is. Record it after
+    /// [`Self::prepare`] and before [`Self::record`].
+    ///
+    /// # Panics
+    /// If `from` is smaller than this cloth's positions, substep starts and velocities.
+    pub fn record_carry(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        kernels: &GpuKernels,
+        from: &wgpu::Buffer,
+    ) {
         let Some(bg) = &self.bind_group else {
             return;
         };
-        if steps == 0 || self.n == 0 {
+        let region = u64::from(self.n) * 16;
+        assert!(from.size() >= 3 * region, "the earlier state is smaller");
+        if region == 0 {
             return;
         }
+        encoder.copy_buffer_to_buffer(from, 0, &self.state, region, region);
+        encoder.copy_buffer_to_buffer(from, 2 * region, &self.state, 2 * region, region);
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("cloth_carry"),
+            timestamp_writes: None,
+        });
+        pass.set_bind_group(0, bg, &[0, 0]);
+        pass.set_pipeline(&kernels.carry);
+        pass.dispatch_workgroups(self.n.div_ceil(WORKGROUP), 1, 1);
+    }
+
+    /// Makes the SDF buffer hold every grid `colliders` use (unless it already does).
+    /// Returns whether the buffer was replaced.
+    fn upload_grids(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        colliders: &[Collider],
+    ) -> bool {
+        let mut grids: Vec<Arc<SdfGrid>> = Vec::new();
+        for c in colliders {
+            if let Shape::Sdf(g) = &c.shape
+                && !grids.iter().any(|x| Arc::ptr_eq(x, g))
+            {
+                grids.push(g.clone());
+            }
+        }
+        let same = grids.len() == self.sdf_grids.len()
+            && grids
+                .iter()
+                .zip(&self.sdf_grids)
+                .all(|(a, b)| Arc::ptr_eq(a, b));
+        if same {
+            return false;
+        }
+        let total: usize = grids.iter().map(|g| g.values().len()).sum();
+        self.sdf_buf = empty(
+            device,
+            "cloth_sdf",
+            (total * 4) as u64,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        );
+        let mut at = 0u64;
+        for g in &grids {
+            if !g.values().is_empty() {
+                queue.write_buffer(&self.sdf_buf, at, bytemuck::cast_slice(g.values()));
+            }
+            at += (g.values().len() * 4) as u64;
+        }
+        self.sdf_grids = grids;
+        true
+    }
+
+    /// Where a collider's grid sits in the SDF buffer: samples along x, y, z and the first.
+    fn grid_of(&self, c: &Collider) -> [u32; 4] {
+        let Shape::Sdf(g) = &c.shape else {
+            return [0; 4];
+        };
+        let mut first = 0;
+        for x in &self.sdf_grids {
+            if Arc::ptr_eq(x, g) {
+                break;
+            }
+            first += x.values().len() as u32;
+        }
+        let d = g.dims();
+        [d.x, d.y, d.z, first]
+    }
+
+    /// Records the steps [`Self::prepare`] wrote for into `encoder` (one compute pass).
+    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, kernels: &GpuKernels) {
+        let cmds = self.commands(kernels);
+        let Some(bg) = self.bind_group.as_ref().filter(|_| !cmds.is_empty()) else {
+            return;
+        };
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("cloth_step"),
             timestamp_writes: None,
         });
+        replay(&mut pass, bg, &cmds);
+    }
+
+    /// As [`Self::record`], one compute pass per stage run, each with timestamps into
+    /// `queries` (pass `i` writes queries `2i` and `2i + 1`); returns the stage of each pass.
+    /// For profiling (the `tradeoff` example): the extra passes cost a little.
+    ///
+    /// # Panics
+    /// If `queries` is smaller than twice the number of passes.
+    pub fn record_profiled(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        kernels: &GpuKernels,
+        queries: &wgpu::QuerySet,
+    ) -> Vec<GpuStage> {
+        let cmds = self.commands(kernels);
+        let mut stages = Vec::new();
+        let Some(bg) = &self.bind_group else {
+            return stages;
+        };
+        let mut start = 0;
+        while start < cmds.len() {
+            let Cmd::Stage(stage) = cmds[start] else {
+                unreachable!("every run starts with its stage");
+            };
+            let end = cmds[start + 1..]
+                .iter()
+                .position(|c| matches!(c, Cmd::Stage(_)))
+                .map_or(cmds.len(), |p| start + 1 + p);
+            let i = stages.len() as u32;
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(stage.name()),
+                timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
+                    query_set: queries,
+                    beginning_of_pass_write_index: Some(2 * i),
+                    end_of_pass_write_index: Some(2 * i + 1),
+                }),
+            });
+            replay(&mut pass, bg, &cmds[start..end]);
+            stages.push(stage);
+            start = end;
+        }
+        stages
+    }
+
+    /// The dispatches of the prepared steps, each run of one stage headed by its stage.
+    fn commands<'k>(&self, kernels: &'k GpuKernels) -> Vec<Cmd<'k>> {
+        let (steps, _) = self.prepared;
+        let mut out = Vec::new();
+        if steps == 0 || self.n == 0 || self.bind_group.is_none() {
+            return out;
+        }
         let groups = |count: u32| count.div_ceil(WORKGROUP);
         let vertex_groups = groups(self.n);
         let pin_groups = groups(self.pins);
         let sub_offset = |k: u32, s: u32| ((k * self.substeps + s) as u64 * TABLE_STRIDE) as u32;
+        let mut stage = None;
+        let mut enter = |out: &mut Vec<Cmd<'k>>, s: GpuStage, offsets: [u32; 2]| {
+            if stage != Some(s) {
+                out.push(Cmd::Stage(s));
+                stage = Some(s);
+            }
+            out.push(Cmd::Bind(offsets));
+        };
         for k in 0..steps {
             let first = sub_offset(k, 0);
-            pass.set_bind_group(0, bg, &[first, 0]);
+            enter(&mut out, GpuStage::Begin, [first, 0]);
             if self.pins > 0 {
-                pass.set_pipeline(&kernels.pins_begin);
-                pass.dispatch_workgroups(pin_groups, 1, 1);
+                out.push(Cmd::Run(&kernels.pins_begin, pin_groups));
             }
             if self.air_on {
-                pass.set_pipeline(&kernels.areas);
-                pass.dispatch_workgroups(vertex_groups, 1, 1);
+                out.push(Cmd::Run(&kernels.areas, vertex_groups));
             }
             for s in 0..self.substeps {
                 let so = sub_offset(k, s);
-                pass.set_bind_group(0, bg, &[so, 0]);
+                enter(&mut out, GpuStage::Integrate, [so, 0]);
                 if self.pins > 0 {
-                    pass.set_pipeline(&kernels.pins_substep);
-                    pass.dispatch_workgroups(pin_groups, 1, 1);
+                    out.push(Cmd::Run(&kernels.pins_substep, pin_groups));
                 }
-                pass.set_pipeline(&kernels.integrate);
-                pass.dispatch_workgroups(vertex_groups, 1, 1);
+                out.push(Cmd::Run(&kernels.integrate, vertex_groups));
                 if self.iterations > 1 && self.lambdas > 0 {
-                    pass.set_pipeline(&kernels.lambda_clear);
-                    pass.dispatch_workgroups(groups(self.lambdas), 1, 1);
+                    out.push(Cmd::Run(&kernels.lambda_clear, groups(self.lambdas)));
                 }
                 for _ in 0..self.iterations {
                     for (i, p) in self.passes.iter().enumerate() {
                         let ro = (i as u64 * TABLE_STRIDE) as u32;
-                        pass.set_bind_group(0, bg, &[so, ro]);
-                        let (pipeline, groups) = match p.kind {
-                            PassKind::DistanceColour => (&kernels.distance_colour, groups(p.count)),
-                            PassKind::DistanceSerial => (&kernels.distance_serial, 1),
-                            PassKind::BendColour => (&kernels.bend_colour, groups(p.count)),
-                            PassKind::BendSerial => (&kernels.bend_serial, 1),
+                        let (pipeline, groups, stage) = match p.kind {
+                            PassKind::DistanceColour => (
+                                &kernels.distance_colour,
+                                groups(p.count),
+                                GpuStage::Distance,
+                            ),
+                            PassKind::DistanceSerial => {
+                                (&kernels.distance_serial, 1, GpuStage::Distance)
+                            }
+                            PassKind::BendColour => {
+                                (&kernels.bend_colour, groups(p.count), GpuStage::Bending)
+                            }
+                            PassKind::BendSerial => (&kernels.bend_serial, 1, GpuStage::Bending),
                         };
-                        pass.set_pipeline(pipeline);
-                        pass.dispatch_workgroups(groups, 1, 1);
+                        enter(&mut out, stage, [so, ro]);
+                        out.push(Cmd::Run(pipeline, groups));
                     }
                 }
+                if self.tether_base != 0 {
+                    enter(&mut out, GpuStage::Tethers, [so, 0]);
+                    out.push(Cmd::Run(&kernels.tethers, vertex_groups));
+                }
                 if self.prepared.1 > 0 {
-                    pass.set_bind_group(0, bg, &[so, 0]);
-                    pass.set_pipeline(&kernels.collide);
-                    pass.dispatch_workgroups(vertex_groups, 1, 1);
+                    enter(&mut out, GpuStage::Collide, [so, 0]);
+                    out.push(Cmd::Run(&kernels.collide, vertex_groups));
                 }
             }
             let last = sub_offset(k, self.substeps - 1);
-            pass.set_bind_group(0, bg, &[last, 0]);
-            pass.set_pipeline(&kernels.finish);
-            pass.dispatch_workgroups(vertex_groups, 1, 1);
+            enter(&mut out, GpuStage::Finish, [last, 0]);
+            out.push(Cmd::Run(&kernels.finish, vertex_groups));
             if self.pins > 0 {
-                pass.set_pipeline(&kernels.pins_finish);
-                pass.dispatch_workgroups(pin_groups, 1, 1);
+                out.push(Cmd::Run(&kernels.pins_finish, pin_groups));
             }
+            out.push(Cmd::Run(&kernels.guard, vertex_groups));
         }
+        out
     }
 
-    /// Reads positions and velocities back (blocking: for tests, tools and opt-in readback).
+    /// Reads positions and velocities back (blocking: for tests and tools; the plugin reads
+    /// back asynchronously).
     #[must_use]
     pub fn read_state(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> (Vec<Vec4>, Vec<Vec4>) {
-        let n = self.n as u64;
-        let size = 3 * n * 16;
+        let n = self.n as usize;
         if n == 0 {
             return (Vec::new(), Vec::new());
         }
+        let all = self.read(device, queue, 0, 3 * n as u64 * 16);
+        (all[..n].to_vec(), all[2 * n..3 * n].to_vec())
+    }
+
+    /// Whether a step since the last upload left a NaN or infinite position or velocity
+    /// (blocking, as [`Self::read_state`]).
+    #[must_use]
+    pub fn read_failed(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> bool {
+        self.read(device, queue, self.status_offset(), 16)[0].x != 0.0
+    }
+
+    fn read(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        offset: u64,
+        size: u64,
+    ) -> Vec<Vec4> {
         let staging = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("cloth_readback"),
             size,
@@ -990,7 +1327,7 @@ impl GpuCloth {
             mapped_at_creation: false,
         });
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
-        encoder.copy_buffer_to_buffer(&self.state, 0, &staging, 0, size);
+        encoder.copy_buffer_to_buffer(&self.state, offset, &staging, 0, size);
         queue.submit([encoder.finish()]);
         staging.map_async(wgpu::MapMode::Read, .., |r| {
             if let Err(e) = r {
@@ -1000,7 +1337,6 @@ impl GpuCloth {
         let _ = device.poll(wgpu::PollType::wait_indefinitely());
         let all: Vec<Vec4> = bytemuck::pod_collect_to_vec(&staging.get_mapped_range(..));
         staging.unmap();
-        let n = n as usize;
-        (all[..n].to_vec(), all[2 * n..3 * n].to_vec())
+        all
     }
 }

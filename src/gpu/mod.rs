@@ -9,5 +9,8 @@ pub mod kernels;
 pub mod mesh;
 mod plugin;
 
-pub use kernels::{GpuCloth, GpuKernels, GpuStepInput, GpuUnsupported};
-pub use plugin::{ClothBackend, ClothBackendInUse, ClothGpuPlugin, ClothGpuSupport, ClothOnGpu};
+pub use kernels::{GpuCloth, GpuKernels, GpuStage, GpuStepInput, GpuUnsupported};
+pub use plugin::{
+    ClothBackend, ClothBackendInUse, ClothGpuPlugin, ClothGpuSupport, ClothOnGpu, ClothReadback,
+};
+pub(crate) use plugin::{ClothLeavingGpu, forget_gpu_cloth};

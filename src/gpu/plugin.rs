@@ -11,10 +11,16 @@
 //! 3. Render world, `Render` schedule (`PrepareResources`): buffers are made or updated.
 //! 4. `RenderGraph` schedule, before the camera driver: the steps' compute passes, then the
 //!    mesh write into the vertex slab; the main, shadow and prepass passes of the same frame
-//!    draw the new shape.
+//!    draw the new shape. The step's status (NaN guard) and, for cloths with
+//!    [`ClothReadback`] or leaving the GPU, the positions and velocities are copied to a
+//!    staging buffer, mapped in `Cleanup`.
+//! 5. Next extracts: mapped results go to the main world, where [`PreUpdate`] applies them
+//!    to [`ClothSim`] (a frame or two late), recovers a cloth whose state went bad, and hands
+//!    a cloth that left the GPU to the CPU.
 
 use std::collections::HashMap;
-use std::sync::Arc;
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::{Arc, Mutex};
 
 use bevy::camera::visibility::NoFrustumCulling;
 use bevy::core_pipeline::schedule::camera_driver;
@@ -22,7 +28,7 @@ use bevy::mesh::MeshVertexAttribute;
 use bevy::prelude::*;
 use bevy::render::mesh::allocator::{MeshAllocator, MeshAllocatorSettings};
 use bevy::render::renderer::{RenderContext, RenderDevice, RenderGraph, RenderQueue};
-use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderSystems};
+use bevy::render::{Extract, ExtractSchedule, MainWorld, Render, RenderApp, RenderSystems};
 
 use super::kernels::{GpuCloth, GpuKernels, GpuStepInput};
 use super::mesh::{MeshKernel, MeshWriter, VertexLayout};
@@ -78,11 +84,14 @@ pub struct ClothGpuSupport {
 /// What the GPU backend runs: PBD and XPBD with substeps and iterations, stretch, shear and
 /// isometric bending, pins (moving with their anchors), gravity, damping, the speed limit, air
 /// drag/lift/friction with the wind, sphere/box/capsule/plane colliders with friction, normals.
-/// What keeps a cloth on the CPU: self-collision, tethers, tearing, dihedral or implicit
-/// bending, the lab solver. Mesh (SDF) colliders are ignored by GPU cloths. The results stay
-/// on the GPU: [`ClothSim`]'s state is the one the cloth started from (or had when its
-/// settings last changed), contact impulses are not sent to colliders, and a change of
-/// settings or pins restarts the GPU cloth from that state.
+/// What keeps a cloth on the CPU: self-collision, tearing, implicit bending, the lab solver.
+/// The results stay on the GPU: [`ClothSim`]'s state is the one the cloth started from unless
+/// the cloth has [`ClothReadback`]; contact impulses are not sent to colliders. A change of
+/// settings or pins carries the GPU state over; an edit through
+/// [`ClothSim::simulation_mut`] restarts the GPU cloth from the edited state; switching to the
+/// CPU reads the state back first (the cloth holds still for the frame or two that takes).
+/// A NaN or infinite state is caught on the GPU and recovered as on the CPU (rest pose,
+/// [`ClothSim::recoveries`], a warning), a frame or two late.
 #[derive(Clone, Copy, Debug)]
 pub struct ClothGpuPlugin {
     /// Backend of cloths without a [`ClothBackend`] component.
@@ -106,13 +115,59 @@ struct GpuUpload {
     weld: crate::solver::Weld,
     drawn: Vec<u32>,
     layout: VertexLayout,
+    /// Start from the GPU state of the previous upload (a settings change), not from `sim`'s.
+    carry: bool,
 }
+
+/// Copies a GPU cloth's positions and velocities into its [`ClothSim`] every frame, a frame
+/// or two after the GPU computed them (opt-in: the copy costs bus bandwidth and CPU time).
+///
+/// Without it a GPU cloth's [`ClothSim`] keeps the state the cloth started from: gameplay that
+/// reads vertex positions, strain or sleep state of a GPU cloth needs this component.
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[reflect(Component)]
+pub struct ClothReadback;
+
+/// A cloth that left the GPU and waits for its last GPU state before the CPU steps it on.
+#[derive(Component)]
+pub(crate) struct ClothLeavingGpu {
+    generation: u64,
+    frames: u32,
+}
+
+/// Frames a cloth leaving the GPU waits for its state before going on from the main world's.
+const LEAVE_TIMEOUT_FRAMES: u32 = 30;
+
+/// Removes a cloth's GPU components (the cloth itself was removed).
+pub(crate) fn forget_gpu_cloth(commands: &mut Commands, entity: Entity) {
+    commands
+        .entity(entity)
+        .try_remove::<(ClothOnGpu, ClothLeavingGpu, ClothBackendInUse)>();
+}
+
+/// What a GPU frame read back for one cloth.
+struct GpuResult {
+    entity: Entity,
+    generation: u64,
+    /// A step left a NaN or infinite position or velocity.
+    failed: bool,
+    /// Positions and velocities, when asked for.
+    state: Option<(Vec<Vec4>, Vec<Vec4>)>,
+}
+
+/// Results waiting for the main world (filled during extraction).
+#[derive(Resource, Default)]
+struct GpuClothResults(Vec<GpuResult>);
 
 /// A cloth the GPU steps, with this frame's queued steps (main world).
 #[derive(Component)]
 pub struct ClothOnGpu {
     generation: u64,
     upload: Arc<GpuUpload>,
+    /// [`ClothSim::simulation_mut`] calls the upload was made after.
+    edits: u64,
+    /// Upload the main world's state again (after a recovery).
+    restart: bool,
     /// Settings the upload was made with (a change re-uploads).
     key: String,
     pending: Vec<Vec<Vec3>>,
@@ -133,8 +188,11 @@ impl ClothOnGpu {
 impl Plugin for ClothGpuPlugin {
     fn build(&self, app: &mut App) {
         app.register_type::<ClothBackend>()
+            .register_type::<ClothReadback>()
             .insert_resource(DefaultBackend(self.default_backend))
+            .init_resource::<GpuClothResults>()
             .add_systems(First, clear_queued_steps)
+            .add_systems(PreUpdate, apply_gpu_results)
             .add_systems(
                 FixedPostUpdate,
                 (
@@ -159,13 +217,24 @@ impl Plugin for ClothGpuPlugin {
         let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
             return;
         };
+        let (sender, receiver) = channel();
         render_app
             .init_resource::<ExtractedGpuCloths>()
             .init_resource::<GpuClothInstances>()
-            .add_systems(ExtractSchedule, extract_gpu_cloths)
+            .insert_resource(ReadbackChannel {
+                sender,
+                receiver: Mutex::new(receiver),
+            })
+            .add_systems(
+                ExtractSchedule,
+                (send_gpu_results, extract_gpu_cloths).chain(),
+            )
             .add_systems(
                 Render,
-                prepare_gpu_cloths.in_set(RenderSystems::PrepareResources),
+                (
+                    prepare_gpu_cloths.in_set(RenderSystems::PrepareResources),
+                    map_readbacks.in_set(RenderSystems::Cleanup),
+                ),
             )
             .add_systems(RenderGraph, run_gpu_cloths.before(camera_driver));
     }
@@ -244,7 +313,8 @@ fn settings_key(sim: &Simulation) -> String {
 
 #[expect(
     clippy::type_complexity,
-    reason = "a query over the cloth, its backend choice and its GPU twin"
+    clippy::too_many_arguments,
+    reason = "a query over the cloth, its backend choice and its GPU twin; a system's inputs"
 )]
 fn choose_backends(
     mut commands: Commands,
@@ -257,10 +327,21 @@ fn choose_backends(
         Option<&ClothBackend>,
         Option<&mut ClothBackendInUse>,
         Option<&mut ClothOnGpu>,
+        Has<ClothLeavingGpu>,
     )>,
+    fixed: Res<Time<Fixed>>,
     mut generation: Local<u64>,
+    // Per cloth: the settings the model was last checked with, and the verdict.
+    mut checked: Local<HashMap<Entity, (String, Result<(), String>)>>,
 ) {
-    for (entity, cloth, backend, in_use, on_gpu) in &mut cloths {
+    let dt = fixed.timestep().as_secs_f32();
+    let mut seen = std::collections::HashSet::new();
+    for (entity, cloth, backend, in_use, on_gpu, leaving) in &mut cloths {
+        seen.insert(entity);
+        if leaving {
+            // Waits for its last GPU state (`apply_gpu_results`).
+            continue;
+        }
         let wanted = backend.copied().unwrap_or(default.0);
         let verdict: Result<(), String> = match wanted {
             ClothBackend::Cpu => Err(String::new()),
@@ -270,7 +351,19 @@ fn choose_backends(
                     s.unavailable.clone()
                 })
                 .map_or(Ok(()), Err)
-                .and_then(|()| GpuCloth::supports(cloth.simulation()).map_err(|e| e.0)),
+                .and_then(|()| {
+                    // The model check (O(n) for stiff bending) once per change of settings.
+                    let key = settings_key(cloth.simulation());
+                    match checked.get(&entity) {
+                        Some((k, verdict)) if *k == key => verdict.clone(),
+                        _ => {
+                            let verdict =
+                                GpuCloth::supports(cloth.simulation(), dt).map_err(|e| e.0);
+                            checked.insert(entity, (key, verdict.clone()));
+                            verdict
+                        }
+                    }
+                }),
         };
         let layout = verdict.clone().and_then(|()| {
             meshes
@@ -282,11 +375,15 @@ fn choose_backends(
         match (layout, on_gpu) {
             (Ok(layout), Some(mut g)) => {
                 let key = settings_key(cloth.simulation());
-                if key != g.key {
+                let edited = cloth.edits != g.edits || g.restart;
+                if key != g.key || edited {
+                    // New settings go on from the GPU's state; an edit of the state wins.
                     *generation += 1;
                     g.generation = *generation;
-                    g.upload = Arc::new(upload(cloth, layout));
+                    g.upload = Arc::new(upload(cloth, layout, !edited));
                     g.key = key;
+                    g.edits = cloth.edits;
+                    g.restart = false;
                 }
             }
             (Ok(layout), None) => {
@@ -295,7 +392,9 @@ fn choose_backends(
                 commands.entity(entity).insert((
                     ClothOnGpu {
                         generation: *generation,
-                        upload: Arc::new(upload(cloth, layout)),
+                        upload: Arc::new(upload(cloth, layout, false)),
+                        edits: cloth.edits,
+                        restart: false,
                         key: settings_key(cloth.simulation()),
                         pending: Vec::new(),
                         dt: 0.0,
@@ -312,10 +411,15 @@ fn choose_backends(
                 ));
             }
             (Err(why), on_gpu) => {
-                if on_gpu.is_some() {
+                if let Some(g) = on_gpu {
+                    // The CPU goes on from the GPU's state once it is read back.
                     commands
                         .entity(entity)
-                        .remove::<(ClothOnGpu, NoFrustumCulling)>();
+                        .remove::<(ClothOnGpu, NoFrustumCulling)>()
+                        .insert(ClothLeavingGpu {
+                            generation: g.generation,
+                            frames: 0,
+                        });
                 }
                 let reason = (!why.is_empty()).then_some(why);
                 let changed = in_use
@@ -340,15 +444,89 @@ fn choose_backends(
             }
         }
     }
+    checked.retain(|e, _| seen.contains(e));
 }
 
-fn upload(cloth: &ClothSim, layout: VertexLayout) -> GpuUpload {
+fn upload(cloth: &ClothSim, layout: VertexLayout, carry: bool) -> GpuUpload {
     let binding = &cloth.binding;
     GpuUpload {
         sim: cloth.simulation().clone(),
         weld: binding.weld().clone(),
         drawn: binding.drawn_indices().collect(),
         layout,
+        carry,
+    }
+}
+
+/// Main world: applies what the GPU read back. A bad state is recovered as on the CPU (and
+/// re-uploaded); positions and velocities go into [`ClothSim`]; a cloth leaving the GPU
+/// takes its last state and goes on on the CPU.
+#[expect(
+    clippy::type_complexity,
+    reason = "a cloth, its GPU state, its placement"
+)]
+fn apply_gpu_results(
+    mut commands: Commands,
+    mut results: ResMut<GpuClothResults>,
+    mut cloths: Query<(
+        Entity,
+        &mut ClothSim,
+        Option<&mut ClothOnGpu>,
+        Option<&mut ClothLeavingGpu>,
+        Option<&GlobalTransform>,
+    )>,
+) {
+    let mut results = core::mem::take(&mut results.0);
+    // The latest result per cloth (a slow frame can bring two).
+    results.reverse();
+    let mut seen = Vec::new();
+    for r in results {
+        if seen.contains(&r.entity) {
+            continue;
+        }
+        seen.push(r.entity);
+        let Ok((entity, mut cloth, on_gpu, leaving, transform)) = cloths.get_mut(r.entity) else {
+            continue;
+        };
+        let current = on_gpu
+            .as_ref()
+            .map(|g| g.generation)
+            .or(leaving.as_ref().map(|l| l.generation));
+        if current != Some(r.generation) {
+            continue;
+        }
+        let cloth = &mut *cloth;
+        if r.failed && on_gpu.as_ref().is_some_and(|g| g.restart) {
+            // Already recovered; the restart is on its way.
+            continue;
+        }
+        if r.failed {
+            cloth.recover(entity, transform.copied());
+        } else if let Some((positions, velocities)) = &r.state {
+            cloth.take_gpu_state(positions, velocities);
+        }
+        if leaving.is_some() && (r.failed || r.state.is_some()) {
+            cloth.dirty = true;
+            commands.entity(entity).remove::<ClothLeavingGpu>();
+        } else if r.failed
+            && let Some(mut g) = on_gpu
+        {
+            // Restart the GPU cloth from the recovered state (a new generation).
+            g.restart = true;
+        }
+    }
+    for (entity, mut cloth, _, leaving, _) in &mut cloths {
+        if let Some(mut l) = leaving {
+            l.frames += 1;
+            if l.frames > LEAVE_TIMEOUT_FRAMES {
+                warn!(
+                    "cloth {entity}: its GPU state did not come back; the CPU goes on from the \
+                     state it last had"
+                );
+                cloth.dirty = true;
+                commands.entity(entity).remove::<ClothLeavingGpu>();
+            }
+        }
     }
 }
 
@@ -377,6 +555,8 @@ fn queue_gpu_steps(
         let sim = &mut cloth.sim;
         g.pending
             .push(sim.state().pins().iter().map(|p| p.target).collect());
+        cloth.count_steps(1);
+        let sim = &mut cloth.sim;
         g.dt = dt;
         if g.colliders_first.is_empty() {
             g.colliders_first = list.to_vec();
@@ -396,23 +576,39 @@ struct ExtractedGpuCloth {
     entity: Entity,
     mesh: AssetId<Mesh>,
     generation: u64,
-    upload: Arc<GpuUpload>,
+    /// `None` for a cloth leaving the GPU (read back, not stepped).
+    upload: Option<Arc<GpuUpload>>,
     steps: Vec<Vec<Vec3>>,
     dt: f32,
     colliders: Vec<Collider>,
     air: Vec<Vec4>,
     transform: bevy::math::Affine3A,
+    /// Read positions and velocities back this frame.
+    readback: bool,
 }
 
 #[derive(Resource, Default)]
 struct ExtractedGpuCloths(Vec<ExtractedGpuCloth>);
 
+#[expect(
+    clippy::type_complexity,
+    reason = "the GPU cloths and those leaving the GPU"
+)]
 fn extract_gpu_cloths(
     mut out: ResMut<ExtractedGpuCloths>,
-    cloths: Extract<Query<(Entity, &ClothOnGpu, &Mesh3d, &GlobalTransform)>>,
+    cloths: Extract<
+        Query<(
+            Entity,
+            &ClothOnGpu,
+            &Mesh3d,
+            &GlobalTransform,
+            Has<ClothReadback>,
+        )>,
+    >,
+    leaving: Extract<Query<(Entity, &ClothLeavingGpu, &Mesh3d, &GlobalTransform)>>,
 ) {
     out.0.clear();
-    for (entity, g, mesh, transform) in &cloths {
+    for (entity, g, mesh, transform, readback) in &cloths {
         // Colliders over the whole frame: poses at its first step's start and its last
         // step's end (the same shapes in both unless one came or went mid-frame).
         let colliders = if g.colliders_first.len() == g.colliders_last.len() {
@@ -431,12 +627,27 @@ fn extract_gpu_cloths(
             entity,
             mesh: mesh.id(),
             generation: g.generation,
-            upload: g.upload.clone(),
+            upload: Some(g.upload.clone()),
             steps: g.pending.clone(),
             dt: g.dt,
             colliders,
             air: g.air.clone(),
             transform: transform.affine(),
+            readback,
+        });
+    }
+    for (entity, l, mesh, transform) in &leaving {
+        out.0.push(ExtractedGpuCloth {
+            entity,
+            mesh: mesh.id(),
+            generation: l.generation,
+            upload: None,
+            steps: Vec::new(),
+            dt: 0.0,
+            colliders: Vec::new(),
+            air: Vec::new(),
+            transform: transform.affine(),
+            readback: true,
         });
     }
 }
@@ -453,10 +664,40 @@ struct Instance {
     writer: MeshWriter,
     mesh: AssetId<Mesh>,
     transform: bevy::math::Affine3A,
+    /// The state buffer of the instance this one replaced, to carry over this frame.
+    carry_from: Option<wgpu::Buffer>,
+    /// Steps to run this frame (0: nothing to step or write).
+    steps: usize,
+    /// Read positions and velocities back this frame (the status is read every frame).
+    readback: bool,
+    /// The staging buffer, when not being mapped.
+    staging: Option<wgpu::Buffer>,
+    /// A copy is on its way to the main world.
+    in_flight: bool,
+}
+
+/// A copy of a cloth's state on its way to the main world.
+struct Readback {
+    entity: Entity,
+    generation: u64,
+    full: bool,
+    buffer: wgpu::Buffer,
+    /// The mapped bytes (`None` if mapping failed).
+    data: Option<Vec<u8>>,
 }
 
 #[derive(Resource, Default)]
-struct GpuClothInstances(HashMap<Entity, Instance>);
+struct GpuClothInstances {
+    cloths: HashMap<Entity, Instance>,
+    /// Copies recorded this frame, to map once submitted.
+    requested: Vec<Readback>,
+}
+
+#[derive(Resource)]
+struct ReadbackChannel {
+    sender: Sender<Readback>,
+    receiver: Mutex<Receiver<Readback>>,
+}
 
 fn prepare_gpu_cloths(
     extracted: Res<ExtractedGpuCloths>,
@@ -470,21 +711,26 @@ fn prepare_gpu_cloths(
     };
     let device = device.wgpu_device();
     instances
-        .0
+        .cloths
         .retain(|e, _| extracted.0.iter().any(|x| x.entity == *e));
     for x in &extracted.0 {
-        let fresh = instances
-            .0
-            .get(&x.entity)
-            .is_none_or(|i| i.generation != x.generation);
-        if fresh {
-            let sim = &x.upload.sim;
+        let old = instances.cloths.get(&x.entity);
+        let fresh = old.is_none_or(|i| i.generation != x.generation);
+        if let (true, Some(upload)) = (fresh, &x.upload) {
+            let sim = &upload.sim;
             let Ok(cloth) = GpuCloth::new(device, &pipelines.kernels, sim) else {
                 continue;
             };
             cloth.upload_state(&queue, sim);
-            let writer = MeshWriter::new(device, &x.upload.weld, &x.upload.drawn, x.upload.layout);
-            instances.0.insert(
+            // New settings go on from where the GPU cloth is (same particles only).
+            let carry_from = old
+                .filter(|o| upload.carry && o.cloth.len() == cloth.len())
+                .map(|o| o.cloth.state_buffer().clone());
+            let writer = MeshWriter::new(device, &upload.weld, &upload.drawn, upload.layout);
+            let staging = old
+                .filter(|o| o.cloth.len() == cloth.len())
+                .and_then(|o| o.staging.clone());
+            instances.cloths.insert(
                 x.entity,
                 Instance {
                     generation: x.generation,
@@ -492,33 +738,50 @@ fn prepare_gpu_cloths(
                     writer,
                     mesh: x.mesh,
                     transform: x.transform,
+                    carry_from,
+                    steps: 0,
+                    readback: false,
+                    staging,
+                    in_flight: false,
                 },
             );
         }
-        let Some(i) = instances.0.get_mut(&x.entity) else {
+        let Some(i) = instances.cloths.get_mut(&x.entity) else {
             continue;
         };
+        if i.generation != x.generation {
+            continue;
+        }
         i.mesh = x.mesh;
         i.transform = x.transform;
-        i.cloth.prepare(
-            device,
-            &queue,
-            &pipelines.kernels,
-            &x.upload.sim,
-            x.dt,
-            &x.steps,
-            GpuStepInput {
-                colliders: &x.colliders,
-                air_velocities: &x.air,
-            },
-        );
+        i.steps = x.steps.len();
+        i.readback = x.readback;
+        if let Some(upload) = &x.upload {
+            i.cloth.prepare(
+                device,
+                &queue,
+                &pipelines.kernels,
+                &upload.sim,
+                x.dt,
+                &x.steps,
+                GpuStepInput {
+                    colliders: &x.colliders,
+                    air_velocities: &x.air,
+                },
+            );
+        }
     }
+}
+
+/// Bytes of a cloth's staging buffer: the status, then positions and velocities.
+fn staging_size(n: usize) -> u64 {
+    16 + 2 * 16 * n as u64
 }
 
 fn run_gpu_cloths(
     mut ctx: RenderContext,
     pipelines: Option<Res<GpuClothPipelines>>,
-    instances: Res<GpuClothInstances>,
+    mut instances: ResMut<GpuClothInstances>,
     allocator: Res<MeshAllocator>,
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
@@ -526,21 +789,116 @@ fn run_gpu_cloths(
     let Some(pipelines) = pipelines else {
         return;
     };
-    for i in instances.0.values() {
-        let Some(slice) = allocator.mesh_vertex_slice(&i.mesh) else {
+    let instances = &mut *instances;
+    for (&entity, i) in &mut instances.cloths {
+        let encoder = ctx.command_encoder();
+        if let Some(from) = i.carry_from.take() {
+            i.cloth.record_carry(encoder, &pipelines.kernels, &from);
+        }
+        if i.steps > 0 {
+            let Some(slice) = allocator.mesh_vertex_slice(&i.mesh) else {
+                continue;
+            };
+            i.cloth.record(encoder, &pipelines.kernels);
+            i.writer.record(
+                device.wgpu_device(),
+                &queue,
+                &pipelines.mesh,
+                encoder,
+                i.cloth.state_buffer(),
+                slice.buffer,
+                slice.range.start,
+                i.transform,
+            );
+        } else if !i.readback {
+            continue;
+        }
+        // The status after the steps, and the state when asked for; skipped while the last
+        // copy is still on its way.
+        let buffer = match i.staging.take() {
+            Some(b) => b,
+            None if i.in_flight => continue,
+            None => device.wgpu_device().create_buffer(&wgpu::BufferDescriptor {
+                label: Some("cloth_readback"),
+                size: staging_size(i.cloth.len()),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+        };
+        i.in_flight = true;
+        let state = i.cloth.state_buffer();
+        let region = 16 * i.cloth.len() as u64;
+        encoder.copy_buffer_to_buffer(state, i.cloth.status_offset(), &buffer, 0, 16);
+        if i.readback && region > 0 {
+            encoder.copy_buffer_to_buffer(state, 0, &buffer, 16, region);
+            encoder.copy_buffer_to_buffer(state, 2 * region, &buffer, 16 + region, region);
+        }
+        instances.requested.push(Readback {
+            entity,
+            generation: i.generation,
+            full: i.readback,
+            buffer,
+            data: None,
+        });
+    }
+}
+
+/// `Cleanup`, after the frame's commands were submitted: maps this frame's copies; the
+/// results come back through the channel when the GPU is done.
+fn map_readbacks(mut instances: ResMut<GpuClothInstances>, channel: Res<ReadbackChannel>) {
+    for mut r in instances.requested.drain(..) {
+        let sender = channel.sender.clone();
+        let buffer = r.buffer.clone();
+        buffer
+            .clone()
+            .map_async(wgpu::MapMode::Read, .., move |result| {
+                if result.is_ok() {
+                    r.data = Some(buffer.get_mapped_range(..).to_vec());
+                    buffer.unmap();
+                }
+                // The receiver lives as long as the render world.
+                let _ = sender.send(r);
+            });
+    }
+}
+
+/// Extraction: what the GPU finished goes to the main world; staging buffers return to their
+/// cloths.
+fn send_gpu_results(
+    channel: Res<ReadbackChannel>,
+    mut instances: ResMut<GpuClothInstances>,
+    mut main_world: ResMut<MainWorld>,
+) {
+    let Ok(receiver) = channel.receiver.lock() else {
+        return;
+    };
+    let mut out = Vec::new();
+    for r in receiver.try_iter() {
+        if let Some(i) = instances.cloths.get_mut(&r.entity)
+            && i.generation == r.generation
+        {
+            i.in_flight = false;
+            if r.buffer.size() == staging_size(i.cloth.len()) {
+                i.staging = Some(r.buffer.clone());
+            }
+        }
+        let Some(data) = &r.data else {
             continue;
         };
-        let encoder = ctx.command_encoder();
-        i.cloth.record(encoder, &pipelines.kernels);
-        i.writer.record(
-            device.wgpu_device(),
-            &queue,
-            &pipelines.mesh,
-            encoder,
-            i.cloth.state_buffer(),
-            slice.buffer,
-            slice.range.start,
-            i.transform,
-        );
+        let values: Vec<Vec4> = bytemuck::pod_collect_to_vec(data);
+        let n = (values.len() - 1) / 2;
+        out.push(GpuResult {
+            entity: r.entity,
+            generation: r.generation,
+            failed: values[0].x != 0.0,
+            state: r
+                .full
+                .then(|| (values[1..1 + n].to_vec(), values[1 + n..1 + 2 * n].to_vec())),
+        });
+    }
+    if !out.is_empty()
+        && let Some(mut results) = main_world.get_resource_mut::<GpuClothResults>()
+    {
+        results.0.extend(out);
     }
 }

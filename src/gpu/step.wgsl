@@ -5,7 +5,11 @@
 // State (binding 2) is one array of vec4, in regions of `n` vertices:
 //   [0, n) positions (w: inverse mass, 0 when pinned) | [n, 2n) positions at the substep's
 //   start | [2n, 3n) velocities | [3n, 4n) area vectors | [4n, 5n) air velocity |
-//   [5n, 5n + pins) pinned positions at the step's start.
+//   [5n, 5n + pins) pinned positions at the step's start | [5n + pins] status (x: 1 once a
+//   position or velocity went NaN or infinite).
+//
+// `topo` (binding 9): [per-vertex triangle offsets (n + 1) | incident triangles | triangles
+// (3 each) | tethers: per-vertex record offsets (n + 1) | records (pin, max length bits)].
 
 struct Params {
     // gravity·h in xyz, h in w
@@ -26,6 +30,13 @@ struct Params {
     tri_base: u32,
     // distance + bending multipliers
     lambdas: u32,
+    // start of the tether offsets in `topo`; 0: no tethers
+    tether_base: u32,
+    // index of the status vec4 in `state`
+    status: u32,
+    // 1: bends are dihedral hinges (rest angle in `a.x`), 0: isometric
+    dihedral: u32,
+    _pad: u32,
 }
 
 // One substep (binding 1, a dynamic offset per substep).
@@ -79,8 +90,10 @@ struct Collider {
     // sphere: radius | box: half extents | capsule: half height, radius
     shape: vec4<f32>,
     // thickness, friction, squared reach (bounding ball + thickness), kind (0 sphere,
-    // 1 box, 2 capsule, 3 plane)
+    // 1 box, 2 capsule, 3 plane, 4 baked SDF grid: origin in shape.xyz, cell in shape.w)
     misc: vec4<f32>,
+    // SDF grid: samples along x, y, z and the first sample's index in `sdf`
+    grid: vec4<u32>,
 }
 
 @group(0) @binding(0) var<uniform> P: Params;
@@ -93,6 +106,7 @@ struct Collider {
 @group(0) @binding(7) var<storage, read> colliders: array<Collider>;
 @group(0) @binding(8) var<uniform> R: Range;
 @group(0) @binding(9) var<storage, read> topo: array<u32>;
+@group(0) @binding(10) var<storage, read> sdf: array<f32>;
 
 const MIN_LENGTH: f32 = 1e-9;
 const MAX_ALPHA_TILDE: f32 = 1e30;
@@ -190,6 +204,56 @@ fn shape_distance(kind: u32, s: vec4<f32>, p: vec3<f32>) -> vec4<f32> {
             return vec4<f32>(0.0, 1.0, 0.0, p.y);
         }
     }
+}
+
+fn sdf_at(g: vec4<u32>, i: u32, j: u32, k: u32) -> f32 {
+    return sdf[g.w + i + g.x * (j + g.y * k)];
+}
+
+// `SdfGrid::sample`: trilinear distance and the gradient of the interpolant (outward normal
+// in xyz, signed distance in w); outside the grid, measured from the surface point nearest
+// the closest border sample.
+fn sdf_sample(origin: vec3<f32>, cell: f32, g: vec4<u32>, p: vec3<f32>) -> vec4<f32> {
+    let top = vec3<f32>(g.xyz - vec3<u32>(1u));
+    let gp = (p - origin) / cell;
+    let gc = clamp(gp, vec3<f32>(0.0), top);
+    let outside = (gp - gc) * cell;
+    let base = max(min(floor(gc), top - vec3<f32>(1.0)), vec3<f32>(0.0));
+    let f = gc - base;
+    let i = u32(base.x);
+    let j = u32(base.y);
+    let k = u32(base.z);
+    let c000 = sdf_at(g, i, j, k);
+    let c100 = sdf_at(g, i + 1u, j, k);
+    let c010 = sdf_at(g, i, j + 1u, k);
+    let c110 = sdf_at(g, i + 1u, j + 1u, k);
+    let c001 = sdf_at(g, i, j, k + 1u);
+    let c101 = sdf_at(g, i + 1u, j, k + 1u);
+    let c011 = sdf_at(g, i, j + 1u, k + 1u);
+    let c111 = sdf_at(g, i + 1u, j + 1u, k + 1u);
+    let c00 = lerp(c000, c100, f.x);
+    let c10 = lerp(c010, c110, f.x);
+    let c01 = lerp(c001, c101, f.x);
+    let c11 = lerp(c011, c111, f.x);
+    let c0 = lerp(c00, c10, f.y);
+    let c1 = lerp(c01, c11, f.y);
+    let d = lerp(c0, c1, f.z);
+    let gx = lerp(lerp(c100 - c000, c110 - c010, f.y), lerp(c101 - c001, c111 - c011, f.y), f.z);
+    let gy = lerp(lerp(c010 - c000, c110 - c100, f.x), lerp(c011 - c001, c111 - c101, f.x), f.z);
+    let gz = lerp(lerp(c001 - c000, c101 - c100, f.x), lerp(c011 - c010, c111 - c110, f.x), f.y);
+    let grad = vec3<f32>(gx, gy, gz);
+    if dot(outside, outside) > 0.0 {
+        let border = origin + gc * cell;
+        let surface = border - try_normalize(grad, vec3<f32>(0.0)) * d;
+        let to_p = p - surface;
+        return vec4<f32>(try_normalize(to_p, vec3<f32>(0.0, 1.0, 0.0)), length(to_p));
+    }
+    return vec4<f32>(try_normalize(grad, vec3<f32>(0.0, 1.0, 0.0)), d);
+}
+
+// glam's `lerp` as the CPU writes it: a + (b − a)·t
+fn lerp(a: f32, b: f32, t: f32) -> f32 {
+    return a + (b - a) * t;
 }
 
 // `air::air_force`
@@ -357,6 +421,121 @@ fn project_bend(j: u32) {
     }
 }
 
+// `bending::bend_correction` applied to dihedral hinge `j` (signed angle, rest angle in `a.x`).
+fn project_dihedral(j: u32) {
+    let c = bends[j];
+    let x0 = state[c.v.x];
+    let x1 = state[c.v.y];
+    let x2 = state[c.v.z];
+    let x3 = state[c.v.w];
+    let ak = alpha_k(c.param.x);
+    var l = 0.0;
+    if P.accumulate != 0u {
+        l = lambda[P.distances + j].x;
+    }
+    let eps = 1e-12;
+    let p2 = x1.xyz - x0.xyz;
+    let p3 = x2.xyz - x0.xyz;
+    let p4 = x3.xyz - x0.xyz;
+    let c23 = cross(p2, p3);
+    let c24 = cross(p2, p4);
+    let l23 = sqrt(dot(c23, c23));
+    let l24 = sqrt(dot(c24, c24));
+    let inv23 = select(0.0, 1.0 / max(l23, eps), l23 > eps);
+    let inv24 = select(0.0, 1.0 / max(l24, eps), l24 > eps);
+    let n1 = c23 * inv23;
+    let n2 = c24 * inv24;
+    let d = min(max(dot(n1, n2), -1.0), 1.0);
+    let p2n1 = cross(p2, n1);
+    let p2n2 = cross(p2, n2);
+    let q3 = (p2n2 - p2n1 * d) * inv23;
+    let q4 = (p2n1 - p2n2 * d) * inv24;
+    let q2 = -((cross(p3, n2) + cross(n1, p3) * d) * inv23)
+        - (cross(p4, n1) + cross(n2, p4) * d) * inv24;
+    let q1 = -(q2 + q3 + q4);
+    let n12 = cross(n1, n2);
+    let s = sqrt(dot(n12, n12));
+    let sigma = select(-1.0, 1.0, dot(n12, p2) > 0.0);
+    let psi = sigma * atan2(s, -d);
+    let cc = psi - c.a.x;
+    let g = x0.w * dot(q1, q1) + x1.w * dot(q2, q2) + x2.w * dot(q3, q3) + x3.w * dot(q4, q4);
+    let s2 = s * s;
+    var base = ak.y * (-cc - ak.x * l) / (g + ak.x * s2);
+    if !(g > 1e-20) || !(l23 > eps) || !(l24 > eps) {
+        base = 0.0;
+    }
+    let f = -(sigma * s * base);
+    state[c.v.x] = vec4<f32>(x0.xyz + q1 * (x0.w * f), x0.w);
+    state[c.v.y] = vec4<f32>(x1.xyz + q2 * (x1.w * f), x1.w);
+    state[c.v.z] = vec4<f32>(x2.xyz + q3 * (x2.w * f), x2.w);
+    state[c.v.w] = vec4<f32>(x3.xyz + q4 * (x3.w * f), x3.w);
+    if P.accumulate != 0u {
+        lambda[P.distances + j] = vec4<f32>(l + s2 * base, 0.0, 0.0, 0.0);
+    }
+}
+
+fn project_hinge(j: u32) {
+    if P.dihedral != 0u {
+        project_dihedral(j);
+    } else {
+        project_bend(j);
+    }
+}
+
+// `Tethers::project`: each free vertex pulled back within reach of its pins, its
+// attachments in order (the anchors are pinned and do not move).
+@compute @workgroup_size(64)
+fn tethers(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= P.n || P.tether_base == 0u {
+        return;
+    }
+    var x = state[i];
+    if x.w <= 0.0 {
+        return;
+    }
+    let b = P.tether_base;
+    for (var k = topo[b + i]; k < topo[b + i + 1u]; k += 2u) {
+        let anchor = state[topo[k]].xyz;
+        let max_len = bitcast<f32>(topo[k + 1u]);
+        let d = x.xyz - anchor;
+        let len2 = dot(d, d);
+        if len2 > max_len * max_len {
+            let pulled = anchor + d * (max_len / sqrt(len2));
+            if finite3(pulled) {
+                x = vec4<f32>(pulled, x.w);
+            }
+        }
+    }
+    state[i] = x;
+}
+
+// After new settings: the positions the previous buffers had (copied into the substep-start
+// region) with this upload's inverse masses.
+@compute @workgroup_size(64)
+fn carry(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= P.n {
+        return;
+    }
+    state[i] = vec4<f32>(state[P.n + i].xyz, state[i].w);
+}
+
+// End of a step: flags a NaN or infinite position or velocity (`ClothState::is_finite`); the
+// plugin reads the flag back and resets the cloth as the CPU does.
+@compute @workgroup_size(64)
+fn guard(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= P.n {
+        return;
+    }
+    let x = state[i];
+    let v = state[2u * P.n + i];
+    if !(finite3(x.xyz) && finite(x.w) && finite3(v.xyz) && finite(v.w)) {
+        state[P.status].x = 1.0;
+    }
+}
+
 // Start of a substep with several iterations: the multipliers start from zero
 // (`Part::reset_lambda`).
 @compute @workgroup_size(64)
@@ -385,14 +564,14 @@ fn distance_serial(@builtin(global_invocation_id) id: vec3<u32>) {
 @compute @workgroup_size(64)
 fn bend_colour(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x < R.count {
-        project_bend(R.first + id.x);
+        project_hinge(R.first + id.x);
     }
 }
 
 @compute @workgroup_size(1)
 fn bend_serial(@builtin(global_invocation_id) id: vec3<u32>) {
     for (var i = 0u; i < R.count; i++) {
-        project_bend(R.first + i);
+        project_hinge(R.first + i);
     }
 }
 
@@ -417,7 +596,13 @@ fn collide(@builtin(global_invocation_id) id: vec3<u32>) {
             continue;
         }
         let local = pose_inverse_apply(c.to_t, c.to_r, p);
-        let dn = shape_distance(u32(c.misc.w), c.shape, local);
+        let kind = u32(c.misc.w);
+        var dn: vec4<f32>;
+        if kind == 4u {
+            dn = sdf_sample(c.shape.xyz, c.shape.w, c.grid, local);
+        } else {
+            dn = shape_distance(kind, c.shape, local);
+        }
         let d = dn.w * c.to_t.w;
         let thickness = c.misc.x;
         if !(d < thickness) {

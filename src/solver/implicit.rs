@@ -179,6 +179,25 @@ impl ImplicitBending {
         self.active
     }
 
+    /// Whether a step of `h` per substep would want the implicit solve (before trying to
+    /// factor: a system too big to factor falls back to projection).
+    pub(crate) fn wanted(
+        topology: &Topology,
+        positions: &[Vec4],
+        rigidity: f32,
+        h: f32,
+        solve: BendingSolve,
+    ) -> bool {
+        let wanted = match solve {
+            BendingSolve::Projected => false,
+            BendingSolve::Implicit => true,
+            BendingSolve::Auto => {
+                saturation(topology, positions, rigidity, h) > IMPLICIT_BENDING_SATURATION
+            }
+        };
+        wanted && rigidity.is_finite() && rigidity > 0.0
+    }
+
     /// Orders the free vertices, assembles `M + h² K` in band form and factors it. False if
     /// it is too big or not positive definite (it always is with positive masses).
     fn factor(

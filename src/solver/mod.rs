@@ -655,6 +655,25 @@ impl Simulation {
         self.scratch.implicit.saturation()
     }
 
+    /// Whether steps of `dt` seconds would want bending solved implicitly (see
+    /// [`BendingSolve`]): isometric XPBD bending too stiff to project per substep.
+    #[must_use]
+    pub fn wants_implicit_bending(&self, dt: f32) -> bool {
+        let Solver::Xpbd { bending, .. } = self.params.solver else {
+            return false;
+        };
+        let h = dt / self.params.substeps.max(1) as f32;
+        self.batches.bending
+            && self.topology.options().effective_bending() == BendingModel::Isometric
+            && implicit::ImplicitBending::wanted(
+                &self.topology,
+                &self.state.positions,
+                1.0 / bending,
+                h,
+                self.params.bending_solve,
+            )
+    }
+
     /// Whether the last step solved bending implicitly (see [`BendingSolve`]).
     #[must_use]
     pub fn implicit_bending(&self) -> bool {

@@ -134,6 +134,16 @@ impl Tethers {
     }
 
     /// Pulls every over-stretched vertex back onto its tether's sphere.
+    /// Every attachment as `(vertex, pin, max_len)`, grouped by vertex in ascending order
+    /// (the order [`Self::project`] applies them; the GPU twin's layout).
+    pub(crate) fn entries(&self) -> impl Iterator<Item = (u32, u32, f32)> + '_ {
+        self.vertex
+            .iter()
+            .zip(&self.pin)
+            .zip(&self.max_len)
+            .map(|((&v, &p), &l)| (v, p, l))
+    }
+
     pub(crate) fn project(&self, pos: &mut [Vec4]) {
         for ((&v, &p), &max_len) in self.vertex.iter().zip(&self.pin).zip(&self.max_len) {
             let anchor: Vec3 = pos[p as usize].xyz();
