@@ -1,6 +1,6 @@
-//! A large cloth falls onto a sphere, a box and a torus mesh (a baked SDF collider) and
-//! settles on the floor, stepped on the GPU inside Bevy's render graph (or on the CPU, to
-//! compare).
+//! A large cloth with self-collision falls onto a sphere, a box and a torus mesh (a baked SDF
+//! collider) and settles on the floor, stepped on the GPU inside Bevy's render graph (or on
+//! the CPU, to compare).
 //!
 //! ```text
 //! cargo run --release --example gpu_cloth                      # 256², GPU
@@ -10,8 +10,8 @@
 //! `--backend gpu|cpu|auto` (default gpu); `--headless` runs with a renderer but no window
 //! when the backend is not the CPU. The JSON line says which backend ran (`"backend"`).
 //!
-//! Self-collision, which a falling cloth this size wants, runs on the CPU backend only for
-//! now: here neither backend uses it, so the two run the same model.
+//! `--no-self-collision` leaves self-collision out. On the GPU it runs in its parallel form
+//! (each vertex moved by the mean of its contacts' corrections), on the CPU pair by pair.
 
 #[path = "support/mod.rs"]
 mod support;
@@ -23,11 +23,15 @@ use support::Args;
 #[derive(Resource)]
 struct Size(u32);
 
+#[derive(Resource)]
+struct SelfCollisionOn(bool);
+
 fn setup(
     mut commands: Commands,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: Option<ResMut<Assets<StandardMaterial>>>,
     size: Res<Size>,
+    self_collision: Res<SelfCollisionOn>,
 ) {
     let n = size.0;
     let grid = Grid::new(n, n, 2.4, 2.4);
@@ -45,6 +49,12 @@ fn setup(
             },
         ))
         .id();
+    if self_collision.0 {
+        commands.entity(cloth).insert(ClothSelfCollision {
+            thickness: None,
+            friction: 0.3,
+        });
+    }
     let obstacles = [
         (
             ClothCollider::sphere(0.45),
@@ -116,6 +126,10 @@ fn main() {
         std::process::exit(2);
     }
     let mut app = support::app(&args, "bevy_cloth: GPU cloth", 1.0 / 60.0);
-    app.insert_resource(Size(size)).add_systems(Startup, setup);
+    app.insert_resource(Size(size))
+        .insert_resource(SelfCollisionOn(
+            !args.rest.contains_key("no-self-collision"),
+        ))
+        .add_systems(Startup, setup);
     support::run(app, &args, report);
 }

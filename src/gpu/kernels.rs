@@ -14,9 +14,14 @@
 //! by f32 rounding (fused multiply–adds, `sqrt`, division), which `tests/gpu_parity.rs`
 //! bounds.
 //!
+//! Self-collision is the exception: the CPU projects contact pairs one by one, which needs an
+//! order; here every vertex sums its contacts' corrections against the positions before the
+//! pass and moves by their mean (Jacobi), the form `solver::step` runs with
+//! `StepInput::parallel_self_collision`, its CPU twin.
+//!
 //! What runs on the GPU is what [`GpuCloth::supports`] accepts; the rest of the model
-//! (implicit bending, self-collision, tearing, the lab solver) stays on the CPU backend,
-//! which says why when it keeps a cloth.
+//! (implicit bending, tearing, the lab solver) stays on the CPU backend, which says why when
+//! it keeps a cloth.
 //!
 //! [`solver::step`]: crate::solver::step
 
@@ -30,13 +35,18 @@ use std::sync::Arc;
 
 use crate::solver::batches::{ConstraintBatches, Part};
 use crate::solver::collide::substep_poses;
-use crate::solver::{Collider, SdfGrid, Shape, Simulation, Solver, SolverParams, Tethers};
+use crate::solver::{
+    Collider, MAX_SELF_NEIGHBOURS, SdfGrid, Shape, Simulation, Solver, SolverParams, Tethers,
+};
 
 /// The WGSL of every kernel.
 pub const STEP_WGSL: &str = include_str!("step.wgsl");
 
 /// Invocations per workgroup of the per-vertex and per-constraint kernels.
 const WORKGROUP: u32 = 64;
+
+/// Invocations of the self-collision hash's prefix-sum kernel (one workgroup).
+const SCAN_WORKGROUP: u32 = 256;
 
 /// Stride of the dynamic-offset uniform tables (the largest alignment WebGPU allows).
 const TABLE_STRIDE: u64 = 256;
@@ -61,7 +71,19 @@ struct Params {
     tether_base: u32,
     status: u32,
     dihedral: u32,
-    _pad: u32,
+    lambda_base: u32,
+    rest_base: u32,
+    corr_base: u32,
+    sc_size: u32,
+    sc_max: u32,
+    sc_counts: u32,
+    sc_starts: u32,
+    sc_cursor: u32,
+    sc_entries: u32,
+    sc_ncount: u32,
+    sc_nlist: u32,
+    _pad: [u32; 2],
+    sc: [f32; 4],
 }
 
 #[repr(C)]
@@ -149,6 +171,9 @@ pub enum GpuStage {
     Bending,
     /// Tethers.
     Tethers,
+    /// Self-collision: the spatial hash and neighbour lists once per step, the pairs per
+    /// substep.
+    SelfCollision,
     /// Colliders.
     Collide,
     /// End-of-step velocities and the NaN guard.
@@ -157,12 +182,13 @@ pub enum GpuStage {
 
 impl GpuStage {
     /// Every stage, in step order.
-    pub const ALL: [GpuStage; 7] = [
+    pub const ALL: [GpuStage; 8] = [
         GpuStage::Begin,
         GpuStage::Integrate,
         GpuStage::Distance,
         GpuStage::Bending,
         GpuStage::Tethers,
+        GpuStage::SelfCollision,
         GpuStage::Collide,
         GpuStage::Finish,
     ];
@@ -176,6 +202,7 @@ impl GpuStage {
             GpuStage::Distance => "distance",
             GpuStage::Bending => "bending",
             GpuStage::Tethers => "tethers",
+            GpuStage::SelfCollision => "self_collision",
             GpuStage::Collide => "collide",
             GpuStage::Finish => "finish",
         }
@@ -202,6 +229,48 @@ fn replay(pass: &mut wgpu::ComputePass<'_>, group: &wgpu::BindGroup, cmds: &[Cmd
                 pass.set_pipeline(pipeline);
                 pass.dispatch_workgroups(*groups, 1, 1);
             }
+        }
+    }
+}
+
+/// Where the self-collision's parts sit in the scratch buffer (u32 indices).
+#[derive(Clone, Copy, Debug, Default)]
+struct ScratchLayout {
+    size: u32,
+    counts: u32,
+    starts: u32,
+    cursor: u32,
+    entries: u32,
+    ncount: u32,
+    nlist: u32,
+    len: u64,
+}
+
+impl ScratchLayout {
+    /// The layout for `n` vertices (`size` 0 and one word when self-collision is off).
+    fn new(n: u32, on: bool) -> Self {
+        if !on || n == 0 {
+            return Self {
+                len: 4,
+                ..Default::default()
+            };
+        }
+        let size = 2 * n;
+        let counts = 1;
+        let starts = counts + size;
+        let cursor = starts + size + 1;
+        let entries = cursor + size;
+        let ncount = entries + n;
+        let nlist = ncount + n;
+        Self {
+            size,
+            counts,
+            starts,
+            cursor,
+            entries,
+            ncount,
+            nlist,
+            len: u64::from(nlist) + u64::from(n) * MAX_SELF_NEIGHBOURS as u64,
         }
     }
 }
@@ -237,6 +306,14 @@ pub struct GpuKernels {
     pins_finish: wgpu::ComputePipeline,
     guard: wgpu::ComputePipeline,
     carry: wgpu::ComputePipeline,
+    sc_clear: wgpu::ComputePipeline,
+    sc_speed: wgpu::ComputePipeline,
+    sc_count: wgpu::ComputePipeline,
+    sc_scan: wgpu::ComputePipeline,
+    sc_scatter: wgpu::ComputePipeline,
+    sc_query: wgpu::ComputePipeline,
+    sc_collide: wgpu::ComputePipeline,
+    sc_apply: wgpu::ComputePipeline,
 }
 
 /// Storage buffers the kernels bind at once (WebGPU's default limit is 8).
@@ -280,11 +357,11 @@ impl GpuKernels {
                 limits.max_storage_buffers_per_shader_stage
             )));
         }
-        if limits.max_compute_invocations_per_workgroup < WORKGROUP
-            || limits.max_compute_workgroup_size_x < WORKGROUP
+        if limits.max_compute_invocations_per_workgroup < SCAN_WORKGROUP
+            || limits.max_compute_workgroup_size_x < SCAN_WORKGROUP
         {
             return Err(GpuUnsupported(format!(
-                "the adapter's workgroups are smaller than the {WORKGROUP} invocations the cloth kernels use"
+                "the adapter's workgroups are smaller than the {SCAN_WORKGROUP} invocations the cloth kernels use"
             )));
         }
         if limits.min_uniform_buffer_offset_alignment as u64 > TABLE_STRIDE {
@@ -350,6 +427,14 @@ impl GpuKernels {
             pins_finish: pipeline("pins_finish"),
             guard: pipeline("guard"),
             carry: pipeline("carry"),
+            sc_clear: pipeline("sc_clear"),
+            sc_speed: pipeline("sc_speed"),
+            sc_count: pipeline("sc_count"),
+            sc_scan: pipeline("sc_scan"),
+            sc_scatter: pipeline("sc_scatter"),
+            sc_query: pipeline("sc_query"),
+            sc_collide: pipeline("sc_collide"),
+            sc_apply: pipeline("sc_apply"),
             layout,
         }
     }
@@ -377,6 +462,14 @@ pub struct GpuCloth {
     tri_base: u32,
     tether_base: u32,
     dihedral: bool,
+    /// Where the regions after the pins' starts begin in the state buffer (vec4 indices).
+    lambda_base: u32,
+    rest_base: u32,
+    corr_base: u32,
+    /// Self-collision: hash buckets (0: off) and the scratch layout.
+    sc: ScratchLayout,
+    /// Rest positions (uploaded with the state when self-collision is on).
+    rest: Vec<Vec4>,
     params: wgpu::Buffer,
     substep_table: wgpu::Buffer,
     substep_capacity: u32,
@@ -384,7 +477,7 @@ pub struct GpuCloth {
     state: wgpu::Buffer,
     distance_buf: wgpu::Buffer,
     bend_buf: wgpu::Buffer,
-    lambda: wgpu::Buffer,
+    scratch: wgpu::Buffer,
     pin_buf: wgpu::Buffer,
     pin_capacity: u32,
     collider_buf: wgpu::Buffer,
@@ -660,9 +753,6 @@ impl GpuCloth {
             return no("the lab solver runs on the CPU only");
         }
         let features = sim.features();
-        if features.self_collision.is_some() {
-            return no("self-collision runs on the CPU only");
-        }
         if features.tear_threshold.is_some() {
             return no("tearing runs on the CPU only");
         }
@@ -720,8 +810,26 @@ impl GpuCloth {
             })
         };
         let lambdas = (dist.len() + bend.len()) as u32;
-        // The regions, then the status.
-        let state_len = (5 * n + pins as usize + 1) as u64 * 16;
+        // The regions, the status, the multipliers, then with self-collision the rest
+        // positions and the corrections.
+        let self_collision = sim.features().self_collision.is_some();
+        let lambda_base = 5 * n as u32 + pins + 1;
+        let rest_base = lambda_base + lambdas;
+        let corr_base = rest_base + n as u32;
+        let state_len = u64::from(if self_collision {
+            corr_base + n as u32
+        } else {
+            rest_base
+        }) * 16;
+        let sc = ScratchLayout::new(n as u32, self_collision);
+        let limit = device.limits().max_storage_buffer_binding_size;
+        if state_len > limit || sc.len * 4 > limit {
+            return Err(GpuUnsupported(format!(
+                "a cloth of {n} vertices needs storage buffers of {} MB, the adapter allows {} MB",
+                state_len.max(sc.len * 4) >> 20,
+                limit >> 20
+            )));
+        }
         let params = sim.params();
         let mut cloth = Self {
             n: n as u32,
@@ -733,6 +841,19 @@ impl GpuCloth {
             tri_base,
             tether_base,
             dihedral: batches.bending && !batches.boundary.bending.iso,
+            lambda_base,
+            rest_base,
+            corr_base,
+            sc,
+            rest: if self_collision {
+                sim.topology()
+                    .rest_positions()
+                    .iter()
+                    .map(|p| p.extend(0.0))
+                    .collect()
+            } else {
+                Vec::new()
+            },
             params: empty(
                 device,
                 "cloth_params",
@@ -762,10 +883,10 @@ impl GpuCloth {
                 bytemuck::cast_slice(&bend),
                 wgpu::BufferUsages::empty(),
             ),
-            lambda: empty(
+            scratch: empty(
                 device,
-                "cloth_lambda",
-                u64::from(lambdas) * 16,
+                "cloth_scratch",
+                sc.len * 4,
                 wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             ),
             sdf_buf: empty(
@@ -831,7 +952,7 @@ impl GpuCloth {
                 },
                 wgpu::BindGroupEntry {
                     binding: 5,
-                    resource: whole(&self.lambda),
+                    resource: whole(&self.scratch),
                 },
                 wgpu::BindGroupEntry {
                     binding: 6,
@@ -908,6 +1029,13 @@ impl GpuCloth {
         data.extend_from_slice(velocities);
         queue.write_buffer(&self.state, 0, bytemuck::cast_slice(&data));
         queue.write_buffer(&self.state, self.status_offset(), &[0u8; 16]);
+        if !self.rest.is_empty() {
+            queue.write_buffer(
+                &self.state,
+                u64::from(self.rest_base) * 16,
+                bytemuck::cast_slice(&self.rest),
+            );
+        }
     }
 
     /// Writes what `steps` steps of `dt` seconds need: parameters, substeps, pin targets
@@ -997,7 +1125,22 @@ impl GpuCloth {
             tether_base: self.tether_base,
             status: 5 * self.n + self.pins,
             dihedral: u32::from(self.dihedral),
-            _pad: 0,
+            lambda_base: self.lambda_base,
+            rest_base: self.rest_base,
+            corr_base: self.corr_base,
+            sc_size: self.sc.size,
+            sc_max: MAX_SELF_NEIGHBOURS as u32,
+            sc_counts: self.sc.counts,
+            sc_starts: self.sc.starts,
+            sc_cursor: self.sc.cursor,
+            sc_entries: self.sc.entries,
+            sc_ncount: self.sc.ncount,
+            sc_nlist: self.sc.nlist,
+            _pad: [0; 2],
+            sc: sim
+                .features()
+                .self_collision
+                .map_or([0.0; 4], |c| [c.thickness, c.friction, dt, 0.0]),
             colliders: c,
             accumulate: u32::from(xpbd && params.iterations > 1),
             xpbd: u32::from(xpbd),
@@ -1243,6 +1386,15 @@ impl GpuCloth {
             if self.air_on {
                 out.push(Cmd::Run(&kernels.areas, vertex_groups));
             }
+            if self.sc.size > 0 {
+                enter(&mut out, GpuStage::SelfCollision, [first, 0]);
+                out.push(Cmd::Run(&kernels.sc_clear, groups(self.sc.size)));
+                out.push(Cmd::Run(&kernels.sc_speed, vertex_groups));
+                out.push(Cmd::Run(&kernels.sc_count, vertex_groups));
+                out.push(Cmd::Run(&kernels.sc_scan, 1));
+                out.push(Cmd::Run(&kernels.sc_scatter, vertex_groups));
+                out.push(Cmd::Run(&kernels.sc_query, vertex_groups));
+            }
             for s in 0..self.substeps {
                 let so = sub_offset(k, s);
                 enter(&mut out, GpuStage::Integrate, [so, 0]);
@@ -1277,6 +1429,11 @@ impl GpuCloth {
                 if self.tether_base != 0 {
                     enter(&mut out, GpuStage::Tethers, [so, 0]);
                     out.push(Cmd::Run(&kernels.tethers, vertex_groups));
+                }
+                if self.sc.size > 0 {
+                    enter(&mut out, GpuStage::SelfCollision, [so, 0]);
+                    out.push(Cmd::Run(&kernels.sc_collide, vertex_groups));
+                    out.push(Cmd::Run(&kernels.sc_apply, vertex_groups));
                 }
                 if self.prepared.1 > 0 {
                     enter(&mut out, GpuStage::Collide, [so, 0]);

@@ -81,10 +81,13 @@ pub struct ClothGpuSupport {
 /// ClothBackend::Auto })`. In an app without a renderer (`MinimalPlugins`) every cloth runs on
 /// the CPU.
 ///
-/// What the GPU backend runs: PBD and XPBD with substeps and iterations, stretch, shear and
-/// isometric bending, pins (moving with their anchors), gravity, damping, the speed limit, air
-/// drag/lift/friction with the wind, sphere/box/capsule/plane colliders with friction, normals.
-/// What keeps a cloth on the CPU: self-collision, tearing, implicit bending, the lab solver.
+/// What the GPU backend runs: PBD and XPBD with substeps and iterations, stretch, shear,
+/// isometric and dihedral bending, pins (moving with their anchors), tethers, gravity,
+/// damping, the speed limit, air drag/lift/friction with the wind, sphere/box/capsule/plane
+/// and mesh (baked SDF) colliders with friction, self-collision (in its parallel form: each
+/// vertex moves by the mean of its contacts' corrections; the CPU projects contacts one by
+/// one), normals. What keeps a cloth on the CPU: tearing, bending stiff enough to need the
+/// implicit solve, the lab solver.
 /// The results stay on the GPU: [`ClothSim`]'s state is the one the cloth started from unless
 /// the cloth has [`ClothReadback`]; contact impulses are not sent to colliders. A change of
 /// settings or pins carries the GPU state over; an edit through

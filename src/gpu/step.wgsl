@@ -6,7 +6,13 @@
 //   [0, n) positions (w: inverse mass, 0 when pinned) | [n, 2n) positions at the substep's
 //   start | [2n, 3n) velocities | [3n, 4n) area vectors | [4n, 5n) air velocity |
 //   [5n, 5n + pins) pinned positions at the step's start | [5n + pins] status (x: 1 once a
-//   position or velocity went NaN or infinite).
+//   position or velocity went NaN or infinite) | from `lambda_base`: the XPBD multipliers
+//   (distances, then hinges) | with self-collision, from `rest_base`: rest positions, and
+//   from `corr_base`: each vertex's self-collision correction.
+//
+// `scratch` (binding 5, atomics), with self-collision: [0] the fastest squared speed (bits) |
+// per hash bucket its count, start (one more) and cursor | the vertices sorted by bucket |
+// per vertex its neighbour count | `sc_max` neighbour slots per vertex.
 //
 // `topo` (binding 9): [per-vertex triangle offsets (n + 1) | incident triangles | triangles
 // (3 each) | tethers: per-vertex record offsets (n + 1) | records (pin, max length bits)].
@@ -36,7 +42,22 @@ struct Params {
     status: u32,
     // 1: bends are dihedral hinges (rest angle in `a.x`), 0: isometric
     dihedral: u32,
-    _pad: u32,
+    lambda_base: u32,
+    rest_base: u32,
+    corr_base: u32,
+    // hash buckets (0: no self-collision) and neighbour slots per vertex
+    sc_size: u32,
+    sc_max: u32,
+    sc_counts: u32,
+    sc_starts: u32,
+    sc_cursor: u32,
+    sc_entries: u32,
+    sc_ncount: u32,
+    sc_nlist: u32,
+    _pad0: u32,
+    _pad1: u32,
+    // self-collision thickness, friction, the step's length
+    sc: vec4<f32>,
 }
 
 // One substep (binding 1, a dynamic offset per substep).
@@ -101,7 +122,7 @@ struct Collider {
 @group(0) @binding(2) var<storage, read_write> state: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read> distances: array<Distance>;
 @group(0) @binding(4) var<storage, read> bends: array<Bend>;
-@group(0) @binding(5) var<storage, read_write> lambda: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> scratch: array<atomic<u32>>;
 @group(0) @binding(6) var<storage, read> pins: array<Pin>;
 @group(0) @binding(7) var<storage, read> colliders: array<Collider>;
 @group(0) @binding(8) var<uniform> R: Range;
@@ -368,7 +389,7 @@ fn project_distance(i: u32) {
     let ak = alpha_k(c.param);
     var l = 0.0;
     if P.accumulate != 0u {
-        l = lambda[i].x;
+        l = state[P.lambda_base + i].x;
     }
     let wa = pa.w;
     let wb = pb.w;
@@ -388,7 +409,7 @@ fn project_distance(i: u32) {
     state[c.a] = vec4<f32>(pa.xyz + nrm * (wa * s), wa);
     state[c.b] = vec4<f32>(pb.xyz + nrm * (-(wb * s)), wb);
     if P.accumulate != 0u {
-        lambda[i].x = l + s;
+        state[P.lambda_base + i].x = l + s;
     }
 }
 
@@ -403,7 +424,7 @@ fn project_bend(j: u32) {
     let ak = alpha_k(c.param.x);
     var l = vec3<f32>(0.0);
     if P.accumulate != 0u {
-        l = lambda[P.distances + j].xyz;
+        l = state[P.lambda_base + P.distances + j].xyz;
     }
     let cc = x0.xyz * a.x + x1.xyz * a.y + x2.xyz * a.z + x3.xyz * a.w;
     let g = x0.w * a.x * a.x + x1.w * a.y * a.y + x2.w * a.z * a.z + x3.w * a.w * a.w;
@@ -417,7 +438,7 @@ fn project_bend(j: u32) {
     state[c.v.z] = vec4<f32>(x2.xyz + dl * (x2.w * a.z), x2.w);
     state[c.v.w] = vec4<f32>(x3.xyz + dl * (x3.w * a.w), x3.w);
     if P.accumulate != 0u {
-        lambda[P.distances + j] = vec4<f32>(l + dl, 0.0);
+        state[P.lambda_base + P.distances + j] = vec4<f32>(l + dl, 0.0);
     }
 }
 
@@ -431,7 +452,7 @@ fn project_dihedral(j: u32) {
     let ak = alpha_k(c.param.x);
     var l = 0.0;
     if P.accumulate != 0u {
-        l = lambda[P.distances + j].x;
+        l = state[P.lambda_base + P.distances + j].x;
     }
     let eps = 1e-12;
     let p2 = x1.xyz - x0.xyz;
@@ -470,7 +491,7 @@ fn project_dihedral(j: u32) {
     state[c.v.z] = vec4<f32>(x2.xyz + q3 * (x2.w * f), x2.w);
     state[c.v.w] = vec4<f32>(x3.xyz + q4 * (x3.w * f), x3.w);
     if P.accumulate != 0u {
-        lambda[P.distances + j] = vec4<f32>(l + s2 * base, 0.0, 0.0, 0.0);
+        state[P.lambda_base + P.distances + j] = vec4<f32>(l + s2 * base, 0.0, 0.0, 0.0);
     }
 }
 
@@ -510,6 +531,228 @@ fn tethers(@builtin(global_invocation_id) id: vec3<u32>) {
     state[i] = x;
 }
 
+// Self-collision (`self_collision::find_self_collision_neighbours` and
+// `self_collide_parallel`): once per step a spatial hash of the positions (counting sort:
+// count, scan, scatter) and per vertex the list of vertices it may touch; per substep every
+// vertex moves by the mean of its touching pairs' corrections (Jacobi).
+
+// `self_collision::cell_of`
+fn sc_cell(p: vec3<f32>, inv: f32) -> vec3<i32> {
+    return vec3<i32>(floor(p * inv));
+}
+
+// `self_collision::hash`
+fn sc_hash(c: vec3<i32>) -> u32 {
+    let h = (c.x * 92837111) ^ (c.y * 689287499) ^ (c.z * 283923481);
+    return bitcast<u32>(select(h, -h, h < 0)) % P.sc_size;
+}
+
+// `self_collision::reach_and_skip`: the query distance (thickness plus a margin for the
+// fastest vertex's travel over the step).
+fn sc_reach() -> f32 {
+    let fastest = sqrt(bitcast<f32>(atomicLoad(&scratch[0])));
+    return P.sc.x + min(2.0 * fastest * P.sc.z, 1.5 * P.sc.x);
+}
+
+@compute @workgroup_size(64)
+fn sc_clear(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i == 0u {
+        atomicStore(&scratch[0], 0u);
+    }
+    if i < P.sc_size {
+        atomicStore(&scratch[P.sc_counts + i], 0u);
+    }
+}
+
+// The fastest squared speed of the step's start (positive floats order as their bits).
+@compute @workgroup_size(64)
+fn sc_speed(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= P.n {
+        return;
+    }
+    let v = state[2u * P.n + i].xyz;
+    let s2 = dot(v, v);
+    if finite(s2) {
+        atomicMax(&scratch[0], bitcast<u32>(s2));
+    }
+}
+
+@compute @workgroup_size(64)
+fn sc_count(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= P.n {
+        return;
+    }
+    let p = state[i].xyz;
+    if finite3(p) {
+        atomicAdd(&scratch[P.sc_counts + sc_hash(sc_cell(p, 1.0 / sc_reach()))], 1u);
+    }
+}
+
+var<workgroup> sc_partial: array<u32, 256>;
+
+// Exclusive prefix sums of the bucket counts: each of 256 invocations sums a run of buckets,
+// one invocation scans the 256 sums, each writes its run's starts.
+@compute @workgroup_size(256)
+fn sc_scan(@builtin(local_invocation_id) lid: vec3<u32>) {
+    let t = lid.x;
+    let size = P.sc_size;
+    let run = (size + 255u) / 256u;
+    let begin = min(t * run, size);
+    let end = min(begin + run, size);
+    var sum = 0u;
+    for (var h = begin; h < end; h++) {
+        sum += atomicLoad(&scratch[P.sc_counts + h]);
+    }
+    sc_partial[t] = sum;
+    workgroupBarrier();
+    if t == 0u {
+        var acc = 0u;
+        for (var k = 0u; k < 256u; k++) {
+            let v = sc_partial[k];
+            sc_partial[k] = acc;
+            acc += v;
+        }
+    }
+    workgroupBarrier();
+    var acc = sc_partial[t];
+    for (var h = begin; h < end; h++) {
+        atomicStore(&scratch[P.sc_starts + h], acc);
+        atomicStore(&scratch[P.sc_cursor + h], acc);
+        acc += atomicLoad(&scratch[P.sc_counts + h]);
+    }
+    if t == 255u {
+        atomicStore(&scratch[P.sc_starts + size], acc);
+    }
+}
+
+@compute @workgroup_size(64)
+fn sc_scatter(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= P.n {
+        return;
+    }
+    let p = state[i].xyz;
+    if finite3(p) {
+        let h = sc_hash(sc_cell(p, 1.0 / sc_reach()));
+        let slot = atomicAdd(&scratch[P.sc_cursor + h], 1u);
+        atomicStore(&scratch[P.sc_entries + slot], i);
+    }
+}
+
+// Every other vertex in the cells the query ball touches, in the same cell, closer than the
+// reach and farther apart at rest than 2.5 thicknesses.
+@compute @workgroup_size(64)
+fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= P.n {
+        return;
+    }
+    let p = state[i].xyz;
+    var count = 0u;
+    if finite3(p) {
+        let reach = sc_reach();
+        let inv = 1.0 / reach;
+        let r2 = reach * reach;
+        let skip = 2.5 * P.sc.x;
+        let skip2 = skip * skip;
+        let rest_i = state[P.rest_base + i].xyz;
+        let lo = sc_cell(p - vec3<f32>(reach), inv);
+        let hi = sc_cell(p + vec3<f32>(reach), inv);
+        for (var z = lo.z; z <= hi.z; z++) {
+            for (var y = lo.y; y <= hi.y; y++) {
+                for (var x = lo.x; x <= hi.x; x++) {
+                    let cell = vec3<i32>(x, y, z);
+                    let h = sc_hash(cell);
+                    let first = atomicLoad(&scratch[P.sc_starts + h]);
+                    let last = atomicLoad(&scratch[P.sc_starts + h + 1u]);
+                    for (var k = first; k < last; k++) {
+                        let j = atomicLoad(&scratch[P.sc_entries + k]);
+                        let q = state[j].xyz;
+                        let d = q - p;
+                        let r = state[P.rest_base + j].xyz - rest_i;
+                        if j != i && all(sc_cell(q, inv) == cell) && dot(d, d) < r2
+                            && dot(r, r) > skip2 && count < P.sc_max {
+                            atomicStore(&scratch[P.sc_nlist + i * P.sc_max + count], j);
+                            count += 1u;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    atomicStore(&scratch[P.sc_ncount + i], count);
+}
+
+// `self_collision::pair_correction`: vertex a's share; w = 0 when the pair does not touch.
+fn sc_pair(a: vec4<f32>, prev_a: vec3<f32>, b: vec4<f32>, prev_b: vec3<f32>) -> vec4<f32> {
+    let limit = P.sc.x;
+    let wa = a.w;
+    let wb = b.w;
+    let w = wa + wb;
+    if w <= 0.0 {
+        return vec4<f32>(0.0);
+    }
+    let d = a.xyz - b.xyz;
+    let len = length(d);
+    if len >= limit || len <= 1e-9 {
+        return vec4<f32>(0.0);
+    }
+    let nrm = d / len;
+    let push = limit - len;
+    var da = nrm * (push * wa / w);
+    var db = -nrm * (push * wb / w);
+    let slide = (a.xyz + da - prev_a) - (b.xyz + db - prev_b);
+    let tangential = slide - nrm * dot(nrm, slide);
+    let t_len = length(tangential);
+    if t_len > 0.0 {
+        let keep = min(P.sc.y * push / t_len, 1.0);
+        da -= tangential * (keep * wa / w);
+        db += tangential * (keep * wb / w);
+    }
+    if !(finite3(da) && finite3(db)) {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(da, 1.0);
+}
+
+@compute @workgroup_size(64)
+fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    let n = P.n;
+    if i >= n {
+        return;
+    }
+    let a = state[i];
+    let prev_a = state[n + i].xyz;
+    var sum = vec3<f32>(0.0);
+    var touching = 0.0;
+    let count = atomicLoad(&scratch[P.sc_ncount + i]);
+    for (var k = 0u; k < count; k++) {
+        let j = atomicLoad(&scratch[P.sc_nlist + i * P.sc_max + k]);
+        let c = sc_pair(a, prev_a, state[j], state[n + j].xyz);
+        sum += c.xyz;
+        touching += c.w;
+    }
+    var corr = vec3<f32>(0.0);
+    if touching > 0.0 {
+        corr = sum / touching;
+    }
+    state[P.corr_base + i] = vec4<f32>(corr, 0.0);
+}
+
+@compute @workgroup_size(64)
+fn sc_apply(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= P.n {
+        return;
+    }
+    let x = state[i];
+    state[i] = vec4<f32>(x.xyz + state[P.corr_base + i].xyz, x.w);
+}
+
 // After new settings: the positions the previous buffers had (copied into the substep-start
 // region) with this upload's inverse masses.
 @compute @workgroup_size(64)
@@ -541,7 +784,7 @@ fn guard(@builtin(global_invocation_id) id: vec3<u32>) {
 @compute @workgroup_size(64)
 fn lambda_clear(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x < P.lambdas {
-        lambda[id.x] = vec4<f32>(0.0);
+        state[P.lambda_base + id.x] = vec4<f32>(0.0);
     }
 }
 

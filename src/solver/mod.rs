@@ -71,7 +71,9 @@ pub use params::{
     BendingSolve, DEFAULT_BENDING_COMPLIANCE, LAB_WEIGHT, ParamError, Solver, SolverParams,
 };
 pub use sdf::{SdfError, SdfGrid, point_triangle_distance};
-pub use self_collision::{SelfCollision, SelfCollisionScratch, count_self_crossings};
+pub use self_collision::{
+    MAX_SELF_NEIGHBOURS, SelfCollision, SelfCollisionScratch, count_self_crossings,
+};
 pub use shading::{vertex_normals, vertex_tangents};
 pub use sleep::{Sleep, WAKE_AIR_SPEED, WAKE_DISTANCE};
 pub use state::{ClothState, Pin, StateError};
@@ -424,6 +426,7 @@ impl Simulation {
                     &[]
                 },
                 self_collision: self.features.self_collision,
+                parallel_self_collision: false,
                 tethers: self.tethers.as_ref().map(|(_, t)| t),
             },
             &mut self.scratch,

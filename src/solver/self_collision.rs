@@ -31,7 +31,16 @@ pub struct SelfCollisionScratch {
     /// Cell of each vertex, to tell it from other cells sharing its bucket.
     cells: Vec<IVec3>,
     pairs: Vec<(u32, u32)>,
+    /// The parallel form (see [`self_collide_parallel`]): per vertex its neighbours' count,
+    /// and [`MAX_SELF_NEIGHBOURS`] slots each.
+    neighbour_count: Vec<u32>,
+    neighbours: Vec<u32>,
+    corrections: Vec<Vec3>,
 }
+
+/// Most neighbours a vertex keeps in the parallel self-collision (the GPU's fixed-size lists);
+/// further ones in a crowded pile are left out.
+pub const MAX_SELF_NEIGHBOURS: usize = 32;
 
 #[inline]
 fn cell_of(p: Vec3, inv_cell: f32) -> IVec3 {
@@ -116,6 +125,138 @@ impl SelfCollisionScratch {
     }
 }
 
+impl SelfCollisionScratch {
+    /// The parallel form of [`Self::find_pairs`]: every vertex lists each other vertex it
+    /// would pair with (so a pair appears in both lists), at most [`MAX_SELF_NEIGHBOURS`].
+    fn find_neighbours(&mut self, pos: &[Vec4], rest: &[Vec3], reach: f32, skip: f32) {
+        self.find_pairs(pos, rest, reach, skip);
+        let n = pos.len();
+        self.neighbour_count.clear();
+        self.neighbour_count.resize(n, 0);
+        self.neighbours.resize(n * MAX_SELF_NEIGHBOURS, 0);
+        for &(i, j) in &self.pairs {
+            for (a, b) in [(i, j), (j, i)] {
+                let c = &mut self.neighbour_count[a as usize];
+                if (*c as usize) < MAX_SELF_NEIGHBOURS {
+                    self.neighbours[a as usize * MAX_SELF_NEIGHBOURS + *c as usize] = b;
+                    *c += 1;
+                }
+            }
+        }
+        self.pairs.clear();
+    }
+}
+
+/// Query distance (`thickness` plus a margin for the step's motion) and the rest distance
+/// under which vertices are left to their constraints; `None` when off.
+fn reach_and_skip(vel: &[Vec4], params: SelfCollision, dt: f32) -> Option<(f32, f32)> {
+    let thickness = params.thickness;
+    if !(thickness.is_finite() && thickness > 0.0) {
+        return None;
+    }
+    let fastest = vel
+        .iter()
+        .map(|v| v.xyz().length_squared())
+        .filter(|s| s.is_finite())
+        .fold(0.0f32, f32::max)
+        .sqrt();
+    let margin = (2.0 * fastest * dt).min(1.5 * thickness);
+    Some((thickness + margin, 2.5 * thickness))
+}
+
+/// The correction of vertex `a` (with `prev_a`) from its pair with `b`: pushed apart to
+/// `thickness`, mass-weighted, with friction on the pair's sliding. `None` when the pair does
+/// not touch or the result is not finite. Both self-collision passes use it.
+#[inline]
+fn pair_correction(
+    a: Vec4,
+    prev_a: Vec4,
+    b: Vec4,
+    prev_b: Vec4,
+    params: SelfCollision,
+) -> Option<(Vec3, Vec3)> {
+    let limit = params.thickness;
+    let (wa, wb) = (a.w, b.w);
+    let w = wa + wb;
+    if w <= 0.0 {
+        return None;
+    }
+    let d = a.xyz() - b.xyz();
+    let len = d.length();
+    if len >= limit || len <= 1e-9 {
+        return None;
+    }
+    let n = d / len;
+    let push = limit - len;
+    let mut da = n * (push * wa / w);
+    let mut db = -n * (push * wb / w);
+    // Friction on the relative sliding of the pair during the substep.
+    let slide = (a.xyz() + da - prev_a.xyz()) - (b.xyz() + db - prev_b.xyz());
+    let tangential = slide - n * n.dot(slide);
+    let t_len = tangential.length();
+    if t_len > 0.0 {
+        let keep = (params.friction * push / t_len).min(1.0);
+        da -= tangential * (keep * wa / w);
+        db += tangential * (keep * wb / w);
+    }
+    (da.is_finite() && db.is_finite()).then_some((da, db))
+}
+
+/// The parallel form of [`find_self_collision_pairs`] (the GPU kernels' CPU twin): per-vertex
+/// neighbour lists, for [`self_collide_parallel`].
+pub(crate) fn find_self_collision_neighbours(
+    pos: &[Vec4],
+    vel: &[Vec4],
+    rest: &[Vec3],
+    params: SelfCollision,
+    dt: f32,
+    scratch: &mut SelfCollisionScratch,
+) {
+    match reach_and_skip(vel, params, dt) {
+        Some((reach, skip)) => scratch.find_neighbours(pos, rest, reach, skip),
+        None => {
+            scratch.neighbour_count.clear();
+            scratch.neighbour_count.resize(pos.len(), 0);
+        }
+    }
+}
+
+/// Self-collision as the GPU runs it (Jacobi): every vertex sums its corrections from all its
+/// touching neighbours against the positions before the pass, divided by their number, and
+/// all vertices move at once. Pair by pair ([`self_collide`]) converges a little faster; this
+/// form needs no ordering, so every vertex is one GPU invocation.
+pub(crate) fn self_collide_parallel(
+    pos: &mut [Vec4],
+    prev: &[Vec4],
+    params: SelfCollision,
+    scratch: &mut SelfCollisionScratch,
+) {
+    let n = pos.len();
+    if scratch.neighbour_count.len() != n {
+        return;
+    }
+    scratch.corrections.clear();
+    scratch.corrections.resize(n, Vec3::ZERO);
+    for i in 0..n {
+        let count = scratch.neighbour_count[i] as usize;
+        let mut sum = Vec3::ZERO;
+        let mut touching = 0u32;
+        for &j in &scratch.neighbours[i * MAX_SELF_NEIGHBOURS..i * MAX_SELF_NEIGHBOURS + count] {
+            let j = j as usize;
+            if let Some((da, _)) = pair_correction(pos[i], prev[i], pos[j], prev[j], params) {
+                sum += da;
+                touching += 1;
+            }
+        }
+        if touching > 0 {
+            scratch.corrections[i] = sum / touching as f32;
+        }
+    }
+    for (x, c) in pos.iter_mut().zip(&scratch.corrections) {
+        *x += c.extend(0.0);
+    }
+}
+
 /// Collects the candidate pairs for this step: vertices closer than `thickness` plus a margin
 /// for how far they can move in `dt` (see the module docs).
 pub(crate) fn find_self_collision_pairs(
@@ -126,19 +267,10 @@ pub(crate) fn find_self_collision_pairs(
     dt: f32,
     scratch: &mut SelfCollisionScratch,
 ) {
-    let thickness = params.thickness;
-    if !(thickness.is_finite() && thickness > 0.0) {
-        scratch.pairs.clear();
-        return;
+    match reach_and_skip(vel, params, dt) {
+        Some((reach, skip)) => scratch.find_pairs(pos, rest, reach, skip),
+        None => scratch.pairs.clear(),
     }
-    let fastest = vel
-        .iter()
-        .map(|v| v.xyz().length_squared())
-        .filter(|s| s.is_finite())
-        .fold(0.0f32, f32::max)
-        .sqrt();
-    let margin = (2.0 * fastest * dt).min(1.5 * thickness);
-    scratch.find_pairs(pos, rest, thickness + margin, 2.5 * thickness);
 }
 
 /// One self-collision pass over the candidate pairs (`prev`: positions at the substep's
@@ -155,32 +287,7 @@ pub(crate) fn self_collide(
     }
     for &(i, j) in &scratch.pairs {
         let (i, j) = (i as usize, j as usize);
-        let limit = thickness;
-        let (a, b) = (pos[i], pos[j]);
-        let (wa, wb) = (a.w, b.w);
-        let w = wa + wb;
-        if w <= 0.0 {
-            continue;
-        }
-        let d = a.xyz() - b.xyz();
-        let len = d.length();
-        if len >= limit || len <= 1e-9 {
-            continue;
-        }
-        let n = d / len;
-        let push = limit - len;
-        let mut da = n * (push * wa / w);
-        let mut db = -n * (push * wb / w);
-        // Friction on the relative sliding of the pair during the substep.
-        let slide = (a.xyz() + da - prev[i].xyz()) - (b.xyz() + db - prev[j].xyz());
-        let tangential = slide - n * n.dot(slide);
-        let t_len = tangential.length();
-        if t_len > 0.0 {
-            let keep = (params.friction * push / t_len).min(1.0);
-            da -= tangential * (keep * wa / w);
-            db += tangential * (keep * wb / w);
-        }
-        if da.is_finite() && db.is_finite() {
+        if let Some((da, db)) = pair_correction(pos[i], prev[i], pos[j], prev[j], params) {
             pos[i] += da.extend(0.0);
             pos[j] += db.extend(0.0);
         }

@@ -33,7 +33,8 @@ use super::lab::{LabScratch, lab_step};
 use super::parallel::Parallel;
 use super::params::{Solver, SolverParams};
 use super::self_collision::{
-    SelfCollision, SelfCollisionScratch, find_self_collision_pairs, self_collide,
+    SelfCollision, SelfCollisionScratch, find_self_collision_neighbours, find_self_collision_pairs,
+    self_collide, self_collide_parallel,
 };
 use super::state::ClothState;
 use super::tether::Tethers;
@@ -50,6 +51,10 @@ pub struct StepInput<'a> {
     pub air_velocities: &'a [Vec4],
     /// Self-collision, if on.
     pub self_collision: Option<SelfCollision>,
+    /// Self-collision in its parallel (Jacobi) form, as the GPU backend runs it: per-vertex
+    /// neighbour lists, each vertex moved by the mean of its pairs' corrections. `false`
+    /// (the CPU backend) projects the pairs one by one.
+    pub parallel_self_collision: bool,
     /// Long-range attachments to the pins, if any.
     pub tethers: Option<&'a Tethers>,
 }
@@ -323,7 +328,12 @@ pub fn step(
     }
     let areas = &scratch.areas;
     if let Some(sc) = input.self_collision {
-        find_self_collision_pairs(
+        let find = if input.parallel_self_collision {
+            find_self_collision_neighbours
+        } else {
+            find_self_collision_pairs
+        };
+        find(
             &state.positions,
             &state.velocities,
             topology.rest_positions(),
@@ -410,12 +420,21 @@ pub fn step(
             tethers.project(&mut state.positions);
         }
         if let Some(sc) = input.self_collision {
-            self_collide(
-                &mut state.positions,
-                &state.prev,
-                sc,
-                &scratch.self_collision,
-            );
+            if input.parallel_self_collision {
+                self_collide_parallel(
+                    &mut state.positions,
+                    &state.prev,
+                    sc,
+                    &mut scratch.self_collision,
+                );
+            } else {
+                self_collide(
+                    &mut state.positions,
+                    &state.prev,
+                    sc,
+                    &scratch.self_collision,
+                );
+            }
         }
         if !colliders.is_empty() {
             let phase = Phase {
