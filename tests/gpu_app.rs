@@ -258,3 +258,29 @@ fn removing_a_gpu_cloth_removes_its_gpu_state() {
     assert!(app.world().get::<bevy_cloth::gpu::ClothOnGpu>(e).is_none());
     assert!(app.world().get::<ClothSim>(e).is_none());
 }
+
+/// The teleport rule on the GPU: the cloth entity jumps 6 m (its pins' anchors with it) and
+/// the whole cloth appears there, unstretched, instead of being dragged across.
+#[test]
+fn a_gpu_cloth_teleports_with_its_pins() {
+    if common::gpu_or_skip("a_gpu_cloth_teleports_with_its_pins").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    let e = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    app.world_mut().entity_mut(e).insert(ClothReadback);
+    common::run(&mut app, 30);
+    assert!(in_use(&app, e).gpu);
+    app.world_mut()
+        .get_mut::<Transform>(e)
+        .unwrap()
+        .translation
+        .x += 6.0;
+    common::run(&mut app, 6);
+    let sim = app.world().get::<ClothSim>(e).unwrap().simulation();
+    let xs: Vec<f32> = sim.state().positions.iter().map(|p| p.x).collect();
+    let lowest = xs.iter().copied().fold(f32::INFINITY, f32::min);
+    assert!(lowest > 5.0, "a vertex was left behind at x = {lowest}");
+    let strain = sim.strain();
+    assert!(strain.max < 0.3, "dragged across: {strain:?}");
+}

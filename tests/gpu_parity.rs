@@ -61,6 +61,20 @@ fn compare(
     targets: impl Fn(usize) -> Vec<Vec3>,
     world: impl Fn(usize) -> (Vec<Collider>, Vec<Vec4>),
 ) -> Vec<f32> {
+    compare_with_teleport(gpu, sim, frames, steps_per_frame, targets, world, None)
+}
+
+/// [`compare`], with the whole cloth teleported by `teleport.1` at the start of step
+/// `teleport.0` (the plugin's teleport rule: translate, then snap the pins to their targets).
+fn compare_with_teleport(
+    gpu: &(wgpu::Device, wgpu::Queue, GpuKernels),
+    sim: &mut Simulation,
+    frames: usize,
+    steps_per_frame: usize,
+    targets: impl Fn(usize) -> Vec<Vec3>,
+    world: impl Fn(usize) -> (Vec<Collider>, Vec<Vec4>),
+    teleport: Option<(usize, Vec3)>,
+) -> Vec<f32> {
     let (device, queue, kernels) = gpu;
     let mut cloth = GpuCloth::new(device, kernels, sim).expect("supported");
     cloth.upload_state(queue, sim);
@@ -79,10 +93,19 @@ fn compare(
     let mut k = 0;
     for _ in 0..frames {
         let mut pin_targets = Vec::new();
+        let mut jumps = Vec::new();
         let (colliders, air) = world(k);
         for _ in 0..steps_per_frame {
             let t = targets(k);
+            let jump = teleport.filter(|j| j.0 == k).map(|j| j.1);
+            if let Some(offset) = jump {
+                state.translate(offset);
+            }
             state.set_pin_targets(t.iter().copied());
+            if jump.is_some() {
+                state.snap_pins();
+            }
+            jumps.push(jump.unwrap_or(Vec3::ZERO));
             step(
                 &mut state,
                 &topology,
@@ -113,6 +136,7 @@ fn compare(
             GpuStepInput {
                 colliders: &colliders,
                 air_velocities: &air,
+                teleports: &jumps,
             },
         );
         let mut encoder = device.create_command_encoder(&Default::default());
@@ -558,4 +582,34 @@ fn self_collision_matches_the_cpu_twin() {
     assert!(errors[0] < 2e-5, "first step: {}", errors[0]);
     let worst = errors.iter().copied().fold(0.0, f32::max);
     assert!(worst < 5e-3, "worst {worst}");
+}
+
+/// The teleport rule on the GPU: at step 12 the pins' anchors jump 5 m and the whole cloth
+/// goes with them (translated, pins snapped to their targets), as the CPU does.
+#[test]
+fn a_teleport_matches_the_cpu() {
+    let Some(g) = gpu("a_teleport_matches_the_cpu") else {
+        return;
+    };
+    let n = 20;
+    let mut s = sim(n, SolverParams::default(), |p| {
+        Vec3::new(p.x, 1.0 - (p.z + 0.5), 0.0)
+    });
+    let start = corners(&mut s, n);
+    let jump = Vec3::new(5.0, 0.5, -2.0);
+    let errors = compare_with_teleport(
+        &g,
+        &mut s,
+        24,
+        1,
+        |k| {
+            let shift = Vec3::X * (0.01 * k as f32) + if k >= 12 { jump } else { Vec3::ZERO };
+            start.iter().map(|p| *p + shift).collect()
+        },
+        |_| (Vec::new(), Vec::new()),
+        Some((12, jump)),
+    );
+    eprintln!("teleport, worst per frame: {errors:?}");
+    let worst = errors.iter().copied().fold(0.0, f32::max);
+    assert!(worst < 2e-3, "worst {worst}");
 }

@@ -123,6 +123,9 @@ pub struct ClothSim {
     recoveries: u32,
     /// Calls of [`ClothSim::simulation_mut`] so far (a GPU cloth restarts from an edited state).
     pub(crate) edits: u64,
+    /// How far the whole cloth jumped with its pins' anchors at the start of this fixed step
+    /// (the teleport rule; the GPU backend applies it to its own state).
+    pub(crate) teleport: Option<Vec3>,
     /// A config or feature change that was refused (the last valid settings run meanwhile).
     settings_error: Option<ClothError>,
     /// A pin list that was refused (the last valid pins hold meanwhile).
@@ -350,7 +353,7 @@ fn repin(
     own: &GlobalTransform,
     poses: &FixedPoses,
     teleport: f32,
-) -> Result<(), ClothError> {
+) -> Result<Option<Vec3>, ClothError> {
     let old: std::collections::HashMap<u32, Vec3> = sim
         .state()
         .pins()
@@ -374,17 +377,18 @@ fn repin(
     state
         .set_pins(new.iter().copied())
         .map_err(SolverError::from)?;
-    if !jumps.is_empty() {
-        let offset = jumps.iter().sum::<Vec3>() / jumps.len() as f32;
-        state.translate(offset);
-        state.set_pin_targets(new.iter().map(|p| p.target));
-        state.snap_pins();
+    if jumps.is_empty() {
+        return Ok(None);
     }
-    Ok(())
+    let offset = jumps.iter().sum::<Vec3>() / jumps.len() as f32;
+    state.translate(offset);
+    state.set_pin_targets(new.iter().map(|p| p.target));
+    state.snap_pins();
+    Ok(Some(offset))
 }
 
 /// Moves the pins of an unchanged pin list to their anchors; a jump past `teleport` moves the
-/// whole cloth by the pins' mean jump.
+/// whole cloth by the pins' mean jump (returned).
 fn follow_anchors(
     sim: &mut Simulation,
     list: &[(u32, PinAnchor)],
@@ -392,7 +396,7 @@ fn follow_anchors(
     own: &GlobalTransform,
     poses: &FixedPoses,
     teleport: f32,
-) -> bool {
+) -> Option<Vec3> {
     let targets: Vec<Option<Vec3>> = list
         .iter()
         .map(|&(p, a)| pin_target(p, a, rest_local, own, poses))
@@ -405,8 +409,8 @@ fn follow_anchors(
         .filter(|d| d.length() > teleport)
         .collect();
     let state = sim.state_mut();
-    if !jumps.is_empty() {
-        let offset = jumps.iter().sum::<Vec3>() / jumps.len() as f32;
+    let offset = (!jumps.is_empty()).then(|| jumps.iter().sum::<Vec3>() / jumps.len() as f32);
+    if let Some(offset) = offset {
         state.translate(offset);
     }
     state.set_pin_targets(
@@ -415,10 +419,10 @@ fn follow_anchors(
             .zip(current)
             .map(|(t, c)| t.unwrap_or(c)),
     );
-    if !jumps.is_empty() {
+    if offset.is_some() {
         state.snap_pins();
     }
-    !jumps.is_empty()
+    offset
 }
 
 struct Built {
@@ -613,6 +617,7 @@ pub(crate) fn init_cloths(
                         torn_edges: 0,
                         recoveries: 0,
                         edits: 0,
+                        teleport: None,
                         settings_error: None,
                         pins_error: None,
                     },
@@ -768,6 +773,7 @@ pub(crate) fn sync_cloths(
             );
         }
         let list = pin_list(&pins, cs.binding.weld());
+        cs.teleport = None;
         if pins.is_changed() || cs.pins_error.is_some() {
             let result = list.and_then(|list| {
                 repin(
@@ -779,12 +785,21 @@ pub(crate) fn sync_cloths(
                     cloth.teleport_distance,
                 )
             });
-            note_rejection(&mut commands, entity, &mut cs.pins_error, result, "pins");
+            if let Ok(offset) = &result {
+                cs.teleport = *offset;
+            }
+            note_rejection(
+                &mut commands,
+                entity,
+                &mut cs.pins_error,
+                result.map(|_| ()),
+                "pins",
+            );
             cs.dirty = true;
             continue;
         }
         if let Ok(list) = list
-            && follow_anchors(
+            && let Some(offset) = follow_anchors(
                 &mut cs.sim,
                 &list,
                 &cs.rest_local,
@@ -793,6 +808,7 @@ pub(crate) fn sync_cloths(
                 cloth.teleport_distance,
             )
         {
+            cs.teleport = Some(offset);
             cs.dirty = true;
         }
     }

@@ -92,9 +92,11 @@ struct SubstepEntry {
     substep: u32,
     pin_base: u32,
     pose_base: u32,
-    _pad0: u32,
+    /// 1 in a step's first substep when the cloth teleports at the step's start.
+    snap: u32,
     t: f32,
-    _pad1: [f32; 3],
+    /// The teleport's offset.
+    offset: [f32; 3],
 }
 
 #[repr(C)]
@@ -302,6 +304,7 @@ pub struct GpuKernels {
     bend_serial: wgpu::ComputePipeline,
     collide: wgpu::ComputePipeline,
     tethers: wgpu::ComputePipeline,
+    teleport: wgpu::ComputePipeline,
     finish: wgpu::ComputePipeline,
     pins_finish: wgpu::ComputePipeline,
     guard: wgpu::ComputePipeline,
@@ -423,6 +426,7 @@ impl GpuKernels {
             bend_serial: pipeline("bend_serial"),
             collide: pipeline("collide"),
             tethers: pipeline("tethers"),
+            teleport: pipeline("teleport"),
             finish: pipeline("finish"),
             pins_finish: pipeline("pins_finish"),
             guard: pipeline("guard"),
@@ -447,6 +451,10 @@ pub struct GpuStepInput<'a> {
     pub colliders: &'a [Collider],
     /// The air's velocity at each vertex (`w` ignored); empty for still air.
     pub air_velocities: &'a [Vec4],
+    /// Per step, how far the whole cloth jumps at the step's start, its pins snapping to their
+    /// targets (the teleport rule: `ClothState::translate`, then `ClothState::snap_pins`);
+    /// empty or zero for none.
+    pub teleports: &'a [Vec3],
 }
 
 /// One cloth's buffers on the GPU.
@@ -491,6 +499,8 @@ pub struct GpuCloth {
     prepared: (u32, u32),
     /// Whether the air acts (area vectors are needed).
     air_on: bool,
+    /// Per prepared step, whether the cloth teleports at its start.
+    teleports: Vec<bool>,
 }
 
 /// Appends a part's or the boundary's distance constraints (global vertex indices).
@@ -919,6 +929,7 @@ impl GpuCloth {
             bind_group: None,
             prepared: (0, 0),
             air_on: false,
+            teleports: Vec::new(),
             passes,
         };
         cloth.bind(device, kernels);
@@ -1153,12 +1164,18 @@ impl GpuCloth {
         for k in 0..steps {
             for s in 0..substeps {
                 let j = (k * substeps + s) as usize;
+                let jump = input
+                    .teleports
+                    .get(k as usize)
+                    .copied()
+                    .filter(|o| s == 0 && *o != Vec3::ZERO && o.is_finite());
                 let e = SubstepEntry {
                     substep: s,
                     pin_base: k * self.pins,
                     pose_base: (k * substeps + s) * c,
+                    snap: u32::from(jump.is_some()),
                     t: (s + 1) as f32 / substeps as f32,
-                    ..Default::default()
+                    offset: jump.unwrap_or(Vec3::ZERO).to_array(),
                 };
                 let at = j * TABLE_STRIDE as usize;
                 table[at..at + size_of::<SubstepEntry>()].copy_from_slice(bytemuck::bytes_of(&e));
@@ -1211,6 +1228,14 @@ impl GpuCloth {
         self.iterations = params.iterations.max(1);
         self.prepared = (steps, c);
         self.air_on = air_on;
+        self.teleports = (0..steps as usize)
+            .map(|k| {
+                input
+                    .teleports
+                    .get(k)
+                    .is_some_and(|o| *o != Vec3::ZERO && o.is_finite())
+            })
+            .collect();
     }
 
     /// Records taking over the positions and velocities of `from`, the state buffer of an
@@ -1380,6 +1405,9 @@ impl GpuCloth {
         for k in 0..steps {
             let first = sub_offset(k, 0);
             enter(&mut out, GpuStage::Begin, [first, 0]);
+            if self.teleports.get(k as usize).copied().unwrap_or(false) {
+                out.push(Cmd::Run(&kernels.teleport, vertex_groups));
+            }
             if self.pins > 0 {
                 out.push(Cmd::Run(&kernels.pins_begin, pin_groups));
             }

@@ -174,6 +174,8 @@ pub struct ClothOnGpu {
     /// Settings the upload was made with (a change re-uploads).
     key: String,
     pending: Vec<Vec<Vec3>>,
+    /// Per pending step, how far the whole cloth jumps at its start (the teleport rule).
+    teleports: Vec<Vec3>,
     dt: f32,
     colliders_first: Vec<Collider>,
     colliders_last: Vec<Collider>,
@@ -400,6 +402,7 @@ fn choose_backends(
                         restart: false,
                         key: settings_key(cloth.simulation()),
                         pending: Vec::new(),
+                        teleports: Vec::new(),
                         dt: 0.0,
                         colliders_first: Vec::new(),
                         colliders_last: Vec::new(),
@@ -536,6 +539,7 @@ fn apply_gpu_results(
 fn clear_queued_steps(mut cloths: Query<&mut ClothOnGpu>) {
     for mut g in &mut cloths {
         g.pending.clear();
+        g.teleports.clear();
         g.colliders_first.clear();
         g.colliders_last.clear();
     }
@@ -559,6 +563,8 @@ fn queue_gpu_steps(
         g.pending
             .push(sim.state().pins().iter().map(|p| p.target).collect());
         cloth.count_steps(1);
+        g.teleports
+            .push(cloth.teleport.take().unwrap_or(Vec3::ZERO));
         let sim = &mut cloth.sim;
         g.dt = dt;
         if g.colliders_first.is_empty() {
@@ -582,6 +588,7 @@ struct ExtractedGpuCloth {
     /// `None` for a cloth leaving the GPU (read back, not stepped).
     upload: Option<Arc<GpuUpload>>,
     steps: Vec<Vec<Vec3>>,
+    teleports: Vec<Vec3>,
     dt: f32,
     colliders: Vec<Collider>,
     air: Vec<Vec4>,
@@ -632,6 +639,7 @@ fn extract_gpu_cloths(
             generation: g.generation,
             upload: Some(g.upload.clone()),
             steps: g.pending.clone(),
+            teleports: g.teleports.clone(),
             dt: g.dt,
             colliders,
             air: g.air.clone(),
@@ -646,6 +654,7 @@ fn extract_gpu_cloths(
             generation: l.generation,
             upload: None,
             steps: Vec::new(),
+            teleports: Vec::new(),
             dt: 0.0,
             colliders: Vec::new(),
             air: Vec::new(),
@@ -770,6 +779,7 @@ fn prepare_gpu_cloths(
                 GpuStepInput {
                     colliders: &x.colliders,
                     air_velocities: &x.air,
+                    teleports: &x.teleports,
                 },
             );
         }

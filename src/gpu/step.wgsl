@@ -65,11 +65,13 @@ struct Substep {
     substep: u32,
     pin_base: u32,
     pose_base: u32,
-    _pad0: u32,
+    // 1 when the cloth teleports at the start of this step (first substep only)
+    snap: u32,
     t: f32,
-    _pad1: f32,
-    _pad2: f32,
-    _pad3: f32,
+    // the teleport's offset
+    ox: f32,
+    oy: f32,
+    oz: f32,
 }
 
 // One range of constraints (binding 8, a dynamic offset per colour).
@@ -304,14 +306,35 @@ fn air_velocity_change(area: vec3<f32>, v_rel: vec3<f32>, inv_mass: f32, h: f32)
     return dv / (1.0 + m / s);
 }
 
-// Start of a step: where the pins start from (`ClothState::pin_starts`).
+// The teleport rule, at the start of a step: the whole cloth moves by the pins' mean jump
+// (`ClothState::translate`).
+@compute @workgroup_size(64)
+fn teleport(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= P.n || S.snap == 0u {
+        return;
+    }
+    let o = vec4<f32>(S.ox, S.oy, S.oz, 0.0);
+    state[i] += o;
+    state[P.n + i] += o;
+}
+
+// Start of a step: where the pins start from (`ClothState::pin_starts`); after a teleport the
+// pins first snap to their targets (`ClothState::snap_pins`).
 @compute @workgroup_size(64)
 fn pins_begin(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
     if i >= P.pins {
         return;
     }
-    state[5u * P.n + i] = state[pins[S.pin_base + i].vertex];
+    let pin = pins[S.pin_base + i];
+    if S.snap != 0u {
+        let at = vec4<f32>(pin.target_pos.xyz, 0.0);
+        state[pin.vertex] = at;
+        state[P.n + pin.vertex] = at;
+        state[2u * P.n + pin.vertex] = vec4<f32>(0.0);
+    }
+    state[5u * P.n + i] = state[pin.vertex];
 }
 
 // `air::vertex_area_vectors`, per vertex over its triangles in triangle order (the CPU's
