@@ -613,3 +613,172 @@ fn a_teleport_matches_the_cpu() {
     let worst = errors.iter().copied().fold(0.0, f32::max);
     assert!(worst < 2e-3, "worst {worst}");
 }
+
+/// The mesh kernel (`mesh.wgsl`) against the CPU write-back (`MeshBinding::update_shading`
+/// and `cloth::writeback`'s world → local): a folded sheet with a hard crease (copies with
+/// different normals: two normal groups) and a UV seam (copies with the same normal: one
+/// group), written from vertex 5 of a slab, through a rotated, scaled, moved transform and a
+/// mirrored one.
+#[test]
+fn the_mesh_kernel_matches_the_cpu_write_back() {
+    use bevy::math::{Affine3A, Vec2};
+    use bevy_cloth::gpu::mesh::{MeshKernel, MeshWriter, VertexLayout};
+    use bevy_cloth::solver::{MeshAttributes, MeshBinding};
+    use wgpu::util::DeviceExt;
+    let Some((device, queue, _)) = gpu("the_mesh_kernel_matches_the_cpu_write_back") else {
+        return;
+    };
+    // Columns 0..=3 form the left roof, 3..=6 the right one; column 3 is stored twice (the
+    // crease), and row 3 twice (a seam in the UVs).
+    let (cols, rows) = (7u32, 7u32);
+    let mut positions = Vec::new();
+    let mut normals = Vec::new();
+    let mut uvs = Vec::new();
+    let mut index = std::collections::HashMap::new();
+    let left_n = Vec3::new(-0.5, 1.0, 0.0).normalize();
+    let right_n = Vec3::new(0.5, 1.0, 0.0).normalize();
+    for side in 0..2u32 {
+        for copy in 0..2u32 {
+            for r in 0..rows {
+                for c in 0..cols {
+                    let on_side = if side == 0 { c <= 3 } else { c >= 3 };
+                    let on_copy = if copy == 0 { r <= 3 } else { r >= 3 };
+                    if !on_side || !on_copy {
+                        continue;
+                    }
+                    let x = c as f32 * 0.1;
+                    let y = 0.05 * (3.0 - (c as f32 - 3.0).abs());
+                    index.insert((side, copy, r, c), positions.len() as u32);
+                    positions.push(Vec3::new(x, y, r as f32 * 0.1));
+                    normals.push(if side == 0 { left_n } else { right_n });
+                    uvs.push(Vec2::new(c as f32 / 6.0, r as f32 / 6.0 + copy as f32));
+                }
+            }
+        }
+    }
+    let mut indices = Vec::new();
+    for r in 0..rows - 1 {
+        for c in 0..cols - 1 {
+            let side = u32::from(c >= 3);
+            let copy = u32::from(r >= 3);
+            let v = |rr, cc| index[&(side, copy, rr, cc)];
+            indices.extend([v(r, c), v(r + 1, c), v(r, c + 1)]);
+            indices.extend([v(r, c + 1), v(r + 1, c), v(r + 1, c + 1)]);
+        }
+    }
+    let mut binding = MeshBinding::new(
+        &positions,
+        MeshAttributes {
+            normals: Some(&normals),
+            uvs: Some(&uvs),
+            tangents: None,
+        },
+        &indices,
+        1e-6,
+    )
+    .unwrap();
+    let weld = binding.weld().clone();
+    let (_, groups) = weld.normal_groups();
+    assert!(
+        weld.particle_count() < positions.len(),
+        "the seam and crease weld"
+    );
+    assert!(
+        groups > weld.particle_count(),
+        "the crease keeps two normal groups"
+    );
+    // The simulated particles: the rest shape, rippled.
+    let particles: Vec<Vec4> = weld
+        .gather(&positions)
+        .iter()
+        .map(|p| (*p + Vec3::Y * (0.03 * (9.0 * p.x + 5.0 * p.z).sin())).extend(1.0))
+        .collect();
+    let drawn: Vec<u32> = binding.drawn_indices().collect();
+    let state = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: None,
+        contents: bytemuck::cast_slice(&particles),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let kernel = MeshKernel::new(&device);
+    let layout = VertexLayout {
+        stride: 32,
+        position: 0,
+        normal: 12,
+    };
+    let writer = MeshWriter::new(&device, &weld, &drawn, layout);
+    let first = 5u32;
+    let m = positions.len();
+    let bytes = u64::from(layout.stride) * (u64::from(first) + m as u64);
+    binding.update_shading(&particles);
+    for transform in [
+        Affine3A::from_scale_rotation_translation(
+            Vec3::new(1.5, 0.7, 1.1),
+            Quat::from_euler(bevy::math::EulerRot::XYZ, 0.3, -0.8, 0.2),
+            Vec3::new(2.0, -1.0, 0.5),
+        ),
+        Affine3A::from_scale_rotation_translation(
+            Vec3::new(-1.0, 1.0, 1.0),
+            Quat::from_rotation_y(0.4),
+            Vec3::new(-3.0, 0.0, 1.0),
+        ),
+    ] {
+        let slab = device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size: bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = device.create_command_encoder(&Default::default());
+        writer.record(
+            &device,
+            &queue,
+            &kernel,
+            &mut encoder,
+            &state,
+            &slab,
+            first,
+            transform,
+        );
+        encoder.copy_buffer_to_buffer(&slab, 0, &staging, 0, bytes);
+        queue.submit([encoder.finish()]);
+        staging.map_async(wgpu::MapMode::Read, .., |_| {});
+        let _ = device.poll(wgpu::PollType::wait_indefinitely());
+        let out: Vec<f32> = bytemuck::pod_collect_to_vec(&staging.get_mapped_range(..));
+        // The CPU write-back's formulas.
+        let to_local = transform.inverse();
+        let linear = transform.matrix3;
+        let flip = if linear.determinant() < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        let floats = (layout.stride / 4) as usize;
+        let (mut worst_p, mut worst_n) = (0.0f32, 0.0f32);
+        for v in 0..m {
+            let o = (first as usize + v) * floats;
+            let p = Vec3::from_slice(&out[o..o + 3]);
+            let n = Vec3::from_slice(&out[o + 3..o + 6]);
+            let want_p =
+                to_local.transform_point3(particles[weld.particles()[v] as usize].truncate());
+            let want_n = (linear.transpose() * (binding.shading().normals()[v] * flip))
+                .normalize_or(Vec3::Y);
+            worst_p = worst_p.max((p - want_p).length());
+            worst_n = worst_n.max((n - want_n).length());
+        }
+        assert!(
+            out[..(first as usize * floats)].iter().all(|x| *x == 0.0),
+            "wrote before `first`"
+        );
+        eprintln!("mesh kernel: worst position {worst_p} m, worst normal {worst_n}");
+        // f32 rounding of a 4×4 product against glam's affine (a few ulp of ~3 m) and of a
+        // normalised sum of face normals.
+        assert!(worst_p < 1e-5, "positions differ by {worst_p} m");
+        assert!(worst_n < 1e-4, "normals differ by {worst_n}");
+    }
+}
