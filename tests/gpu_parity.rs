@@ -622,7 +622,7 @@ fn a_teleport_matches_the_cpu() {
 #[test]
 fn the_mesh_kernel_matches_the_cpu_write_back() {
     use bevy::math::{Affine3A, Vec2};
-    use bevy_cloth::gpu::mesh::{MeshKernel, MeshWriter, VertexLayout};
+    use bevy_cloth::gpu::mesh::{MeshKernel, MeshWriter, TangentSource, VertexLayout};
     use bevy_cloth::solver::{MeshAttributes, MeshBinding};
     use wgpu::util::DeviceExt;
     let Some((device, queue, _)) = gpu("the_mesh_kernel_matches_the_cpu_write_back") else {
@@ -700,12 +700,23 @@ fn the_mesh_kernel_matches_the_cpu_write_back() {
         usage: wgpu::BufferUsages::STORAGE,
     });
     let kernel = MeshKernel::new(&device);
+    // Bevy's order: position, normal, UV, tangent.
     let layout = VertexLayout {
-        stride: 32,
+        stride: 48,
         position: 0,
         normal: 12,
+        tangent: Some(32),
     };
-    let writer = MeshWriter::new(&device, &weld, &drawn, layout);
+    let corner_uvs = binding.shading().corner_uvs().expect("UVs give tangents");
+    let source = TangentSource {
+        corner_uvs: binding
+            .drawn_triangles()
+            .iter()
+            .map(|&t| corner_uvs[t as usize])
+            .collect(),
+        handedness: None,
+    };
+    let writer = MeshWriter::new(&device, &weld, &drawn, layout, Some(&source));
     let first = 5u32;
     let m = positions.len();
     let bytes = u64::from(layout.stride) * (u64::from(first) + m as u64);
@@ -759,7 +770,7 @@ fn the_mesh_kernel_matches_the_cpu_write_back() {
             1.0
         };
         let floats = (layout.stride / 4) as usize;
-        let (mut worst_p, mut worst_n) = (0.0f32, 0.0f32);
+        let (mut worst_p, mut worst_n, mut worst_t) = (0.0f32, 0.0f32, 0.0f32);
         for v in 0..m {
             let o = (first as usize + v) * floats;
             let p = Vec3::from_slice(&out[o..o + 3]);
@@ -770,15 +781,23 @@ fn the_mesh_kernel_matches_the_cpu_write_back() {
                 .normalize_or(Vec3::Y);
             worst_p = worst_p.max((p - want_p).length());
             worst_n = worst_n.max((n - want_n).length());
+            let t = Vec4::from_slice(&out[o + 8..o + 12]);
+            let want = binding.shading().tangents()[v];
+            let want_t = (to_local.matrix3 * want.truncate()).normalize_or(Vec3::X);
+            assert_eq!(t.w, want.w, "handedness of vertex {v}");
+            worst_t = worst_t.max((t.truncate() - want_t).length());
         }
         assert!(
             out[..(first as usize * floats)].iter().all(|x| *x == 0.0),
             "wrote before `first`"
         );
-        eprintln!("mesh kernel: worst position {worst_p} m, worst normal {worst_n}");
+        eprintln!(
+            "mesh kernel: worst position {worst_p} m, worst normal {worst_n}, worst tangent {worst_t}"
+        );
         // f32 rounding of a 4×4 product against glam's affine (a few ulp of ~3 m) and of a
         // normalised sum of face normals.
         assert!(worst_p < 1e-5, "positions differ by {worst_p} m");
         assert!(worst_n < 1e-4, "normals differ by {worst_n}");
+        assert!(worst_t < 1e-4, "tangents differ by {worst_t}");
     }
 }

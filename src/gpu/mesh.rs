@@ -1,8 +1,9 @@
-//! Writing a GPU cloth into its mesh's vertex slab (`mesh.wgsl`): positions and normals in
-//! the entity's local space, straight from the state buffer, with no copy through the CPU.
+//! Writing a GPU cloth into its mesh's vertex slab (`mesh.wgsl`): positions, normals and
+//! (when the mesh has them) tangents in the entity's local space, straight from the state
+//! buffer, with no copy through the CPU.
 
 use bytemuck::{Pod, Zeroable};
-use glam::{Affine3A, Mat4};
+use glam::{Affine3A, Mat4, Vec2};
 use wgpu::util::DeviceExt;
 
 use crate::solver::Weld;
@@ -25,6 +26,10 @@ struct MeshParams {
     offsets_at: u32,
     triangles_at: u32,
     flip: f32,
+    tangent_offset: u32,
+    vertex_offsets_at: u32,
+    uvs_at: u32,
+    handedness_at: u32,
 }
 
 /// Where a mesh keeps positions and normals in its interleaved vertex buffer.
@@ -36,6 +41,19 @@ pub struct VertexLayout {
     pub position: u32,
     /// Byte offset of the normal (`Float32x3`).
     pub normal: u32,
+    /// Byte offset of the tangent (`Float32x4`), if the mesh has tangents.
+    pub tangent: Option<u32>,
+}
+
+/// What tangents are made from (see `MeshShading`): per drawn triangle, in the order of the
+/// drawn index list, its corners' UVs; per mesh vertex the handedness to keep, when the UVs
+/// were made from source tangents.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TangentSource {
+    /// UVs of each drawn triangle's corners.
+    pub corner_uvs: Vec<[Vec2; 3]>,
+    /// Handedness per mesh vertex, or `None` to take it from the UVs.
+    pub handedness: Option<Vec<f32>>,
 }
 
 /// The compiled mesh-writing kernel.
@@ -97,13 +115,22 @@ pub struct MeshWriter {
     layout: VertexLayout,
     vertices: u32,
     header: [u32; 3],
+    /// Where the tangent data starts in `topo`: vertex offsets, UVs, handedness (0: none).
+    tangent_header: Option<[u32; 3]>,
 }
 
 impl MeshWriter {
-    /// The mesh's weld (mesh vertex → particle, normal groups) and its drawn triangles (mesh
-    /// vertex indices, three per triangle).
+    /// The mesh's weld (mesh vertex → particle, normal groups), its drawn triangles (mesh
+    /// vertex indices, three per triangle), where its attributes sit, and, for a layout with
+    /// tangents, what they are made from (without it, the tangents are left as they are).
     #[must_use]
-    pub fn new(device: &wgpu::Device, weld: &Weld, drawn: &[u32], layout: VertexLayout) -> Self {
+    pub fn new(
+        device: &wgpu::Device,
+        weld: &Weld,
+        drawn: &[u32],
+        layout: VertexLayout,
+        tangents: Option<&TangentSource>,
+    ) -> Self {
         let m = weld.vertex_count();
         let (group, groups) = weld.normal_groups();
         let mut topo: Vec<u32> = weld.particles().to_vec();
@@ -135,6 +162,47 @@ impl MeshWriter {
         }
         let triangles_at = topo.len() as u32;
         topo.extend_from_slice(drawn);
+        let tangent_header = match (layout.tangent, tangents) {
+            (Some(_), Some(src)) if src.corner_uvs.len() * 3 == drawn.len() => {
+                // Per mesh vertex, its drawn triangles.
+                let mut count = vec![0u32; m + 1];
+                for &v in drawn {
+                    count[v as usize] += 1;
+                }
+                let vertex_offsets_at = topo.len() as u32;
+                let mut at = vertex_offsets_at + m as u32 + 1;
+                for c in &count[..m] {
+                    topo.push(at);
+                    at += c;
+                }
+                topo.push(at);
+                let mut fill: Vec<u32> =
+                    topo[vertex_offsets_at as usize..vertex_offsets_at as usize + m].to_vec();
+                topo.resize(at as usize, 0);
+                for (i, t) in drawn.chunks_exact(3).enumerate() {
+                    for &v in t {
+                        topo[fill[v as usize] as usize] = i as u32;
+                        fill[v as usize] += 1;
+                    }
+                }
+                let uvs_at = topo.len() as u32;
+                for corners in &src.corner_uvs {
+                    for uv in corners {
+                        topo.extend([uv.x.to_bits(), uv.y.to_bits()]);
+                    }
+                }
+                let handedness_at = match &src.handedness {
+                    Some(h) if h.len() == m => {
+                        let at = topo.len() as u32;
+                        topo.extend(h.iter().map(|x| x.to_bits()));
+                        at
+                    }
+                    _ => 0,
+                };
+                Some([vertex_offsets_at, uvs_at, handedness_at])
+            }
+            _ => None,
+        };
         let topo = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("cloth_mesh_topology"),
             contents: bytemuck::cast_slice(&topo),
@@ -152,6 +220,7 @@ impl MeshWriter {
             layout,
             vertices: m as u32,
             header: [groups_at, offsets_at, triangles_at],
+            tangent_header,
         }
     }
 
@@ -197,6 +266,13 @@ impl MeshWriter {
             offsets_at: self.header[1],
             triangles_at: self.header[2],
             flip,
+            tangent_offset: match (self.layout.tangent, self.tangent_header) {
+                (Some(t), Some(_)) => (t as i64 - self.layout.position as i64) as u32 / 4,
+                _ => u32::MAX,
+            },
+            vertex_offsets_at: self.tangent_header.map_or(0, |h| h[0]),
+            uvs_at: self.tangent_header.map_or(0, |h| h[1]),
+            handedness_at: self.tangent_header.map_or(0, |h| h[2]),
         };
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&p));
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {

@@ -5,7 +5,13 @@
 //
 // `topo` (binding 2): [particle of each mesh vertex (m) | normal group of each mesh vertex (m)
 // | per group the offsets into the incident list (groups + 1) | incident mesh triangles |
-// mesh triangles, 3 mesh vertices each].
+// mesh triangles, 3 mesh vertices each] and, with tangents: [per mesh vertex the offsets into
+// its incident list (m + 1) | incident drawn triangles | per drawn triangle its corner UVs
+// (6 f32 as bits) | with source handedness: per mesh vertex ±1 (f32 bits)].
+//
+// Tangents are `MeshShading::update`'s: per vertex the UV tangents and bitangents of its
+// drawn triangles summed (`shading::triangle_tangent`), made orthogonal to the normal and
+// given a handedness (`shading::finish_tangent`), then taken to local space.
 
 struct MeshParams {
     // world → local (columns of an affine map: x, y, z axes and translation)
@@ -24,6 +30,12 @@ struct MeshParams {
     triangles_at: u32,
     // ±1: a mirrored entity turns the winding around
     flip: f32,
+    // float offset of the tangent from the position; 0xffffffff: no tangents
+    tangent_offset: u32,
+    vertex_offsets_at: u32,
+    uvs_at: u32,
+    // 0: handedness from the UVs
+    handedness_at: u32,
 }
 
 @group(0) @binding(0) var<uniform> M: MeshParams;
@@ -33,6 +45,63 @@ struct MeshParams {
 
 fn at(v: u32) -> vec3<f32> {
     return particles[topo[v]].xyz;
+}
+
+fn uv(t: u32, corner: u32) -> vec2<f32> {
+    let o = M.uvs_at + 6u * t + 2u * corner;
+    return vec2<f32>(bitcast<f32>(topo[o]), bitcast<f32>(topo[o + 1u]));
+}
+
+// `Vec3::try_normalize(..).unwrap_or(fallback)`
+fn normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
+    let r = 1.0 / length(v);
+    if r > 0.0 && r < 3.0e38 {
+        return v * r;
+    }
+    return fallback;
+}
+
+// glam's `Vec3::any_orthonormal_vector`
+fn any_orthonormal(n: vec3<f32>) -> vec3<f32> {
+    let sign = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    return vec3<f32>(b, sign + n.y * n.y * a, -n.y);
+}
+
+// The world-space tangent with handedness of mesh vertex `v` with world normal `n`.
+fn tangent(v: u32, n: vec3<f32>) -> vec4<f32> {
+    var tan = vec3<f32>(0.0);
+    var bit = vec3<f32>(0.0);
+    for (var k = topo[M.vertex_offsets_at + v]; k < topo[M.vertex_offsets_at + v + 1u]; k++) {
+        let d = topo[k];
+        let t = M.triangles_at + 3u * d;
+        let p0 = at(topo[t]);
+        let q0 = at(topo[t + 1u]) - p0;
+        let q1 = at(topo[t + 2u]) - p0;
+        let uv0 = uv(d, 0u);
+        let uv1 = uv(d, 1u);
+        let uv2 = uv(d, 2u);
+        let det = (uv1.x - uv0.x) * (uv2.y - uv0.y) - (uv1.y - uv0.y) * (uv2.x - uv0.x);
+        if abs(det) < 1e-20 {
+            continue;
+        }
+        let r = 1.0 / det;
+        let tp = ((uv2.y - uv0.y) * q0 + (uv0.y - uv1.y) * q1) * r;
+        let bp = ((uv0.x - uv2.x) * q0 + (uv1.x - uv0.x) * q1) * r;
+        if all(abs(tp) < vec3<f32>(3.0e38)) && all(abs(bp) < vec3<f32>(3.0e38)) {
+            tan += tp;
+            bit += bp;
+        }
+    }
+    let t = normalize_or(tan - n * dot(n, tan), any_orthonormal(n));
+    var w = 1.0;
+    if M.handedness_at != 0u {
+        w = bitcast<f32>(topo[M.handedness_at + v]);
+    } else if dot(cross(n, t), bit) < 0.0 {
+        w = -1.0;
+    }
+    return vec4<f32>(t, w);
 }
 
 @compute @workgroup_size(64)
@@ -53,6 +122,15 @@ fn write_mesh(@builtin(global_invocation_id) id: vec3<u32>) {
         if all(abs(face) < vec3<f32>(3.0e38)) {
             sum += face;
         }
+    }
+    if M.tangent_offset != 0xffffffffu {
+        let tw = tangent(v, normalize_or(sum, vec3<f32>(0.0, 1.0, 0.0)));
+        let local_t = normalize_or((M.to_local * vec4<f32>(tw.xyz, 0.0)).xyz, vec3<f32>(1.0, 0.0, 0.0));
+        let o = M.base + v * M.stride + M.tangent_offset;
+        slab[o] = local_t.x;
+        slab[o + 1u] = local_t.y;
+        slab[o + 2u] = local_t.z;
+        slab[o + 3u] = tw.w;
     }
     let world = sum * M.flip;
     let local = M.normal_x.xyz * world.x + M.normal_y.xyz * world.y + M.normal_z.xyz * world.z;

@@ -31,7 +31,7 @@ use bevy::render::renderer::{RenderContext, RenderDevice, RenderGraph, RenderQue
 use bevy::render::{Extract, ExtractSchedule, MainWorld, Render, RenderApp, RenderSystems};
 
 use super::kernels::{GpuCloth, GpuKernels, GpuStepInput};
-use super::mesh::{MeshKernel, MeshWriter, VertexLayout};
+use super::mesh::{MeshKernel, MeshWriter, TangentSource, VertexLayout};
 use crate::cloth::{ClothSim, ClothSystems};
 use crate::collider::ClothColliders;
 use crate::solver::{Collider, Simulation};
@@ -118,6 +118,7 @@ struct GpuUpload {
     weld: crate::solver::Weld,
     drawn: Vec<u32>,
     layout: VertexLayout,
+    tangents: Option<TangentSource>,
     /// Start from the GPU state of the previous upload (a settings change), not from `sim`'s.
     carry: bool,
 }
@@ -284,13 +285,15 @@ impl Plugin for ClothGpuPlugin {
 /// by id, tightly packed), or why the GPU cannot write it.
 fn vertex_layout(mesh: &Mesh) -> Result<VertexLayout, String> {
     let mut offset = 0u32;
-    let (mut position, mut normal) = (None, None);
+    let (mut position, mut normal, mut tangent) = (None, None, None);
     for (attribute, _) in mesh.attributes() {
         let attribute: &MeshVertexAttribute = attribute;
         if attribute.id == Mesh::ATTRIBUTE_POSITION.id {
             position = Some(offset);
         } else if attribute.id == Mesh::ATTRIBUTE_NORMAL.id {
             normal = Some(offset);
+        } else if attribute.id == Mesh::ATTRIBUTE_TANGENT.id {
+            tangent = Some(offset);
         }
         offset += attribute.format.size() as u32;
     }
@@ -299,6 +302,7 @@ fn vertex_layout(mesh: &Mesh) -> Result<VertexLayout, String> {
             stride: offset,
             position,
             normal,
+            tangent,
         }),
         _ => Err("the mesh has no normals for the GPU to write".to_owned()),
     }
@@ -455,11 +459,21 @@ fn choose_backends(
 
 fn upload(cloth: &ClothSim, layout: VertexLayout, carry: bool) -> GpuUpload {
     let binding = &cloth.binding;
+    let shading = binding.shading();
+    let tangents = shading.corner_uvs().map(|uvs| TangentSource {
+        corner_uvs: binding
+            .drawn_triangles()
+            .iter()
+            .map(|&t| uvs[t as usize])
+            .collect(),
+        handedness: shading.handedness().map(<[f32]>::to_vec),
+    });
     GpuUpload {
         sim: cloth.simulation().clone(),
         weld: binding.weld().clone(),
         drawn: binding.drawn_indices().collect(),
         layout,
+        tangents,
         carry,
     }
 }
@@ -738,7 +752,13 @@ fn prepare_gpu_cloths(
             let carry_from = old
                 .filter(|o| upload.carry && o.cloth.len() == cloth.len())
                 .map(|o| o.cloth.state_buffer().clone());
-            let writer = MeshWriter::new(device, &upload.weld, &upload.drawn, upload.layout);
+            let writer = MeshWriter::new(
+                device,
+                &upload.weld,
+                &upload.drawn,
+                upload.layout,
+                upload.tangents.as_ref(),
+            );
             let staging = old
                 .filter(|o| o.cloth.len() == cloth.len())
                 .and_then(|o| o.staging.clone());

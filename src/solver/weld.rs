@@ -336,6 +336,20 @@ impl MeshShading {
         self.corner_uvs.is_some()
     }
 
+    /// The UVs of each mesh triangle's corners that tangents come from (real ones, or made
+    /// from the source tangents); `None` without tangents.
+    #[must_use]
+    pub fn corner_uvs(&self) -> Option<&[[Vec2; 3]]> {
+        self.corner_uvs.as_deref()
+    }
+
+    /// The handedness each mesh vertex's tangent keeps (from the source tangents), when the
+    /// corner UVs were made from them; `None`: handedness follows the UVs.
+    #[must_use]
+    pub fn handedness(&self) -> Option<&[f32]> {
+        self.handedness.as_deref()
+    }
+
     /// Recomputes normals (and tangents) for every mesh vertex from `particles`, over the mesh
     /// triangles `drawn` (indices into the triangle list given to [`Self::new`]).
     pub fn update(
@@ -593,6 +607,12 @@ impl MeshBinding {
     #[must_use]
     pub fn shading(&self) -> &MeshShading {
         &self.shading
+    }
+
+    /// The mesh triangles drawn now (indices into the mesh's triangle list).
+    #[must_use]
+    pub fn drawn_triangles(&self) -> &[u32] {
+        &self.drawn
     }
 
     /// The mesh triangles drawn now, as a mesh index list.
