@@ -20,8 +20,9 @@ use bevy_cloth::prelude::Grid;
 use std::sync::Arc;
 
 use bevy_cloth::solver::{
-    BendingModel, Collider, Features, Pin, Pose, SdfGrid, SelfCollision, Serial, Shape, Simulation,
-    Solver, SolverParams, StepInput, StepScratch, TetherParams, Tethers, TopologyOptions, step,
+    BendingModel, BendingSolve, Collider, Features, Pin, Pose, SdfGrid, SelfCollision, Serial,
+    Shape, Simulation, Solver, SolverParams, StepInput, StepScratch, TetherParams, Tethers,
+    TopologyOptions, step,
 };
 
 const DT: f32 = 1.0 / 60.0;
@@ -346,9 +347,9 @@ fn unsupported_settings_are_refused_with_a_reason() {
     s.set_features(f).unwrap();
     assert!(GpuCloth::supports(&s, DT).is_ok(), "self-collision runs");
     f.tear_threshold = Some(1.5);
+    f.tethers = Some(TetherParams::default());
     s.set_features(f).unwrap();
-    let e = GpuCloth::supports(&s, DT).unwrap_err();
-    assert!(e.0.contains("tearing"), "{e}");
+    assert!(GpuCloth::supports(&s, DT).is_ok(), "every feature runs");
     let lab = sim(
         8,
         SolverParams {
@@ -360,22 +361,28 @@ fn unsupported_settings_are_refused_with_a_reason() {
         |p| p,
     );
     assert!(GpuCloth::supports(&lab, DT).unwrap_err().0.contains("lab"));
-    // Isometric bending this stiff: the CPU solves it implicitly, so the GPU refuses it.
-    let stiff = sim(
-        16,
-        SolverParams {
-            solver: Solver::Xpbd {
-                stretch: 0.0,
-                shear: 1e-6,
-                bending: 1e-3,
+    // Isometric bending this stiff: the CPU solves it implicitly where `Auto` lets it (the
+    // GPU projects it instead), and the GPU refuses a cloth that asks for the implicit solve.
+    let stiff = |solve| {
+        sim(
+            16,
+            SolverParams {
+                solver: Solver::Xpbd {
+                    stretch: 0.0,
+                    shear: 1e-6,
+                    bending: 1e-3,
+                },
+                bending_solve: solve,
+                ..Default::default()
             },
-            ..Default::default()
-        },
-        |p| p,
-    );
-    assert!(stiff.wants_implicit_bending(DT));
-    let e = GpuCloth::supports(&stiff, DT).unwrap_err();
-    assert!(e.0.contains("implicitly"), "{e}");
+            |p| p,
+        )
+    };
+    let auto = stiff(BendingSolve::Auto);
+    assert!(auto.wants_implicit_bending(DT));
+    assert!(GpuCloth::supports(&auto, DT).is_ok());
+    let e = GpuCloth::supports(&stiff(BendingSolve::Implicit), DT).unwrap_err();
+    assert!(e.0.contains("implicit"), "{e}");
 }
 
 /// Dihedral bending (the signed-angle hinges, `atan2` on both sides) with tethers to two
@@ -800,4 +807,78 @@ fn the_mesh_kernel_matches_the_cpu_write_back() {
         assert!(worst_n < 1e-4, "normals differ by {worst_n}");
         assert!(worst_t < 1e-4, "tangents differ by {worst_t}");
     }
+}
+
+/// The tear check (`tear_check`) against `tear::overstretched_edges`: a cloth pulled by its
+/// corners, threshold 1.6; the GPU's flag rises in the frame the CPU first finds an edge past
+/// it (neither side tears here: the plugin tears on the CPU).
+#[test]
+fn the_tear_check_matches_the_cpu() {
+    let Some((device, queue, kernels)) = gpu("the_tear_check_matches_the_cpu") else {
+        return;
+    };
+    let n = 16;
+    let mut s = sim(n, SolverParams::default(), |p| {
+        Vec3::new(p.x, 1.0 - (p.z + 0.5), 0.0)
+    });
+    s.set_features(Features {
+        tear_threshold: Some(1.6),
+        ..Default::default()
+    })
+    .unwrap();
+    let start = corners(&mut s, n);
+    let mut cloth = GpuCloth::new(&device, &kernels, &s).unwrap();
+    cloth.upload_state(&queue, &s);
+    let mut state = s.state().clone();
+    let topology = s.topology().clone();
+    let mut batches = s.batches().clone();
+    let params = *s.params();
+    let mut scratch = StepScratch::default();
+    let (mut cpu_first, mut gpu_first) = (None, None);
+    for k in 0..60 {
+        // The corners move apart 1 cm a step.
+        let t: Vec<Vec3> = start
+            .iter()
+            .enumerate()
+            .map(|(i, p)| *p + Vec3::X * (0.02 * k as f32 * if i == 0 { -1.0 } else { 1.0 }))
+            .collect();
+        state.set_pin_targets(t.iter().copied());
+        step(
+            &mut state,
+            &topology,
+            &mut batches,
+            &params,
+            DT,
+            StepInput::default(),
+            &mut scratch,
+            &Serial,
+        );
+        cloth.prepare(
+            &device,
+            &queue,
+            &kernels,
+            &s,
+            DT,
+            &[t],
+            GpuStepInput::default(),
+        );
+        let mut encoder = device.create_command_encoder(&Default::default());
+        cloth.record(&mut encoder, &kernels);
+        queue.submit([encoder.finish()]);
+        let over =
+            !bevy_cloth::solver::overstretched_edges(&state.positions, topology.edges(), 1.6)
+                .is_empty();
+        if over && cpu_first.is_none() {
+            cpu_first = Some(k);
+        }
+        if cloth.read_torn(&device, &queue) && gpu_first.is_none() {
+            gpu_first = Some(k);
+        }
+    }
+    eprintln!("first overstretched step: CPU {cpu_first:?}, GPU {gpu_first:?}");
+    assert!(
+        cpu_first.is_some_and(|k| k > 5),
+        "the scene must start untorn"
+    );
+    assert_eq!(gpu_first, cpu_first);
 }

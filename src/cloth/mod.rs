@@ -13,7 +13,7 @@ mod mesh;
 mod plugin;
 mod pose;
 pub(crate) mod sim;
-mod writeback;
+pub(crate) mod writeback;
 
 pub use components::{
     Cloth, ClothConfig, ClothPin, ClothPins, ClothSelfCollision, ClothTearing, ClothTethers,

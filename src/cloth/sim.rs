@@ -172,6 +172,30 @@ impl ClothSim {
         );
     }
 
+    /// After edges tore (particle pairs): counts them, drops their triangles from the drawn
+    /// mesh and sends [`ClothTorn`] (in mesh vertices).
+    pub(crate) fn note_torn(
+        &mut self,
+        entity: Entity,
+        torn: &[[u32; 2]],
+        messages: &mut MessageWriter<ClothTorn>,
+    ) {
+        if torn.is_empty() {
+            return;
+        }
+        self.torn_edges += torn.len();
+        self.binding.retain(self.sim.topology());
+        self.indices_dirty = true;
+        let weld = self.binding.weld();
+        messages.write(ClothTorn {
+            cloth: entity,
+            edges: torn
+                .iter()
+                .map(|e| e.map(|p| weld.representative(p)))
+                .collect(),
+        });
+    }
+
     /// Counts steps the GPU took.
     pub(crate) fn count_steps(&mut self, steps: u64) {
         self.steps += steps;
@@ -868,20 +892,7 @@ pub(crate) fn step_cloths(
             cloth.recover(entity, poses.get(entity));
         }
         add_impulses(colliders, cloth.sim.impulses(), &mut impulses);
-        if !report.torn.is_empty() {
-            cloth.torn_edges += report.torn.len();
-            cloth.binding.retain(cloth.sim.topology());
-            cloth.indices_dirty = true;
-            let weld = cloth.binding.weld();
-            torn.write(ClothTorn {
-                cloth: entity,
-                edges: report
-                    .torn
-                    .iter()
-                    .map(|e| e.map(|p| weld.representative(p)))
-                    .collect(),
-            });
-        }
+        cloth.note_torn(entity, &report.torn, &mut torn);
         cloth.steps += 1;
         // A sleeping cloth did not move: its mesh stays as it is.
         cloth.dirty |= !report.asleep;

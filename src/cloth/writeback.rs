@@ -21,6 +21,19 @@ type CpuWritten = (
     Without<crate::gpu::ClothLeavingGpu>,
 );
 
+/// Torn triangles leave the index buffer (if any tore since the last write), kept in the
+/// mesh's own index format; the vertex buffer keeps its size.
+pub(crate) fn write_indices(mesh: &mut Mesh, cloth: &mut ClothSim) {
+    if core::mem::take(&mut cloth.indices_dirty) {
+        let indices = cloth.binding.drawn_indices();
+        mesh.insert_indices(if cloth.u16_indices {
+            Indices::U16(indices.map(|i| i as u16).collect())
+        } else {
+            Indices::U32(indices.collect())
+        });
+    }
+}
+
 pub(crate) fn write_back(
     mut meshes: Option<ResMut<Assets<Mesh>>>,
     mut cloths: Query<(&mut ClothSim, &GlobalTransform), CpuWritten>,
@@ -38,17 +51,8 @@ pub(crate) fn write_back(
         let Some(mut mesh) = meshes.get_mut(&cloth.mesh) else {
             continue;
         };
+        write_indices(&mut mesh, cloth);
         let binding = &cloth.binding;
-        if core::mem::take(&mut cloth.indices_dirty) {
-            // Torn triangles leave the index buffer, kept in the mesh's own index format;
-            // the vertex buffer keeps its size.
-            let indices = binding.drawn_indices();
-            mesh.insert_indices(if cloth.u16_indices {
-                Indices::U16(indices.map(|i| i as u16).collect())
-            } else {
-                Indices::U32(indices.collect())
-            });
-        }
         let affine = gt.affine();
         let to_local = affine.inverse();
         let linear = affine.matrix3;

@@ -19,9 +19,13 @@
 //! pass and moves by their mean (Jacobi), the form `solver::step` runs with
 //! `StepInput::parallel_self_collision`, its CPU twin.
 //!
+//! Tearing is checked, not done, here: a step that leaves an edge past the threshold raises a
+//! flag in the status; the plugin reads the state back and tears on the CPU (a new topology,
+//! new buffers, the GPU state carried over), a frame or two after the GPU saw the stretch.
+//!
 //! What runs on the GPU is what [`GpuCloth::supports`] accepts; the rest of the model
-//! (implicit bending, tearing, the lab solver) stays on the CPU backend, which says why when
-//! it keeps a cloth.
+//! (implicit bending, the lab solver) stays on the CPU backend, which says why when it keeps
+//! a cloth.
 //!
 //! [`solver::step`]: crate::solver::step
 
@@ -308,6 +312,7 @@ pub struct GpuKernels {
     finish: wgpu::ComputePipeline,
     pins_finish: wgpu::ComputePipeline,
     guard: wgpu::ComputePipeline,
+    tear_check: wgpu::ComputePipeline,
     carry: wgpu::ComputePipeline,
     sc_clear: wgpu::ComputePipeline,
     sc_speed: wgpu::ComputePipeline,
@@ -430,6 +435,7 @@ impl GpuKernels {
             finish: pipeline("finish"),
             pins_finish: pipeline("pins_finish"),
             guard: pipeline("guard"),
+            tear_check: pipeline("tear_check"),
             carry: pipeline("carry"),
             sc_clear: pipeline("sc_clear"),
             sc_speed: pipeline("sc_speed"),
@@ -501,6 +507,8 @@ pub struct GpuCloth {
     air_on: bool,
     /// Per prepared step, whether the cloth teleports at its start.
     teleports: Vec<bool>,
+    /// Whether edges are checked against a tear threshold.
+    tearing: bool,
 }
 
 /// Appends a part's or the boundary's distance constraints (global vertex indices).
@@ -741,15 +749,23 @@ fn table(b: &wgpu::Buffer, size: usize) -> wgpu::BindingResource<'_> {
 
 impl GpuCloth {
     /// Whether `sim`, with its current settings and features, can run on the GPU kernels in
-    /// steps of `dt` seconds (which decide whether stiff bending needs the implicit solve).
+    /// steps of `dt` seconds.
+    ///
+    /// The GPU projects bending. Where the CPU would solve it implicitly
+    /// ([`BendingSolve::Auto`](crate::solver::BendingSolve::Auto) with bending too stiff to
+    /// project per substep), the GPU still projects it: the cloth bends more easily than asked
+    /// (see `Simulation::bending_saturation`). A cloth that asks for
+    /// [`BendingSolve::Implicit`](crate::solver::BendingSolve::Implicit) stays on the CPU.
     ///
     /// # Errors
     /// What keeps it on the CPU, in words.
     pub fn supports(sim: &Simulation, dt: f32) -> Result<(), GpuUnsupported> {
         Self::supports_model(sim)?;
-        if sim.wants_implicit_bending(dt) {
+        if sim.params().bending_solve == crate::solver::BendingSolve::Implicit
+            && sim.wants_implicit_bending(dt)
+        {
             return Err(GpuUnsupported(
-                "bending this stiff is solved implicitly, on the CPU only".to_owned(),
+                "implicit bending (BendingSolve::Implicit) runs on the CPU only".to_owned(),
             ));
         }
         Ok(())
@@ -761,10 +777,6 @@ impl GpuCloth {
         let params = sim.params();
         if let Solver::Lab { .. } = params.solver {
             return no("the lab solver runs on the CPU only");
-        }
-        let features = sim.features();
-        if features.tear_threshold.is_some() {
-            return no("tearing runs on the CPU only");
         }
         Ok(())
     }
@@ -930,6 +942,7 @@ impl GpuCloth {
             prepared: (0, 0),
             air_on: false,
             teleports: Vec::new(),
+            tearing: false,
             passes,
         };
         cloth.bind(device, kernels);
@@ -1148,10 +1161,13 @@ impl GpuCloth {
             sc_ncount: self.sc.ncount,
             sc_nlist: self.sc.nlist,
             _pad: [0; 2],
-            sc: sim
-                .features()
-                .self_collision
-                .map_or([0.0; 4], |c| [c.thickness, c.friction, dt, 0.0]),
+            sc: {
+                let f = sim.features();
+                let (thickness, friction) = f
+                    .self_collision
+                    .map_or((0.0, 0.0), |c| (c.thickness, c.friction));
+                [thickness, friction, dt, f.tear_threshold.unwrap_or(0.0)]
+            },
             colliders: c,
             accumulate: u32::from(xpbd && params.iterations > 1),
             xpbd: u32::from(xpbd),
@@ -1228,6 +1244,7 @@ impl GpuCloth {
         self.iterations = params.iterations.max(1);
         self.prepared = (steps, c);
         self.air_on = air_on;
+        self.tearing = sim.features().tear_threshold.is_some_and(|t| t > 1.0);
         self.teleports = (0..steps as usize)
             .map(|k| {
                 input
@@ -1475,6 +1492,9 @@ impl GpuCloth {
                 out.push(Cmd::Run(&kernels.pins_finish, pin_groups));
             }
             out.push(Cmd::Run(&kernels.guard, vertex_groups));
+            if self.tearing && self.distances > 0 {
+                out.push(Cmd::Run(&kernels.tear_check, groups(self.distances)));
+            }
         }
         out
     }
@@ -1496,6 +1516,14 @@ impl GpuCloth {
     #[must_use]
     pub fn read_failed(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> bool {
         self.read(device, queue, self.status_offset(), 16)[0].x != 0.0
+    }
+
+    /// Whether the end of a step since the last upload had an edge stretched past the tear
+    /// threshold (blocking, as [`Self::read_state`]). The GPU does not tear: the caller does,
+    /// on the CPU, and uploads the torn cloth.
+    #[must_use]
+    pub fn read_torn(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> bool {
+        self.read(device, queue, self.status_offset(), 16)[0].y != 0.0
     }
 
     fn read(

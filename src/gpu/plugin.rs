@@ -155,6 +155,8 @@ struct GpuResult {
     generation: u64,
     /// A step left a NaN or infinite position or velocity.
     failed: bool,
+    /// A step ended with an edge past the tear threshold.
+    torn: bool,
     /// Positions and velocities, when asked for.
     state: Option<(Vec<Vec4>, Vec<Vec4>)>,
 }
@@ -488,6 +490,8 @@ fn upload(cloth: &ClothSim, layout: VertexLayout, carry: bool) -> GpuUpload {
 fn apply_gpu_results(
     mut commands: Commands,
     mut results: ResMut<GpuClothResults>,
+    mut meshes: Option<ResMut<Assets<Mesh>>>,
+    mut torn_messages: MessageWriter<crate::cloth::ClothTorn>,
     mut cloths: Query<(
         Entity,
         &mut ClothSim,
@@ -524,6 +528,15 @@ fn apply_gpu_results(
             cloth.recover(entity, transform.copied());
         } else if let Some((positions, velocities)) = &r.state {
             cloth.take_gpu_state(positions, velocities);
+            if r.torn {
+                // Tear on the CPU; the new topology goes to the GPU as a settings change
+                // (its state carried over), and the index buffer loses the torn triangles.
+                let torn = cloth.sim.tear();
+                cloth.note_torn(entity, &torn, &mut torn_messages);
+                if let Some(mesh) = meshes.as_deref_mut().and_then(|m| m.get_mut(&cloth.mesh)) {
+                    crate::cloth::writeback::write_indices(mesh.into_inner(), cloth);
+                }
+            }
         }
         if leaving.is_some() && (r.failed || r.state.is_some()) {
             cloth.dirty = true;
@@ -633,6 +646,8 @@ fn extract_gpu_cloths(
 ) {
     out.0.clear();
     for (entity, g, mesh, transform, readback) in &cloths {
+        // A tearing cloth is always read back: the CPU tears it.
+        let readback = readback || g.upload.sim.features().tear_threshold.is_some();
         // Colliders over the whole frame: poses at its first step's start and its last
         // step's end (the same shapes in both unless one came or went mid-frame).
         let colliders = if g.colliders_first.len() == g.colliders_last.len() {
@@ -700,6 +715,8 @@ struct Instance {
     staging: Option<wgpu::Buffer>,
     /// A copy is on its way to the main world.
     in_flight: bool,
+    /// Still on the GPU (not leaving it).
+    on_gpu: bool,
 }
 
 /// A copy of a cloth's state on its way to the main world.
@@ -775,6 +792,7 @@ fn prepare_gpu_cloths(
                     readback: false,
                     staging,
                     in_flight: false,
+                    on_gpu: true,
                 },
             );
         }
@@ -788,6 +806,7 @@ fn prepare_gpu_cloths(
         i.transform = x.transform;
         i.steps = x.steps.len();
         i.readback = x.readback;
+        i.on_gpu = x.upload.is_some();
         if let Some(upload) = &x.upload {
             i.cloth.prepare(
                 device,
@@ -829,10 +848,13 @@ fn run_gpu_cloths(
             i.cloth.record_carry(encoder, &pipelines.kernels, &from);
         }
         if i.steps > 0 {
-            let Some(slice) = allocator.mesh_vertex_slice(&i.mesh) else {
-                continue;
-            };
             i.cloth.record(encoder, &pipelines.kernels);
+        }
+        // The mesh every frame while on the GPU: a change of the mesh asset (torn triangles
+        // leaving the index buffer) uploads its main-world vertices again.
+        if i.on_gpu
+            && let Some(slice) = allocator.mesh_vertex_slice(&i.mesh)
+        {
             i.writer.record(
                 device.wgpu_device(),
                 &queue,
@@ -843,7 +865,8 @@ fn run_gpu_cloths(
                 slice.range.start,
                 i.transform,
             );
-        } else if !i.readback {
+        }
+        if i.steps == 0 && !i.readback {
             continue;
         }
         // The status after the steps, and the state when asked for; skipped while the last
@@ -924,6 +947,7 @@ fn send_gpu_results(
             entity: r.entity,
             generation: r.generation,
             failed: values[0].x != 0.0,
+            torn: values[0].y != 0.0,
             state: r
                 .full
                 .then(|| (values[1..1 + n].to_vec(), values[1 + n..1 + 2 * n].to_vec())),

@@ -6,7 +6,8 @@
 //   [0, n) positions (w: inverse mass, 0 when pinned) | [n, 2n) positions at the substep's
 //   start | [2n, 3n) velocities | [3n, 4n) area vectors | [4n, 5n) air velocity |
 //   [5n, 5n + pins) pinned positions at the step's start | [5n + pins] status (x: 1 once a
-//   position or velocity went NaN or infinite) | from `lambda_base`: the XPBD multipliers
+//   position or velocity went NaN or infinite; y: 1 once an edge was stretched past the tear
+//   threshold) | from `lambda_base`: the XPBD multipliers
 //   (distances, then hinges) | with self-collision, from `rest_base`: rest positions, and
 //   from `corr_base`: each vertex's self-collision correction.
 //
@@ -56,7 +57,7 @@ struct Params {
     sc_nlist: u32,
     _pad0: u32,
     _pad1: u32,
-    // self-collision thickness, friction, the step's length
+    // self-collision thickness, friction, the step's length; the tear threshold (0: none)
     sc: vec4<f32>,
 }
 
@@ -774,6 +775,22 @@ fn sc_apply(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let x = state[i];
     state[i] = vec4<f32>(x.xyz + state[P.corr_base + i].xyz, x.w);
+}
+
+// End of a step: flags an edge stretched past the tear threshold (`tear::overstretched_edges`
+// over the distance constraints, one per edge); the plugin reads the state back and tears on
+// the CPU, which rebuilds the topology and uploads it again.
+@compute @workgroup_size(64)
+fn tear_check(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= P.distances || !(P.sc.w > 1.0) {
+        return;
+    }
+    let c = distances[i];
+    let d = state[c.a].xyz - state[c.b].xyz;
+    if c.rest > 0.0 && length(d) > P.sc.w * c.rest {
+        state[P.status].y = 1.0;
+    }
 }
 
 // After new settings: the positions the previous buffers had (copied into the substep-start

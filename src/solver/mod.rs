@@ -464,28 +464,39 @@ impl Simulation {
                 }
             }
         }
-        let mut report = StepReport::default();
-        if let Some(threshold) = self.features.tear_threshold {
-            report.torn =
-                overstretched_edges(&self.state.positions, self.topology.edges(), threshold);
-            if !report.torn.is_empty() {
-                let torn = self.topology.without_edges(&report.torn);
-                // Every edge that left, not only those past the threshold: an edge whose
-                // triangles all went with their torn neighbours no longer holds anything.
-                report.torn = vanished_edges(self.topology.edges(), torn.edges());
-                self.topology = torn;
-                self.scratch.implicit.invalidate();
-                self.batches =
-                    ConstraintBatches::new(&self.topology, &self.params, self.batches.part_count());
-                self.tethers = None;
-            }
-        }
+        let mut report = StepReport {
+            torn: self.tear(),
+            ..Default::default()
+        };
         if !self.state.is_finite() {
             self.reset_to_rest();
             report.recovered = true;
         }
         self.count_quiet_step(env, felt_wind, dt);
         report
+    }
+
+    /// Tears every edge stretched past [`Features::tear_threshold`] now: the topology loses
+    /// them (and the triangles and hinges they were part of) and the constraints are rebuilt.
+    /// Returns every edge that left, not only those past the threshold (an edge whose
+    /// triangles all went with their torn neighbours no longer holds anything). The step does
+    /// this at its end; the GPU backend calls it on the state it reads back.
+    pub fn tear(&mut self) -> Vec<[u32; 2]> {
+        let Some(threshold) = self.features.tear_threshold else {
+            return Vec::new();
+        };
+        let over = overstretched_edges(&self.state.positions, self.topology.edges(), threshold);
+        if over.is_empty() {
+            return over;
+        }
+        let torn = self.topology.without_edges(&over);
+        let gone = vanished_edges(self.topology.edges(), torn.edges());
+        self.topology = torn;
+        self.scratch.implicit.invalidate();
+        self.batches =
+            ConstraintBatches::new(&self.topology, &self.params, self.batches.part_count());
+        self.tethers = None;
+        gone
     }
 
     /// After a step: counts it as quiet or not and puts the cloth to sleep after enough quiet
