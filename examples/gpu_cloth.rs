@@ -70,7 +70,7 @@ fn setup(
             // A mesh collider: the torus's own mesh, baked into a signed distance field.
             ClothCollider::mesh(32),
             Torus::new(0.12, 0.32).mesh().build(),
-            Vec3::new(0.05, 0.1, -0.6),
+            Vec3::new(0.35, 0.1, 0.8),
         ),
     ];
     for (collider, mesh, at) in obstacles {

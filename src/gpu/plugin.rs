@@ -86,8 +86,9 @@ pub struct ClothGpuSupport {
 /// damping, the speed limit, air drag/lift/friction with the wind, sphere/box/capsule/plane
 /// and mesh (baked SDF) colliders with friction, self-collision (in its parallel form: each
 /// vertex moves by the mean of its contacts' corrections; the CPU projects contacts one by
-/// one), normals. What keeps a cloth on the CPU: tearing, bending stiff enough to need the
-/// implicit solve, the lab solver.
+/// one), tearing (checked on the GPU, done on the CPU after a readback, a frame or two late),
+/// normals and tangents. What keeps a cloth on the CPU: `BendingSolve::Implicit`, the lab
+/// solver. Bending the CPU would solve implicitly under `BendingSolve::Auto` is projected.
 /// The results stay on the GPU: [`ClothSim`]'s state is the one the cloth started from unless
 /// the cloth has [`ClothReadback`]; contact impulses are not sent to colliders. A change of
 /// settings or pins carries the GPU state over; an edit through
