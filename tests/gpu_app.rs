@@ -385,3 +385,52 @@ fn a_gpu_cloth_tears_when_pulled_apart() {
     assert_eq!(indices, 3 * sim.simulation().topology().triangles().len());
     assert!(sim.simulation().state().is_finite());
 }
+
+/// Contact impulses from a GPU cloth reach its collider (`ClothContactImpulse`, which the
+/// rapier bridge pushes bodies with), a few frames late: a GPU cloth resting on one sphere
+/// and the same cloth on the CPU resting on another, far apart, press on them alike.
+#[test]
+fn a_gpu_cloth_pushes_on_its_colliders() {
+    if common::gpu_or_skip("a_gpu_cloth_pushes_on_its_colliders").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    let pair = |app: &mut App, x: f32, backend: ClothBackend| {
+        let grid = Grid::new(16, 16, 1.0, 1.0);
+        let mesh = app
+            .world_mut()
+            .resource_mut::<Assets<Mesh>>()
+            .add(grid_mesh(&grid));
+        app.world_mut().spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(x, 0.6, 0.0),
+            Cloth::default(),
+            backend,
+        ));
+        app.world_mut()
+            .spawn((ClothCollider::sphere(0.3), Transform::from_xyz(x, 0.0, 0.0)))
+            .id()
+    };
+    let cpu_ball = pair(&mut app, -10.0, ClothBackend::Cpu);
+    let gpu_ball = pair(&mut app, 10.0, ClothBackend::Gpu);
+    let (mut cpu, mut gpu) = (Vec::new(), Vec::new());
+    for _ in 0..120 {
+        app.update();
+        let push = |app: &App, e| {
+            app.world()
+                .get::<ClothContactImpulse>(e)
+                .map_or(0.0, |i| i.linear.y)
+        };
+        cpu.push(push(&app, cpu_ball));
+        gpu.push(push(&app, gpu_ball));
+    }
+    // Resting: the last second's mean downward push on each ball.
+    let mean = |v: &[f32]| v[60..].iter().sum::<f32>() / 60.0;
+    let (c, g) = (mean(&cpu), mean(&gpu));
+    eprintln!("mean push per step: CPU cloth {c} N·s, GPU cloth {g} N·s");
+    assert!(c < -1e-4, "the CPU cloth does not rest on its ball ({c})");
+    assert!(
+        (g - c).abs() < 0.15 * c.abs(),
+        "GPU cloth {g} N·s against CPU cloth {c} N·s"
+    );
+}

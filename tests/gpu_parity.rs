@@ -20,12 +20,19 @@ use bevy_cloth::prelude::Grid;
 use std::sync::Arc;
 
 use bevy_cloth::solver::{
-    BendingModel, BendingSolve, Collider, Features, Pin, Pose, SdfGrid, SelfCollision, Serial,
-    Shape, Simulation, Solver, SolverParams, StepInput, StepScratch, TetherParams, Tethers,
-    TopologyOptions, step,
+    BendingModel, BendingSolve, Collider, ContactImpulse, Features, Pin, Pose, SdfGrid,
+    SelfCollision, Serial, Shape, Simulation, Solver, SolverParams, StepInput, StepScratch,
+    TetherParams, Tethers, TopologyOptions, step,
 };
 
 const DT: f32 = 1.0 / 60.0;
+
+thread_local! {
+    /// Worst relative difference of a collider's linear impulse seen by this test's thread,
+    /// and the largest impulse (N·s) the CPU reported.
+    static IMPULSE_ERR: core::cell::Cell<f32> = const { core::cell::Cell::new(0.0) };
+    static IMPULSE_MAX: core::cell::Cell<f32> = const { core::cell::Cell::new(0.0) };
+}
 
 /// A `n`×`n` grid one metre wide, `place`d, 1 g per vertex.
 fn sim(n: u32, params: SolverParams, place: impl Fn(Vec3) -> Vec3) -> Simulation {
@@ -96,6 +103,7 @@ fn compare_with_teleport(
         let mut pin_targets = Vec::new();
         let mut jumps = Vec::new();
         let (colliders, air) = world(k);
+        let mut cpu_impulses = vec![ContactImpulse::default(); colliders.len()];
         for _ in 0..steps_per_frame {
             let t = targets(k);
             let jump = teleport.filter(|j| j.0 == k).map(|j| j.1);
@@ -124,6 +132,10 @@ fn compare_with_teleport(
                 &mut scratch,
                 &Serial,
             );
+            for (sum, i) in cpu_impulses.iter_mut().zip(scratch.impulses()) {
+                sum.linear += i.linear;
+                sum.angular += i.angular;
+            }
             pin_targets.push(t);
             k += 1;
         }
@@ -152,6 +164,33 @@ fn compare_with_teleport(
             !cloth.read_failed(device, queue),
             "the guard flagged a finite state"
         );
+        // The impulses the cloth gave the colliders over the frame: the GPU sums them per
+        // workgroup (a tree) and the CPU per part, in order; both from positions that differ
+        // by the bound below.
+        let gpu_impulses = cloth.read_impulses(device, queue);
+        assert_eq!(gpu_impulses.len(), colliders.len());
+        for (c, (g, w)) in colliders.iter().zip(gpu_impulses.iter().zip(&cpu_impulses)) {
+            // Relative to the impulse, or to 0.1 mN·s for tiny ones. Measured on llvmpipe:
+            // 3e-6; the bound leaves room for other summation orders and fused arithmetic.
+            let scale = w.linear.length().max(1e-4);
+            let err = (g.linear - w.linear).length() / scale;
+            IMPULSE_ERR.with(|e| e.set(e.get().max(err)));
+            IMPULSE_MAX.with(|e| e.set(e.get().max(w.linear.length())));
+            assert!(
+                err < 1e-3,
+                "frame {k}: impulse on {:?}: GPU {:?}, CPU {:?}",
+                c.shape,
+                g.linear,
+                w.linear
+            );
+            let ang_scale = w.angular.length().max(1e-4);
+            assert!(
+                (g.angular - w.angular).length() / ang_scale < 1e-3,
+                "frame {k}: angular impulse: GPU {:?}, CPU {:?}",
+                g.angular,
+                w.angular
+            );
+        }
         let mut worst = 0.0f32;
         for (g, c) in pos.iter().zip(&state.positions) {
             assert_eq!(g.w, c.w, "inverse masses differ");
@@ -295,6 +334,15 @@ fn cloth_on_colliders_matches_the_cpu() {
         |k| (shapes(k), Vec::new()),
     );
     eprintln!("colliders, worst per frame: {errors:?}");
+    eprintln!(
+        "colliders, worst relative impulse difference: {}",
+        IMPULSE_ERR.with(|e| e.get())
+    );
+    let most = IMPULSE_MAX.with(|e| e.get());
+    assert!(
+        most > 1e-3,
+        "the colliders were hardly touched ({most} N·s)"
+    );
     assert!(errors[0] < 2e-5, "first step: {}", errors[0]);
     let worst = errors.iter().copied().fold(0.0, f32::max);
     assert!(worst < 5e-3, "worst {worst}");

@@ -86,7 +86,10 @@ struct Params {
     sc_entries: u32,
     sc_ncount: u32,
     sc_nlist: u32,
-    _pad: [u32; 2],
+    impulses: u32,
+    impulse_base: u32,
+    impulse_slots: u32,
+    _pad: [u32; 3],
     sc: [f32; 4],
 }
 
@@ -239,6 +242,23 @@ fn replay(pass: &mut wgpu::ComputePass<'_>, group: &wgpu::BindGroup, cmds: &[Cmd
     }
 }
 
+/// Adds up impulse slots read back from [`GpuCloth::impulse_region`] (6 words per collide
+/// workgroup and collider, f32 bits) into one impulse per collider.
+#[must_use]
+pub fn sum_impulses(words: &[u32], colliders: usize) -> Vec<crate::solver::ContactImpulse> {
+    let mut out = vec![crate::solver::ContactImpulse::default(); colliders];
+    if colliders == 0 {
+        return out;
+    }
+    for (i, slot) in words.chunks_exact(6).enumerate() {
+        let f = |j: usize| f32::from_bits(slot[j]);
+        let imp = &mut out[i % colliders];
+        imp.linear += Vec3::new(f(0), f(1), f(2));
+        imp.angular += Vec3::new(f(3), f(4), f(5));
+    }
+    out
+}
+
 /// Where the self-collision's parts sit in the scratch buffer (u32 indices).
 #[derive(Clone, Copy, Debug, Default)]
 struct ScratchLayout {
@@ -307,6 +327,7 @@ pub struct GpuKernels {
     bend_colour: wgpu::ComputePipeline,
     bend_serial: wgpu::ComputePipeline,
     collide: wgpu::ComputePipeline,
+    impulse_clear: wgpu::ComputePipeline,
     tethers: wgpu::ComputePipeline,
     teleport: wgpu::ComputePipeline,
     finish: wgpu::ComputePipeline,
@@ -430,6 +451,7 @@ impl GpuKernels {
             bend_colour: pipeline("bend_colour"),
             bend_serial: pipeline("bend_serial"),
             collide: pipeline("collide"),
+            impulse_clear: pipeline("impulse_clear"),
             tethers: pipeline("tethers"),
             teleport: pipeline("teleport"),
             finish: pipeline("finish"),
@@ -492,6 +514,11 @@ pub struct GpuCloth {
     distance_buf: wgpu::Buffer,
     bend_buf: wgpu::Buffer,
     scratch: wgpu::Buffer,
+    /// Words the scratch buffer holds (self-collision, then the impulse slots).
+    scratch_capacity: u64,
+    /// Words of impulse slots the last [`GpuCloth::prepare`] laid out (6 per collide
+    /// workgroup and collider), after the self-collision part.
+    impulse_slots: u32,
     pin_buf: wgpu::Buffer,
     pin_capacity: u32,
     collider_buf: wgpu::Buffer,
@@ -909,8 +936,12 @@ impl GpuCloth {
                 device,
                 "cloth_scratch",
                 sc.len * 4,
-                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_DST
+                    | wgpu::BufferUsages::COPY_SRC,
             ),
+            scratch_capacity: sc.len,
+            impulse_slots: 0,
             sdf_buf: empty(
                 device,
                 "cloth_sdf",
@@ -1127,6 +1158,21 @@ impl GpuCloth {
             );
             rebind = true;
         }
+        // Impulse slots after the self-collision words: 6 per collide workgroup and collider.
+        let slots = self.n.div_ceil(WORKGROUP) * c * 6;
+        let words = self.sc.len + u64::from(slots);
+        if words > self.scratch_capacity {
+            self.scratch_capacity = words.next_power_of_two();
+            self.scratch = empty(
+                device,
+                "cloth_scratch",
+                self.scratch_capacity * 4,
+                wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_DST
+                    | wgpu::BufferUsages::COPY_SRC,
+            );
+            rebind = true;
+        }
         if rebind || self.bind_group.is_none() {
             self.bind(device, kernels);
         }
@@ -1160,7 +1206,10 @@ impl GpuCloth {
             sc_entries: self.sc.entries,
             sc_ncount: self.sc.ncount,
             sc_nlist: self.sc.nlist,
-            _pad: [0; 2],
+            impulses: u32::from(slots > 0),
+            impulse_base: self.sc.len as u32,
+            impulse_slots: slots,
+            _pad: [0; 3],
             sc: {
                 let f = sim.features();
                 let (thickness, friction) = f
@@ -1243,6 +1292,7 @@ impl GpuCloth {
         self.substeps = substeps;
         self.iterations = params.iterations.max(1);
         self.prepared = (steps, c);
+        self.impulse_slots = slots;
         self.air_on = air_on;
         self.tearing = sim.features().tear_threshold.is_some_and(|t| t > 1.0);
         self.teleports = (0..steps as usize)
@@ -1419,6 +1469,10 @@ impl GpuCloth {
             }
             out.push(Cmd::Bind(offsets));
         };
+        if self.impulse_slots > 0 {
+            enter(&mut out, GpuStage::Collide, [0, 0]);
+            out.push(Cmd::Run(&kernels.impulse_clear, groups(self.impulse_slots)));
+        }
         for k in 0..steps {
             let first = sub_offset(k, 0);
             enter(&mut out, GpuStage::Begin, [first, 0]);
@@ -1516,6 +1570,48 @@ impl GpuCloth {
     #[must_use]
     pub fn read_failed(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> bool {
         self.read(device, queue, self.status_offset(), 16)[0].x != 0.0
+    }
+
+    /// Where the impulse slots of the last prepared frame sit in [`Self::scratch_buffer`]:
+    /// byte offset and size (0 without colliders). Sum them with [`sum_impulses`].
+    #[must_use]
+    pub fn impulse_region(&self) -> (u64, u64) {
+        (self.sc.len * 4, u64::from(self.impulse_slots) * 4)
+    }
+
+    /// The scratch buffer (self-collision's hash and lists, then the impulse slots).
+    #[must_use]
+    pub fn scratch_buffer(&self) -> &wgpu::Buffer {
+        &self.scratch
+    }
+
+    /// The impulse the cloth gave each collider over the last recorded frame (the sum of its
+    /// steps' [`StepScratch::impulses`](crate::solver::StepScratch::impulses)), blocking, as
+    /// [`Self::read_state`].
+    #[must_use]
+    pub fn read_impulses(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Vec<crate::solver::ContactImpulse> {
+        let (offset, size) = self.impulse_region();
+        if size == 0 {
+            return Vec::new();
+        }
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("cloth_impulses"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+        encoder.copy_buffer_to_buffer(&self.scratch, offset, &staging, 0, size);
+        queue.submit([encoder.finish()]);
+        staging.map_async(wgpu::MapMode::Read, .., |_| {});
+        let _ = device.poll(wgpu::PollType::wait_indefinitely());
+        let words: Vec<u32> = bytemuck::pod_collect_to_vec(&staging.get_mapped_range(..));
+        staging.unmap();
+        sum_impulses(&words, self.prepared.1 as usize)
     }
 
     /// Whether the end of a step since the last upload had an edge stretched past the tear

@@ -9,7 +9,7 @@ pub mod kernels;
 pub mod mesh;
 mod plugin;
 
-pub use kernels::{GpuCloth, GpuKernels, GpuStage, GpuStepInput, GpuUnsupported};
+pub use kernels::{GpuCloth, GpuKernels, GpuStage, GpuStepInput, GpuUnsupported, sum_impulses};
 pub use plugin::{
     ClothBackend, ClothBackendInUse, ClothGpuPlugin, ClothGpuSupport, ClothOnGpu, ClothReadback,
 };

@@ -30,11 +30,11 @@ use bevy::render::mesh::allocator::{MeshAllocator, MeshAllocatorSettings};
 use bevy::render::renderer::{RenderContext, RenderDevice, RenderGraph, RenderQueue};
 use bevy::render::{Extract, ExtractSchedule, MainWorld, Render, RenderApp, RenderSystems};
 
-use super::kernels::{GpuCloth, GpuKernels, GpuStepInput};
+use super::kernels::{GpuCloth, GpuKernels, GpuStepInput, sum_impulses};
 use super::mesh::{MeshKernel, MeshWriter, TangentSource, VertexLayout};
 use crate::cloth::{ClothSim, ClothSystems};
 use crate::collider::ClothColliders;
-use crate::solver::{Collider, Simulation};
+use crate::solver::{Collider, ContactImpulse, Simulation};
 use crate::wind::ClothWindField;
 
 /// Which solver steps a cloth.
@@ -160,7 +160,14 @@ struct GpuResult {
     torn: bool,
     /// Positions and velocities, when asked for.
     state: Option<(Vec<Vec4>, Vec<Vec4>)>,
+    /// The impulse the frame's steps gave each collider.
+    impulses: Vec<(Entity, ContactImpulse)>,
 }
+
+/// GPU cloths' impulses on colliders, waiting for the next fixed step's
+/// [`ClothContactImpulse`](crate::collider::ClothContactImpulse)s.
+#[derive(Resource, Default)]
+struct GpuImpulses(Vec<(Entity, ContactImpulse)>);
 
 /// Results waiting for the main world (filled during extraction).
 #[derive(Resource, Default)]
@@ -183,6 +190,8 @@ pub struct ClothOnGpu {
     dt: f32,
     colliders_first: Vec<Collider>,
     colliders_last: Vec<Collider>,
+    /// The entities of `colliders_last`.
+    collider_entities: Vec<Entity>,
     air: Vec<Vec4>,
 }
 
@@ -200,6 +209,7 @@ impl Plugin for ClothGpuPlugin {
             .register_type::<ClothReadback>()
             .insert_resource(DefaultBackend(self.default_backend))
             .init_resource::<GpuClothResults>()
+            .init_resource::<GpuImpulses>()
             .add_systems(First, clear_queued_steps)
             .add_systems(PreUpdate, apply_gpu_results)
             .add_systems(
@@ -208,7 +218,7 @@ impl Plugin for ClothGpuPlugin {
                     choose_backends
                         .in_set(ClothSystems::Prepare)
                         .after(crate::cloth::sim::sync_cloths),
-                    queue_gpu_steps.in_set(ClothSystems::Simulate),
+                    (queue_gpu_steps, add_gpu_impulses).in_set(ClothSystems::Simulate),
                 ),
             );
         let has_renderer = app.get_sub_app(RenderApp).is_some();
@@ -413,6 +423,7 @@ fn choose_backends(
                         dt: 0.0,
                         colliders_first: Vec::new(),
                         colliders_last: Vec::new(),
+                        collider_entities: Vec::new(),
                         air: Vec::new(),
                     },
                     // The mesh's bounds are those of the rest shape it was made with.
@@ -493,6 +504,7 @@ fn apply_gpu_results(
     mut results: ResMut<GpuClothResults>,
     mut meshes: Option<ResMut<Assets<Mesh>>>,
     mut torn_messages: MessageWriter<crate::cloth::ClothTorn>,
+    mut impulses: ResMut<GpuImpulses>,
     mut cloths: Query<(
         Entity,
         &mut ClothSim,
@@ -506,6 +518,8 @@ fn apply_gpu_results(
     results.reverse();
     let mut seen = Vec::new();
     for r in results {
+        // Every frame's impulses happened, whichever result is the latest.
+        impulses.0.extend(r.impulses.iter().copied());
         if seen.contains(&r.entity) {
             continue;
         }
@@ -599,6 +613,9 @@ fn queue_gpu_steps(
             g.colliders_first = list.to_vec();
         }
         g.colliders_last = list.to_vec();
+        g.collider_entities = colliders
+            .as_deref()
+            .map_or_else(Vec::new, |c| c.entities.clone());
         match wind.as_deref() {
             Some(w) if !w.field.is_empty() && !sim.params().air.is_none() => {
                 sim.sample_air(&w.field, w.time + 0.5 * f64::from(dt), &mut g.air);
@@ -619,6 +636,7 @@ struct ExtractedGpuCloth {
     teleports: Vec<Vec3>,
     dt: f32,
     colliders: Vec<Collider>,
+    collider_entities: Vec<Entity>,
     air: Vec<Vec4>,
     transform: bevy::math::Affine3A,
     /// Read positions and velocities back this frame.
@@ -672,6 +690,7 @@ fn extract_gpu_cloths(
             teleports: g.teleports.clone(),
             dt: g.dt,
             colliders,
+            collider_entities: g.collider_entities.clone(),
             air: g.air.clone(),
             transform: transform.affine(),
             readback,
@@ -687,6 +706,7 @@ fn extract_gpu_cloths(
             teleports: Vec::new(),
             dt: 0.0,
             colliders: Vec::new(),
+            collider_entities: Vec::new(),
             air: Vec::new(),
             transform: transform.affine(),
             readback: true,
@@ -712,10 +732,10 @@ struct Instance {
     steps: usize,
     /// Read positions and velocities back this frame (the status is read every frame).
     readback: bool,
-    /// The staging buffer, when not being mapped.
-    staging: Option<wgpu::Buffer>,
-    /// A copy is on its way to the main world.
-    in_flight: bool,
+    /// Staging buffers not being mapped (a few, of the sizes recently used).
+    staging: Vec<wgpu::Buffer>,
+    /// The colliders of this frame's steps (their impulses go back to these entities).
+    collider_entities: Vec<Entity>,
     /// Still on the GPU (not leaving it).
     on_gpu: bool,
 }
@@ -725,6 +745,8 @@ struct Readback {
     entity: Entity,
     generation: u64,
     full: bool,
+    /// The colliders whose impulse slots follow the state (empty: none copied).
+    colliders: Vec<Entity>,
     buffer: wgpu::Buffer,
     /// The mapped bytes (`None` if mapping failed).
     data: Option<Vec<u8>>,
@@ -777,9 +799,7 @@ fn prepare_gpu_cloths(
                 upload.layout,
                 upload.tangents.as_ref(),
             );
-            let staging = old
-                .filter(|o| o.cloth.len() == cloth.len())
-                .and_then(|o| o.staging.clone());
+            let staging = Vec::new();
             instances.cloths.insert(
                 x.entity,
                 Instance {
@@ -792,7 +812,7 @@ fn prepare_gpu_cloths(
                     steps: 0,
                     readback: false,
                     staging,
-                    in_flight: false,
+                    collider_entities: Vec::new(),
                     on_gpu: true,
                 },
             );
@@ -808,6 +828,7 @@ fn prepare_gpu_cloths(
         i.steps = x.steps.len();
         i.readback = x.readback;
         i.on_gpu = x.upload.is_some();
+        i.collider_entities.clone_from(&x.collider_entities);
         if let Some(upload) = &x.upload {
             i.cloth.prepare(
                 device,
@@ -824,11 +845,6 @@ fn prepare_gpu_cloths(
             );
         }
     }
-}
-
-/// Bytes of a cloth's staging buffer: the status, then positions and velocities.
-fn staging_size(n: usize) -> u64 {
-    16 + 2 * 16 * n as u64
 }
 
 fn run_gpu_cloths(
@@ -870,30 +886,49 @@ fn run_gpu_cloths(
         if i.steps == 0 && !i.readback {
             continue;
         }
-        // The status after the steps, and the state when asked for; skipped while the last
-        // copy is still on its way.
-        let buffer = match i.staging.take() {
-            Some(b) => b,
-            None if i.in_flight => continue,
+        // The status after the steps, the state when asked for, the colliders' impulses
+        // when the steps had colliders: [status | positions | velocities | impulse slots].
+        let region = 16 * i.cloth.len() as u64;
+        let state_bytes = if i.readback { 2 * region } else { 0 };
+        let (impulse_at, impulse_bytes) = if i.steps > 0 {
+            i.cloth.impulse_region()
+        } else {
+            (0, 0)
+        };
+        let size = 16 + state_bytes + impulse_bytes;
+        let buffer = match i.staging.iter().position(|b| b.size() == size) {
+            Some(k) => i.staging.swap_remove(k),
             None => device.wgpu_device().create_buffer(&wgpu::BufferDescriptor {
                 label: Some("cloth_readback"),
-                size: staging_size(i.cloth.len()),
+                size,
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             }),
         };
-        i.in_flight = true;
         let state = i.cloth.state_buffer();
-        let region = 16 * i.cloth.len() as u64;
         encoder.copy_buffer_to_buffer(state, i.cloth.status_offset(), &buffer, 0, 16);
-        if i.readback && region > 0 {
+        if state_bytes > 0 {
             encoder.copy_buffer_to_buffer(state, 0, &buffer, 16, region);
             encoder.copy_buffer_to_buffer(state, 2 * region, &buffer, 16 + region, region);
+        }
+        if impulse_bytes > 0 {
+            encoder.copy_buffer_to_buffer(
+                i.cloth.scratch_buffer(),
+                impulse_at,
+                &buffer,
+                16 + state_bytes,
+                impulse_bytes,
+            );
         }
         instances.requested.push(Readback {
             entity,
             generation: i.generation,
             full: i.readback,
+            colliders: if impulse_bytes > 0 {
+                i.collider_entities.clone()
+            } else {
+                Vec::new()
+            },
             buffer,
             data: None,
         });
@@ -933,30 +968,51 @@ fn send_gpu_results(
     for r in receiver.try_iter() {
         if let Some(i) = instances.cloths.get_mut(&r.entity)
             && i.generation == r.generation
+            && i.staging.len() < 4
         {
-            i.in_flight = false;
-            if r.buffer.size() == staging_size(i.cloth.len()) {
-                i.staging = Some(r.buffer.clone());
-            }
+            i.staging.push(r.buffer.clone());
         }
         let Some(data) = &r.data else {
             continue;
         };
-        let values: Vec<Vec4> = bytemuck::pod_collect_to_vec(data);
-        let n = (values.len() - 1) / 2;
+        let Some(n) = instances.cloths.get(&r.entity).map(|i| i.cloth.len()) else {
+            continue;
+        };
+        let status: Vec4 = bytemuck::pod_read_unaligned(&data[..16]);
+        let state_bytes = if r.full { 32 * n } else { 0 };
+        let state = (r.full && data.len() >= 16 + state_bytes).then(|| {
+            let values: Vec<Vec4> = bytemuck::pod_collect_to_vec(&data[16..16 + state_bytes]);
+            (values[..n].to_vec(), values[n..].to_vec())
+        });
+        let words: Vec<u32> =
+            bytemuck::pod_collect_to_vec(&data[(16 + state_bytes).min(data.len())..]);
+        let impulses = sum_impulses(&words, r.colliders.len());
         out.push(GpuResult {
             entity: r.entity,
             generation: r.generation,
-            failed: values[0].x != 0.0,
-            torn: values[0].y != 0.0,
-            state: r
-                .full
-                .then(|| (values[1..1 + n].to_vec(), values[1 + n..1 + 2 * n].to_vec())),
+            failed: status.x != 0.0,
+            torn: status.y != 0.0,
+            state,
+            impulses: r.colliders.iter().copied().zip(impulses).collect(),
         });
     }
     if !out.is_empty()
         && let Some(mut results) = main_world.get_resource_mut::<GpuClothResults>()
     {
         results.0.extend(out);
+    }
+}
+
+/// In the fixed step after they arrive (their `ClothContactImpulse`s were just reset): GPU
+/// cloths' impulses on colliders, a few frames after the GPU computed them.
+fn add_gpu_impulses(
+    mut pending: ResMut<GpuImpulses>,
+    mut targets: Query<&mut crate::collider::ClothContactImpulse>,
+) {
+    for (entity, imp) in pending.0.drain(..) {
+        if let Ok(mut t) = targets.get_mut(entity) {
+            t.linear += imp.linear;
+            t.angular += imp.angular;
+        }
     }
 }

@@ -13,7 +13,9 @@
 //
 // `scratch` (binding 5, atomics), with self-collision: [0] the fastest squared speed (bits) |
 // per hash bucket its count, start (one more) and cursor | the vertices sorted by bucket |
-// per vertex its neighbour count | `sc_max` neighbour slots per vertex.
+// per vertex its neighbour count | `sc_max` neighbour slots per vertex. From `impulse_base`:
+// per collide workgroup and collider, the impulse on the collider (linear, angular: 6 f32 as
+// bits, each written by one invocation only).
 //
 // `topo` (binding 9): [per-vertex triangle offsets (n + 1) | incident triangles | triangles
 // (3 each) | tethers: per-vertex record offsets (n + 1) | records (pin, max length bits)].
@@ -55,8 +57,14 @@ struct Params {
     sc_entries: u32,
     sc_ncount: u32,
     sc_nlist: u32,
+    // 1: sum the colliders' impulses; where their slots start in `scratch`, and how many
+    // words they take (6 per collide workgroup and collider: linear, angular)
+    impulses: u32,
+    impulse_base: u32,
+    impulse_slots: u32,
     _pad0: u32,
     _pad1: u32,
+    _pad2: u32,
     // self-collision thickness, friction, the step's length; the tear threshold (0: none)
     sc: vec4<f32>,
 }
@@ -858,60 +866,118 @@ fn bend_serial(@builtin(global_invocation_id) id: vec3<u32>) {
     }
 }
 
-// `collide::collide_vertex` (without the impulse sums).
+// One vertex against one collider (`collide::collide_vertex`'s loop body): the corrected
+// position in xyz, w = 1 when it was pushed.
+fn collide_one(c: Collider, p: vec3<f32>, prev: vec3<f32>) -> vec4<f32> {
+    let off = p - c.to_t.xyz;
+    if dot(off, off) > c.misc.z {
+        return vec4<f32>(p, 0.0);
+    }
+    let local = pose_inverse_apply(c.to_t, c.to_r, p);
+    let kind = u32(c.misc.w);
+    var dn: vec4<f32>;
+    if kind == 4u {
+        dn = sdf_sample(c.shape.xyz, c.shape.w, c.grid, local);
+    } else {
+        dn = shape_distance(kind, c.shape, local);
+    }
+    let d = dn.w * c.to_t.w;
+    let thickness = c.misc.x;
+    if !(d < thickness) {
+        return vec4<f32>(p, 0.0);
+    }
+    let nrm = rotate(c.to_r, dn.xyz);
+    let push = thickness - d;
+    var corrected = p + nrm * push;
+    let surface = pose_apply(c.to_t, c.to_r, local) - pose_apply(c.from_t, c.from_r, local);
+    let slide = (corrected - prev) - surface;
+    let tangential = slide - nrm * dot(nrm, slide);
+    let t_len = length(tangential);
+    let limit = c.misc.y * push;
+    if t_len > 0.0 {
+        if t_len <= limit {
+            corrected -= tangential;
+        } else {
+            corrected -= tangential * (limit / t_len);
+        }
+    }
+    if !within_range(corrected) {
+        return vec4<f32>(p, 0.0);
+    }
+    return vec4<f32>(corrected, 1.0);
+}
+
+var<workgroup> imp_lin: array<vec3<f32>, 64>;
+var<workgroup> imp_ang: array<vec3<f32>, 64>;
+
+// `collide::collide_vertex`. With `P.impulses`, each workgroup also sums the momentum its
+// vertices gave each collider (−m·Δx/h, and its moment about the collider's origin) into its
+// own slot of the impulse region, over every substep and step of the frame; the plugin adds
+// the slots up after reading them back. Every invocation reaches every barrier.
 @compute @workgroup_size(64)
-fn collide(@builtin(global_invocation_id) id: vec3<u32>) {
+fn collide(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(local_invocation_id) lid: vec3<u32>,
+    @builtin(workgroup_id) wid: vec3<u32>,
+) {
     let i = id.x;
     let n = P.n;
-    if i >= n {
-        return;
+    var x = vec4<f32>(0.0);
+    var prev = vec3<f32>(0.0);
+    if i < n {
+        x = state[i];
+        prev = state[n + i].xyz;
     }
-    var x = state[i];
-    if x.w <= 0.0 {
-        return;
-    }
-    let prev = state[n + i].xyz;
+    let free = i < n && x.w > 0.0;
     for (var k = 0u; k < P.colliders; k++) {
         let c = colliders[S.pose_base + k];
-        let p = x.xyz;
-        let off = p - c.to_t.xyz;
-        if dot(off, off) > c.misc.z {
-            continue;
-        }
-        let local = pose_inverse_apply(c.to_t, c.to_r, p);
-        let kind = u32(c.misc.w);
-        var dn: vec4<f32>;
-        if kind == 4u {
-            dn = sdf_sample(c.shape.xyz, c.shape.w, c.grid, local);
-        } else {
-            dn = shape_distance(kind, c.shape, local);
-        }
-        let d = dn.w * c.to_t.w;
-        let thickness = c.misc.x;
-        if !(d < thickness) {
-            continue;
-        }
-        let nrm = rotate(c.to_r, dn.xyz);
-        let push = thickness - d;
-        var corrected = p + nrm * push;
-        let surface = pose_apply(c.to_t, c.to_r, local) - pose_apply(c.from_t, c.from_r, local);
-        let slide = (corrected - prev) - surface;
-        let tangential = slide - nrm * dot(nrm, slide);
-        let t_len = length(tangential);
-        let limit = c.misc.y * push;
-        if t_len > 0.0 {
-            if t_len <= limit {
-                corrected -= tangential;
-            } else {
-                corrected -= tangential * (limit / t_len);
+        var dp = vec3<f32>(0.0);
+        var arm = vec3<f32>(0.0);
+        if free {
+            let p = x.xyz;
+            let r = collide_one(c, p, prev);
+            if r.w != 0.0 {
+                dp = (r.xyz - p) / x.w;
+                arm = p - c.to_t.xyz;
+                x = vec4<f32>(r.xyz, x.w);
             }
         }
-        if !within_range(corrected) {
-            continue;
+        if P.impulses != 0u {
+            imp_lin[lid.x] = -dp;
+            imp_ang[lid.x] = -cross(arm, dp);
+            workgroupBarrier();
+            for (var s = 32u; s > 0u; s >>= 1u) {
+                if lid.x < s {
+                    imp_lin[lid.x] += imp_lin[lid.x + s];
+                    imp_ang[lid.x] += imp_ang[lid.x + s];
+                }
+                workgroupBarrier();
+            }
+            if lid.x == 0u {
+                let slot = P.impulse_base + 6u * (wid.x * P.colliders + k);
+                var add = array<f32, 6>(
+                    imp_lin[0].x, imp_lin[0].y, imp_lin[0].z,
+                    imp_ang[0].x, imp_ang[0].y, imp_ang[0].z,
+                );
+                for (var j = 0u; j < 6u; j++) {
+                    let old = bitcast<f32>(atomicLoad(&scratch[slot + j]));
+                    atomicStore(&scratch[slot + j], bitcast<u32>(old + add[j] * P.inv_h));
+                }
+            }
+            workgroupBarrier();
         }
-        x = vec4<f32>(corrected, x.w);
     }
-    state[i] = x;
+    if free {
+        state[i] = x;
+    }
+}
+
+// Start of a frame: the impulse slots start from zero.
+@compute @workgroup_size(64)
+fn impulse_clear(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x < P.impulse_slots {
+        atomicStore(&scratch[P.impulse_base + id.x], 0u);
+    }
 }
 
 // End of a step: velocities of the free vertices (`run_part` with `finish_velocity`).
