@@ -382,7 +382,8 @@ fn several_iterations_and_steps_per_frame_match_the_cpu() {
     assert!(errors[0] < 5e-5, "first frame: {}", errors[0]);
 }
 
-/// What the GPU cannot run is refused with a reason, before any buffer is made.
+/// What the GPU can run (every feature, every solver) and what it refuses with a reason
+/// (`BendingSolve::Implicit`), before any buffer is made.
 #[test]
 fn unsupported_settings_are_refused_with_a_reason() {
     let mut s = sim(8, SolverParams::default(), |p| p);
@@ -408,7 +409,7 @@ fn unsupported_settings_are_refused_with_a_reason() {
         },
         |p| p,
     );
-    assert!(GpuCloth::supports(&lab, DT).unwrap_err().0.contains("lab"));
+    assert!(GpuCloth::supports(&lab, DT).is_ok(), "the lab solver runs");
     // Isometric bending this stiff: the CPU solves it implicitly where `Auto` lets it (the
     // GPU projects it instead), and the GPU refuses a cloth that asks for the implicit solve.
     let stiff = |solve| {
@@ -929,4 +930,41 @@ fn the_tear_check_matches_the_cpu() {
         "the scene must start untorn"
     );
     assert_eq!(gpu_first, cpu_first);
+}
+
+/// The lab solver (seed 000's Jacobi averaging: velocity keep, 32 iterations of averaged edge
+/// projections) against the CPU's `lab_step`, two substeps per step, two moving pins.
+#[test]
+fn the_lab_solver_matches_the_cpu() {
+    let Some(g) = gpu("the_lab_solver_matches_the_cpu") else {
+        return;
+    };
+    let params = SolverParams {
+        solver: Solver::Lab {
+            velocity_keep: 0.99,
+        },
+        substeps: 2,
+        iterations: 32,
+        ..Default::default()
+    };
+    let n = 21;
+    let mut s = sim(n, params, |p| p + Vec3::Y);
+    let start = corners(&mut s, n);
+    let errors = compare(
+        &g,
+        &mut s,
+        40,
+        1,
+        |k| {
+            start
+                .iter()
+                .map(|p| *p + Vec3::X * (0.005 * k as f32))
+                .collect()
+        },
+        |_| (Vec::new(), Vec::new()),
+    );
+    eprintln!("lab, worst per frame: {errors:?}");
+    assert!(errors[0] < 2e-5, "first step: {}", errors[0]);
+    let worst = errors.iter().copied().fold(0.0, f32::max);
+    assert!(worst < 2e-3, "worst {worst}");
 }

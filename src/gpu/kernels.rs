@@ -23,9 +23,12 @@
 //! flag in the status; the plugin reads the state back and tears on the CPU (a new topology,
 //! new buffers, the GPU state carried over), a frame or two after the GPU saw the stretch.
 //!
-//! What runs on the GPU is what [`GpuCloth::supports`] accepts; the rest of the model
-//! (implicit bending, the lab solver) stays on the CPU backend, which says why when it keeps
-//! a cloth.
+//! The lab solver (seed 000's Jacobi averaging) is a gather per vertex over its edges in edge
+//! order, so it matches the CPU's sums bit for bit where the arithmetic is the same.
+//!
+//! What runs on the GPU is what [`GpuCloth::supports`] accepts: everything but an explicitly
+//! implicit bending solve, which stays on the CPU backend (it says why when it keeps a
+//! cloth).
 //!
 //! [`solver::step`]: crate::solver::step
 
@@ -89,7 +92,8 @@ struct Params {
     impulses: u32,
     impulse_base: u32,
     impulse_slots: u32,
-    _pad: [u32; 3],
+    lab_base: u32,
+    _pad: [u32; 2],
     sc: [f32; 4],
 }
 
@@ -335,6 +339,11 @@ pub struct GpuKernels {
     guard: wgpu::ComputePipeline,
     tear_check: wgpu::ComputePipeline,
     carry: wgpu::ComputePipeline,
+    lab_pins: wgpu::ComputePipeline,
+    lab_integrate: wgpu::ComputePipeline,
+    lab_gather: wgpu::ComputePipeline,
+    lab_apply: wgpu::ComputePipeline,
+    lab_finish: wgpu::ComputePipeline,
     sc_clear: wgpu::ComputePipeline,
     sc_speed: wgpu::ComputePipeline,
     sc_count: wgpu::ComputePipeline,
@@ -459,6 +468,11 @@ impl GpuKernels {
             guard: pipeline("guard"),
             tear_check: pipeline("tear_check"),
             carry: pipeline("carry"),
+            lab_pins: pipeline("lab_pins"),
+            lab_integrate: pipeline("lab_integrate"),
+            lab_gather: pipeline("lab_gather"),
+            lab_apply: pipeline("lab_apply"),
+            lab_finish: pipeline("lab_finish"),
             sc_clear: pipeline("sc_clear"),
             sc_speed: pipeline("sc_speed"),
             sc_count: pipeline("sc_count"),
@@ -497,6 +511,8 @@ pub struct GpuCloth {
     distances: u32,
     tri_base: u32,
     tether_base: u32,
+    /// The lab solver's per-vertex edge lists in `topo` (0: another solver).
+    lab_base: u32,
     dihedral: bool,
     /// Where the regions after the pins' starts begin in the state buffer (vec4 indices).
     lambda_base: u32,
@@ -682,6 +698,36 @@ fn incidence(n: usize, triangles: &[[u32; 3]]) -> (Vec<u32>, u32) {
     (out, tri_base)
 }
 
+/// Appends the lab solver's edges to `topo`: per vertex the start of its records (absolute,
+/// `n + 1`), then per incident edge in edge order `(other end, rest length bits)`. Returns
+/// where the offsets start.
+fn append_lab_edges(topo: &mut Vec<u32>, n: usize, edges: &[crate::solver::Edge]) -> u32 {
+    let base = topo.len() as u32;
+    let mut count = vec![0u32; n];
+    for e in edges {
+        count[e.v[0] as usize] += 1;
+        count[e.v[1] as usize] += 1;
+    }
+    let records = base + n as u32 + 1;
+    let mut at = records;
+    for c in &count {
+        topo.push(at);
+        at += 2 * c;
+    }
+    topo.push(at);
+    let mut fill: Vec<u32> = topo[base as usize..base as usize + n].to_vec();
+    topo.resize(at as usize, 0);
+    for e in edges {
+        for (a, b) in [(e.v[0], e.v[1]), (e.v[1], e.v[0])] {
+            let k = fill[a as usize] as usize;
+            topo[k] = b;
+            topo[k + 1] = e.rest.to_bits();
+            fill[a as usize] += 2;
+        }
+    }
+    base
+}
+
 /// Appends the tethers to `topo`: per vertex the start of its records (absolute indices,
 /// `n + 1` of them), then `(pin, max length as bits)` per record, grouped by vertex in the
 /// CPU's order. Returns where the offsets start.
@@ -798,13 +844,9 @@ impl GpuCloth {
         Ok(())
     }
 
-    /// [`Self::supports`] without the step length: what the kernels can run at all.
-    fn supports_model(sim: &Simulation) -> Result<(), GpuUnsupported> {
-        let no = |s: &str| Err(GpuUnsupported(s.to_owned()));
-        let params = sim.params();
-        if let Solver::Lab { .. } = params.solver {
-            return no("the lab solver runs on the CPU only");
-        }
+    /// [`Self::supports`] without the step length: what the kernels can run at all (every
+    /// solver and feature; an empty cloth too).
+    fn supports_model(_sim: &Simulation) -> Result<(), GpuUnsupported> {
         Ok(())
     }
 
@@ -835,6 +877,11 @@ impl GpuCloth {
                 }
             }
             None => 0,
+        };
+        let lab_base = if matches!(sim.params().solver, Solver::Lab { .. }) {
+            append_lab_edges(&mut topo, n, sim.topology().edges())
+        } else {
+            0
         };
         let usage_uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
         let range_entries: Vec<u8> = passes
@@ -889,6 +936,7 @@ impl GpuCloth {
             distances: dist.len() as u32,
             tri_base,
             tether_base,
+            lab_base,
             dihedral: batches.bending && !batches.boundary.bending.iso,
             lambda_base,
             rest_base,
@@ -1121,7 +1169,12 @@ impl GpuCloth {
         let params: &SolverParams = sim.params();
         let substeps = params.substeps.max(1);
         let h = dt / substeps as f32;
-        let colliders = input.colliders;
+        // The lab solver ignores colliders and air, as on the CPU.
+        let lab = match params.solver {
+            Solver::Lab { velocity_keep } => Some(velocity_keep),
+            _ => None,
+        };
+        let colliders = if lab.is_some() { &[] } else { input.colliders };
         let c = colliders.len() as u32;
         let mut rebind = self.upload_grids(device, queue, colliders);
         // Tables and per-step inputs, grown to fit.
@@ -1177,11 +1230,11 @@ impl GpuCloth {
             self.bind(device, kernels);
         }
         let (air, xpbd) = (params.air, matches!(params.solver, Solver::Xpbd { .. }));
-        let air_on = !air.is_none();
+        let air_on = !air.is_none() && lab.is_none();
         let p = Params {
             gravity_h: (params.gravity * h).extend(h).to_array(),
             inv_h: 1.0 / h,
-            damp: 1.0 / (1.0 + params.damping * h),
+            damp: lab.unwrap_or(1.0 / (1.0 + params.damping * h)),
             max_speed: params.max_speed,
             inv_h2: 1.0 / (h * h),
             air: [
@@ -1209,7 +1262,8 @@ impl GpuCloth {
             impulses: u32::from(slots > 0),
             impulse_base: self.sc.len as u32,
             impulse_slots: slots,
-            _pad: [0; 3],
+            lab_base: self.lab_base,
+            _pad: [0; 2],
             sc: {
                 let f = sim.features();
                 let (thickness, friction) = f
@@ -1484,6 +1538,30 @@ impl GpuCloth {
             }
             if self.air_on {
                 out.push(Cmd::Run(&kernels.areas, vertex_groups));
+            }
+            if self.lab_base != 0 {
+                // The lab solver: no air, colliders, tethers or self-collision (as on the CPU).
+                for s in 0..self.substeps {
+                    let so = sub_offset(k, s);
+                    enter(&mut out, GpuStage::Integrate, [so, 0]);
+                    if self.pins > 0 {
+                        out.push(Cmd::Run(&kernels.pins_substep, pin_groups));
+                        out.push(Cmd::Run(&kernels.lab_pins, pin_groups));
+                    }
+                    out.push(Cmd::Run(&kernels.lab_integrate, vertex_groups));
+                    enter(&mut out, GpuStage::Distance, [so, 0]);
+                    for _ in 0..self.iterations {
+                        out.push(Cmd::Run(&kernels.lab_gather, vertex_groups));
+                        out.push(Cmd::Run(&kernels.lab_apply, vertex_groups));
+                    }
+                    enter(&mut out, GpuStage::Finish, [so, 0]);
+                    out.push(Cmd::Run(&kernels.lab_finish, vertex_groups));
+                }
+                out.push(Cmd::Run(&kernels.guard, vertex_groups));
+                if self.tearing && self.distances > 0 {
+                    out.push(Cmd::Run(&kernels.tear_check, groups(self.distances)));
+                }
+                continue;
             }
             if self.sc.size > 0 {
                 enter(&mut out, GpuStage::SelfCollision, [first, 0]);

@@ -81,16 +81,17 @@ pub struct ClothGpuSupport {
 /// ClothBackend::Auto })`. In an app without a renderer (`MinimalPlugins`) every cloth runs on
 /// the CPU.
 ///
-/// What the GPU backend runs: PBD and XPBD with substeps and iterations, stretch, shear,
+/// What the GPU backend runs: the lab solver, PBD and XPBD with substeps and iterations, stretch, shear,
 /// isometric and dihedral bending, pins (moving with their anchors), tethers, gravity,
 /// damping, the speed limit, air drag/lift/friction with the wind, sphere/box/capsule/plane
 /// and mesh (baked SDF) colliders with friction, self-collision (in its parallel form: each
 /// vertex moves by the mean of its contacts' corrections; the CPU projects contacts one by
 /// one), tearing (checked on the GPU, done on the CPU after a readback, a frame or two late),
-/// normals and tangents. What keeps a cloth on the CPU: `BendingSolve::Implicit`, the lab
-/// solver. Bending the CPU would solve implicitly under `BendingSolve::Auto` is projected.
+/// normals and tangents. What keeps a cloth on the CPU: `BendingSolve::Implicit`. Bending the
+/// CPU would solve implicitly under `BendingSolve::Auto` is projected.
 /// The results stay on the GPU: [`ClothSim`]'s state is the one the cloth started from unless
-/// the cloth has [`ClothReadback`]; contact impulses are not sent to colliders. A change of
+/// the cloth has [`ClothReadback`]. Contact impulses on colliders are summed on the GPU, read
+/// back and added to their `ClothContactImpulse` a few frames late. A change of
 /// settings or pins carries the GPU state over; an edit through
 /// [`ClothSim::simulation_mut`] restarts the GPU cloth from the edited state; switching to the
 /// CPU reads the state back first (the cloth holds still for the frame or two that takes).
@@ -532,6 +533,10 @@ fn apply_gpu_results(
             .map(|g| g.generation)
             .or(leaving.as_ref().map(|l| l.generation));
         if current != Some(r.generation) {
+            continue;
+        }
+        // An edit of the state since the upload wins over what the GPU computed before it.
+        if on_gpu.as_ref().is_some_and(|g| g.edits != cloth.edits) {
             continue;
         }
         let cloth = &mut *cloth;

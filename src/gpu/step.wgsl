@@ -18,7 +18,9 @@
 // bits, each written by one invocation only).
 //
 // `topo` (binding 9): [per-vertex triangle offsets (n + 1) | incident triangles | triangles
-// (3 each) | tethers: per-vertex record offsets (n + 1) | records (pin, max length bits)].
+// (3 each) | tethers: per-vertex record offsets (n + 1) | records (pin, max length bits) |
+// lab solver: per-vertex offsets (n + 1) | per incident edge, in edge order, (other end,
+// rest length bits)].
 
 struct Params {
     // gravity·h in xyz, h in w
@@ -62,7 +64,9 @@ struct Params {
     impulses: u32,
     impulse_base: u32,
     impulse_slots: u32,
-    _pad0: u32,
+    // the lab solver: where its per-vertex edge lists start in `topo` (0: not the lab solver);
+    // `damp` then holds its velocity keep
+    lab_base: u32,
     _pad1: u32,
     _pad2: u32,
     // self-collision thickness, friction, the step's length; the tear threshold (0: none)
@@ -799,6 +803,97 @@ fn tear_check(@builtin(global_invocation_id) id: vec3<u32>) {
     if c.rest > 0.0 && length(d) > P.sc.w * c.rest {
         state[P.status].y = 1.0;
     }
+}
+
+// The lab solver of seed 000 (`lab::lab_step`, one per substep): keep a share of the
+// velocity, add gravity, move; then per iteration every vertex gathers its edges' projections
+// (in edge order, as the CPU sums them) and moves to their average with its own position.
+
+// Pins at rest (the lab step zeroes their velocities after placing them).
+@compute @workgroup_size(64)
+fn lab_pins(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= P.pins {
+        return;
+    }
+    state[2u * P.n + pins[S.pin_base + i].vertex] = vec4<f32>(0.0);
+}
+
+@compute @workgroup_size(64)
+fn lab_integrate(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    let n = P.n;
+    if i >= n {
+        return;
+    }
+    let x = state[i];
+    if x.w == 0.0 {
+        return;
+    }
+    let h = P.gravity_h.w;
+    let v = state[2u * n + i].xyz * P.damp + P.gravity_h.xyz;
+    state[2u * n + i] = vec4<f32>(v, 0.0);
+    state[i] = vec4<f32>(x.xyz + v * h, x.w);
+}
+
+// The averaged position, into the substep-start region (free during the lab step).
+@compute @workgroup_size(64)
+fn lab_gather(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    let n = P.n;
+    if i >= n {
+        return;
+    }
+    let x = state[i];
+    let b = P.lab_base;
+    var sum = vec3<f32>(0.0);
+    var count = 0.0;
+    for (var k = topo[b + i]; k < topo[b + i + 1u]; k += 2u) {
+        let xi = x.xyz;
+        let xj = state[topo[k]].xyz;
+        let rest = bitcast<f32>(topo[k + 1u]);
+        let d = xi - xj;
+        let len = length(d);
+        var dir = vec3<f32>(0.0);
+        if len > 0.0 {
+            dir = d / len;
+        }
+        sum += 0.5 * (xi + xj + rest * dir);
+        count += 1.0;
+    }
+    let weight = 0.2;
+    state[n + i] = vec4<f32>((weight * x.xyz + sum) / (weight + count), x.w);
+}
+
+@compute @workgroup_size(64)
+fn lab_apply(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    let n = P.n;
+    if i >= n {
+        return;
+    }
+    let x = state[i];
+    if x.w == 0.0 {
+        return;
+    }
+    let moved = state[n + i].xyz;
+    state[2u * n + i] += vec4<f32>((moved - x.xyz) / P.gravity_h.w, 0.0);
+    state[i] = vec4<f32>(moved, x.w);
+}
+
+// End of a lab substep: free vertices' speeds clamped, substep starts = positions.
+@compute @workgroup_size(64)
+fn lab_finish(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    let n = P.n;
+    if i >= n {
+        return;
+    }
+    let x = state[i];
+    if x.w > 0.0 {
+        state[2u * n + i] = clamp_speed(state[2u * n + i], P.max_speed);
+    }
+    state[n + i] = x;
 }
 
 // After new settings: the positions the previous buffers had (copied into the substep-start
