@@ -567,7 +567,7 @@ fn tethers(@builtin(global_invocation_id) id: vec3<u32>) {
     state[i] = x;
 }
 
-// Self-collision (`self_collision::find_self_collision_neighbours` and
+// Self-collision (`self_collision::find_self_collision_candidates` in parallel form and
 // `self_collide_parallel`): once per step a spatial hash of the positions (counting sort:
 // count, scan, scatter) and per vertex the list of vertices it may touch; per substep every
 // vertex moves by the mean of its touching pairs' corrections (Jacobi).

@@ -158,12 +158,7 @@ impl ImplicitBending {
         };
         self.saturation = saturation(topology, positions, rigidity, h);
         self.active = false;
-        let wanted = match solve {
-            BendingSolve::Projected => false,
-            BendingSolve::Implicit => true,
-            BendingSolve::Auto => self.saturation > IMPLICIT_BENDING_SATURATION,
-        };
-        if wanted && rigidity.is_finite() && rigidity > 0.0 {
+        if wants_implicit(self.saturation, rigidity, solve) {
             let limit = match solve {
                 BendingSolve::Auto => IMPLICIT_BENDING_AUTO_WORK,
                 _ => IMPLICIT_BENDING_MAX_WORK,
@@ -179,7 +174,7 @@ impl ImplicitBending {
         self.active
     }
 
-    /// Whether a step of `h` per substep would want the implicit solve (before trying to
+    /// Whether a step would want the implicit solve (before trying to
     /// factor: a system too big to factor falls back to projection).
     pub(crate) fn wanted(
         topology: &Topology,
@@ -188,14 +183,12 @@ impl ImplicitBending {
         h: f32,
         solve: BendingSolve,
     ) -> bool {
-        let wanted = match solve {
-            BendingSolve::Projected => false,
-            BendingSolve::Implicit => true,
-            BendingSolve::Auto => {
-                saturation(topology, positions, rigidity, h) > IMPLICIT_BENDING_SATURATION
-            }
+        // The saturation only matters (and is only computed) for `Auto`.
+        let s = match solve {
+            BendingSolve::Auto => saturation(topology, positions, rigidity, h),
+            _ => 0.0,
         };
-        wanted && rigidity.is_finite() && rigidity > 0.0
+        wants_implicit(s, rigidity, solve)
     }
 
     /// Orders the free vertices, assembles `M + h² K` in band form and factors it. False if
@@ -399,6 +392,17 @@ impl ImplicitBending {
 }
 
 /// Largest `B h² Σ w_i a_i²` over the hinges.
+/// The implicit solve is wanted: asked for, or under `Auto` with bending saturated past
+/// [`IMPLICIT_BENDING_SATURATION`]; never without a finite, positive rigidity.
+fn wants_implicit(saturation: f32, rigidity: f32, solve: BendingSolve) -> bool {
+    let wanted = match solve {
+        BendingSolve::Projected => false,
+        BendingSolve::Implicit => true,
+        BendingSolve::Auto => saturation > IMPLICIT_BENDING_SATURATION,
+    };
+    wanted && rigidity.is_finite() && rigidity > 0.0
+}
+
 fn saturation(topology: &Topology, positions: &[Vec4], rigidity: f32, h: f32) -> f32 {
     if !(rigidity.is_finite() && rigidity > 0.0) {
         return 0.0;

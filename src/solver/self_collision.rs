@@ -202,25 +202,6 @@ fn pair_correction(
     (da.is_finite() && db.is_finite()).then_some((da, db))
 }
 
-/// The parallel form of [`find_self_collision_pairs`] (the GPU kernels' CPU twin): per-vertex
-/// neighbour lists, for [`self_collide_parallel`].
-pub(crate) fn find_self_collision_neighbours(
-    pos: &[Vec4],
-    vel: &[Vec4],
-    rest: &[Vec3],
-    params: SelfCollision,
-    dt: f32,
-    scratch: &mut SelfCollisionScratch,
-) {
-    match reach_and_skip(vel, params, dt) {
-        Some((reach, skip)) => scratch.find_neighbours(pos, rest, reach, skip),
-        None => {
-            scratch.neighbour_count.clear();
-            scratch.neighbour_count.resize(pos.len(), 0);
-        }
-    }
-}
-
 /// Self-collision as the GPU runs it (Jacobi): every vertex sums its corrections from all its
 /// touching neighbours against the positions before the pass, divided by their number, and
 /// all vertices move at once. Pair by pair ([`self_collide`]) converges a little faster; this
@@ -257,19 +238,27 @@ pub(crate) fn self_collide_parallel(
     }
 }
 
-/// Collects the candidate pairs for this step: vertices closer than `thickness` plus a margin
-/// for how far they can move in `dt` (see the module docs).
-pub(crate) fn find_self_collision_pairs(
+/// Collects the candidates for this step: vertices closer than `thickness` plus a margin for
+/// how far they can move in `dt` (see the module docs), as pairs for [`self_collide`] or, with
+/// `parallel`, as per-vertex neighbour lists for [`self_collide_parallel`] (the GPU kernels'
+/// CPU twin).
+pub(crate) fn find_self_collision_candidates(
     pos: &[Vec4],
     vel: &[Vec4],
     rest: &[Vec3],
     params: SelfCollision,
     dt: f32,
+    parallel: bool,
     scratch: &mut SelfCollisionScratch,
 ) {
-    match reach_and_skip(vel, params, dt) {
-        Some((reach, skip)) => scratch.find_pairs(pos, rest, reach, skip),
-        None => scratch.pairs.clear(),
+    match (reach_and_skip(vel, params, dt), parallel) {
+        (Some((reach, skip)), true) => scratch.find_neighbours(pos, rest, reach, skip),
+        (Some((reach, skip)), false) => scratch.find_pairs(pos, rest, reach, skip),
+        (None, true) => {
+            scratch.neighbour_count.clear();
+            scratch.neighbour_count.resize(pos.len(), 0);
+        }
+        (None, false) => scratch.pairs.clear(),
     }
 }
 
@@ -402,7 +391,15 @@ mod tests {
             thickness: 0.1,
             friction: 0.0,
         };
-        find_self_collision_pairs(&pos, &[Vec4::ZERO; 3], &rest, params, 1.0 / 60.0, &mut s);
+        find_self_collision_candidates(
+            &pos,
+            &[Vec4::ZERO; 3],
+            &rest,
+            params,
+            1.0 / 60.0,
+            false,
+            &mut s,
+        );
         self_collide(&mut pos, &prev, params, &s);
         assert!((pos[0].xyz().distance(pos[1].xyz()) - 0.1).abs() < 1e-6);
         assert_eq!(pos[2], prev[2]);
@@ -423,7 +420,15 @@ mod tests {
             thickness: 0.1,
             friction: 0.0,
         };
-        find_self_collision_pairs(&pos, &[Vec4::ZERO; 2], &rest, params, 1.0 / 60.0, &mut s);
+        find_self_collision_candidates(
+            &pos,
+            &[Vec4::ZERO; 2],
+            &rest,
+            params,
+            1.0 / 60.0,
+            false,
+            &mut s,
+        );
         self_collide(&mut pos, &prev, params, &s);
         assert_eq!(pos, prev);
     }

@@ -33,8 +33,8 @@ use super::lab::{LabScratch, lab_step};
 use super::parallel::Parallel;
 use super::params::{Solver, SolverParams};
 use super::self_collision::{
-    SelfCollision, SelfCollisionScratch, find_self_collision_neighbours, find_self_collision_pairs,
-    self_collide, self_collide_parallel,
+    SelfCollision, SelfCollisionScratch, find_self_collision_candidates, self_collide,
+    self_collide_parallel,
 };
 use super::state::ClothState;
 use super::tether::Tethers;
@@ -328,17 +328,13 @@ pub fn step(
     }
     let areas = &scratch.areas;
     if let Some(sc) = input.self_collision {
-        let find = if input.parallel_self_collision {
-            find_self_collision_neighbours
-        } else {
-            find_self_collision_pairs
-        };
-        find(
+        find_self_collision_candidates(
             &state.positions,
             &state.velocities,
             topology.rest_positions(),
             sc,
             dt,
+            input.parallel_self_collision,
             &mut scratch.self_collision,
         );
     }
