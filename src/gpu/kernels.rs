@@ -21,7 +21,7 @@
 //!
 //! Tearing is checked, not done, here: a step that leaves an edge past the threshold raises a
 //! flag in the status; the plugin reads the state back and tears on the CPU (a new topology,
-//! new buffers, the GPU state carried over), a frame or two after the GPU saw the stretch.
+//! new buffers, the GPU state carried over), a few frames after the GPU saw the stretch.
 //!
 //! The lab solver (seed 000's Jacobi averaging) is a gather per vertex over its edges in edge
 //! order, so it matches the CPU's sums bit for bit where the arithmetic is the same.

@@ -15,7 +15,7 @@
 //!    [`ClothReadback`] or leaving the GPU, the positions and velocities are copied to a
 //!    staging buffer, mapped in `Cleanup`.
 //! 5. Next extracts: mapped results go to the main world, where [`PreUpdate`] applies them
-//!    to [`ClothSim`] (a frame or two late), recovers a cloth whose state went bad, and hands
+//!    to [`ClothSim`] (a few frames late), recovers a cloth whose state went bad, and hands
 //!    a cloth that left the GPU to the CPU.
 
 use std::collections::HashMap;
@@ -81,22 +81,23 @@ pub struct ClothGpuSupport {
 /// ClothBackend::Auto })`. In an app without a renderer (`MinimalPlugins`) every cloth runs on
 /// the CPU.
 ///
-/// What the GPU backend runs: the lab solver, PBD and XPBD with substeps and iterations, stretch, shear,
-/// isometric and dihedral bending, pins (moving with their anchors), tethers, gravity,
-/// damping, the speed limit, air drag/lift/friction with the wind, sphere/box/capsule/plane
-/// and mesh (baked SDF) colliders with friction, self-collision (in its parallel form: each
-/// vertex moves by the mean of its contacts' corrections; the CPU projects contacts one by
-/// one), tearing (checked on the GPU, done on the CPU after a readback, a frame or two late),
-/// normals and tangents. What keeps a cloth on the CPU: `BendingSolve::Implicit`. Bending the
-/// CPU would solve implicitly under `BendingSolve::Auto` is projected.
+/// What the GPU backend runs: the lab solver, PBD and XPBD with substeps and iterations,
+/// stretch, shear, isometric and dihedral bending, pins (moving with their anchors, with the
+/// teleport rule), tethers, gravity, damping, the speed limit, air drag/lift/friction with the
+/// wind, sphere/box/capsule/plane and mesh (baked SDF) colliders with friction, self-collision
+/// (in its parallel form: each vertex moves by the mean of its contacts' corrections; the CPU
+/// projects contacts one by one), tearing (checked on the GPU, done on the CPU after a
+/// readback), normals and tangents. What keeps a cloth on the CPU: `BendingSolve::Implicit`.
+/// Bending the CPU would solve implicitly under `BendingSolve::Auto` is projected.
+///
 /// The results stay on the GPU: [`ClothSim`]'s state is the one the cloth started from unless
-/// the cloth has [`ClothReadback`]. Contact impulses on colliders are summed on the GPU, read
-/// back and added to their `ClothContactImpulse` a few frames late. A change of
-/// settings or pins carries the GPU state over; an edit through
+/// the cloth has [`ClothReadback`]. What comes back from the GPU comes a few frames late
+/// (three or four with Bevy's pipelined rendering): read-back states, contact impulses on
+/// colliders (added to their `ClothContactImpulse`), tears (`ClothTorn`), and the recovery of
+/// a NaN or infinite state (as on the CPU: rest pose, [`ClothSim::recoveries`], a warning).
+/// A change of settings or pins carries the GPU state over; an edit through
 /// [`ClothSim::simulation_mut`] restarts the GPU cloth from the edited state; switching to the
-/// CPU reads the state back first (the cloth holds still for the frame or two that takes).
-/// A NaN or infinite state is caught on the GPU and recovered as on the CPU (rest pose,
-/// [`ClothSim::recoveries`], a warning), a frame or two late.
+/// CPU reads the state back first (the cloth holds still until it arrives).
 #[derive(Clone, Copy, Debug)]
 pub struct ClothGpuPlugin {
     /// Backend of cloths without a [`ClothBackend`] component.
