@@ -40,6 +40,7 @@ use wgpu::util::DeviceExt;
 
 use std::sync::Arc;
 
+use super::append_lists;
 use crate::solver::batches::{ConstraintBatches, Part};
 use crate::solver::collide::substep_poses;
 use crate::solver::{
@@ -672,83 +673,43 @@ fn flatten(
 /// Per vertex the triangles it belongs to, in triangle order, then the triangles:
 /// `[offsets (n + 1) | incident triangles | 3 vertices per triangle]` and the triangles' start.
 fn incidence(n: usize, triangles: &[[u32; 3]]) -> (Vec<u32>, u32) {
-    let mut count = vec![0u32; n + 1];
-    for t in triangles {
-        for &v in t {
-            count[v as usize] += 1;
-        }
-    }
     let mut out = Vec::with_capacity(n + 1 + 6 * triangles.len());
-    let mut at = (n + 1) as u32;
-    for c in &count[..n] {
-        out.push(at);
-        at += c;
-    }
-    out.push(at);
-    out.resize(at as usize, 0);
-    let mut fill: Vec<u32> = out[..n].to_vec();
-    for (i, t) in triangles.iter().enumerate() {
-        for &v in t {
-            out[fill[v as usize] as usize] = i as u32;
-            fill[v as usize] += 1;
-        }
-    }
+    append_lists(
+        &mut out,
+        n,
+        triangles
+            .iter()
+            .enumerate()
+            .flat_map(|(i, t)| t.map(|v| (v, [i as u32]))),
+    );
     let tri_base = out.len() as u32;
     out.extend(triangles.iter().flatten());
     (out, tri_base)
 }
 
-/// Appends the lab solver's edges to `topo`: per vertex the start of its records (absolute,
-/// `n + 1`), then per incident edge in edge order `(other end, rest length bits)`. Returns
-/// where the offsets start.
+/// Appends the lab solver's edges to `topo`: per vertex, per incident edge in edge order,
+/// `(other end, rest length bits)`. Returns where the offsets start.
 fn append_lab_edges(topo: &mut Vec<u32>, n: usize, edges: &[crate::solver::Edge]) -> u32 {
-    let base = topo.len() as u32;
-    let mut count = vec![0u32; n];
-    for e in edges {
-        count[e.v[0] as usize] += 1;
-        count[e.v[1] as usize] += 1;
-    }
-    let records = base + n as u32 + 1;
-    let mut at = records;
-    for c in &count {
-        topo.push(at);
-        at += 2 * c;
-    }
-    topo.push(at);
-    let mut fill: Vec<u32> = topo[base as usize..base as usize + n].to_vec();
-    topo.resize(at as usize, 0);
-    for e in edges {
-        for (a, b) in [(e.v[0], e.v[1]), (e.v[1], e.v[0])] {
-            let k = fill[a as usize] as usize;
-            topo[k] = b;
-            topo[k + 1] = e.rest.to_bits();
-            fill[a as usize] += 2;
-        }
-    }
-    base
+    append_lists(
+        topo,
+        n,
+        edges.iter().flat_map(|e| {
+            let rest = e.rest.to_bits();
+            [(e.v[0], [e.v[1], rest]), (e.v[1], [e.v[0], rest])]
+        }),
+    )
 }
 
-/// Appends the tethers to `topo`: per vertex the start of its records (absolute indices,
-/// `n + 1` of them), then `(pin, max length as bits)` per record, grouped by vertex in the
+/// Appends the tethers to `topo`: per vertex `(pin, max length bits)` per attachment, in the
 /// CPU's order. Returns where the offsets start.
 fn append_tethers(topo: &mut Vec<u32>, n: usize, tethers: &Tethers) -> u32 {
-    let base = topo.len() as u32;
-    let records = base + n as u32 + 1;
-    let mut count = vec![0u32; n];
-    for (v, _, _) in tethers.entries() {
-        count[v as usize] += 1;
-    }
-    let mut at = records;
-    for c in &count {
-        topo.push(at);
-        at += 2 * c;
-    }
-    topo.push(at);
-    for (_, pin, max_len) in tethers.entries() {
-        topo.push(pin);
-        topo.push(max_len.to_bits());
-    }
-    base
+    append_lists(
+        topo,
+        n,
+        tethers
+            .entries()
+            .map(|(v, pin, max_len)| (v, [pin, max_len.to_bits()])),
+    )
 }
 
 fn storage(

@@ -6,6 +6,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Affine3A, Mat4, Vec2};
 use wgpu::util::DeviceExt;
 
+use super::append_lists;
 use crate::solver::Weld;
 
 /// The WGSL of the mesh-writing kernel.
@@ -138,53 +139,23 @@ impl MeshWriter {
         topo.extend_from_slice(group);
         // Per group, the drawn triangles touching it (once per corner in the group, as the
         // CPU sums them).
-        let mut count = vec![0u32; groups + 1];
-        for t in drawn.chunks_exact(3) {
-            for &v in t {
-                count[group[v as usize] as usize] += 1;
-            }
-        }
-        let offsets_at = topo.len() as u32;
-        let mut at = offsets_at + groups as u32 + 1;
-        for c in &count[..groups] {
-            topo.push(at);
-            at += c;
-        }
-        topo.push(at);
-        let mut fill: Vec<u32> = topo[offsets_at as usize..offsets_at as usize + groups].to_vec();
-        topo.resize(at as usize, 0);
-        for (i, t) in drawn.chunks_exact(3).enumerate() {
-            for &v in t {
-                let g = group[v as usize] as usize;
-                topo[fill[g] as usize] = i as u32;
-                fill[g] += 1;
-            }
-        }
+        let triangles = || {
+            drawn
+                .chunks_exact(3)
+                .enumerate()
+                .flat_map(|(i, t)| [t[0], t[1], t[2]].map(|v| (v, [i as u32])))
+        };
+        let offsets_at = append_lists(
+            &mut topo,
+            groups,
+            triangles().map(|(v, t)| (group[v as usize], t)),
+        );
         let triangles_at = topo.len() as u32;
         topo.extend_from_slice(drawn);
         let tangent_header = match (layout.tangent, tangents) {
             (Some(_), Some(src)) if src.corner_uvs.len() * 3 == drawn.len() => {
                 // Per mesh vertex, its drawn triangles.
-                let mut count = vec![0u32; m + 1];
-                for &v in drawn {
-                    count[v as usize] += 1;
-                }
-                let vertex_offsets_at = topo.len() as u32;
-                let mut at = vertex_offsets_at + m as u32 + 1;
-                for c in &count[..m] {
-                    topo.push(at);
-                    at += c;
-                }
-                topo.push(at);
-                let mut fill: Vec<u32> =
-                    topo[vertex_offsets_at as usize..vertex_offsets_at as usize + m].to_vec();
-                topo.resize(at as usize, 0);
-                for (i, t) in drawn.chunks_exact(3).enumerate() {
-                    for &v in t {
-                        topo[fill[v as usize] as usize] = i as u32;
-                        fill[v as usize] += 1;
-                    }
-                }
+                let vertex_offsets_at = append_lists(&mut topo, m, triangles());
                 let uvs_at = topo.len() as u32;
                 for corners in &src.corner_uvs {
                     for uv in corners {

@@ -136,7 +136,7 @@ impl Tethers {
     /// Pulls every over-stretched vertex back onto its tether's sphere.
     /// Every attachment as `(vertex, pin, max_len)`, grouped by vertex in ascending order
     /// (the order [`Self::project`] applies them; the GPU twin's layout).
-    pub(crate) fn entries(&self) -> impl Iterator<Item = (u32, u32, f32)> + '_ {
+    pub(crate) fn entries(&self) -> impl Iterator<Item = (u32, u32, f32)> + Clone + '_ {
         self.vertex
             .iter()
             .zip(&self.pin)
