@@ -287,8 +287,22 @@ pub fn run(mut app: App, args: &Args, report: fn(&mut World) -> Json) {
                 std::thread::sleep(Duration::from_millis(2));
             }
         }
+        // With a renderer and no window nothing paces the frames: wait for the GPU after
+        // each one, so the GPU cloths' steps keep up and the report reads recent states.
+        let device = app
+            .get_sub_app(bevy::render::RenderApp)
+            .and_then(|r| {
+                r.world()
+                    .get_resource::<bevy::render::renderer::RenderDevice>()
+            })
+            .cloned();
         for _ in 0..frames {
             app.update();
+            if let Some(device) = &device {
+                let _ = device
+                    .wgpu_device()
+                    .poll(wgpu::PollType::wait_indefinitely());
+            }
         }
         println!("{}", report(app.world_mut()));
         return;
