@@ -41,6 +41,7 @@
 
 pub mod cloth;
 pub mod collider;
+pub mod editor;
 pub mod gpu;
 pub mod render;
 pub mod solver;
@@ -56,6 +57,7 @@ pub mod prelude {
     #[cfg(feature = "rapier")]
     pub use crate::collider::rapier::ClothRapierPlugin;
     pub use crate::collider::{ClothCollider, ClothContactImpulse, ColliderShape};
+    pub use crate::editor::{ClothCameraPlugin, ClothFlyCamera};
     pub use crate::gpu::{ClothBackend, ClothBackendInUse, ClothGpuPlugin, ClothReadback};
     pub use crate::render::{
         VelvetExtension, VelvetMaterial, VelvetPlugin, velvet_material, velvet_material_from,

@@ -194,7 +194,7 @@ pub fn app(args: &Args, title: &str, fixed_step: f64) -> App {
                 })
                 .set(assets()),
         )
-        .add_plugins(VelvetPlugin)
+        .add_plugins((VelvetPlugin, ClothCameraPlugin))
         .add_systems(Update, dress_cloths);
     }
     app.add_plugins(ClothPlugins::default().set(ClothGpuPlugin {
@@ -363,7 +363,8 @@ pub fn run(mut app: App, args: &Args, report: fn(&mut World) -> Json) {
     app.run();
 }
 
-/// A camera, a sun with shadows, and a ground plane.
+/// A camera (right mouse to look, WASD/QE to fly: `ClothFlyCamera`), a sun with shadows,
+/// and a ground plane.
 pub fn stage(
     commands: &mut Commands,
     meshes: &mut Assets<Mesh>,
@@ -374,6 +375,7 @@ pub fn stage(
     commands.spawn((
         Camera3d::default(),
         Transform::from_translation(eye).looking_at(target, Vec3::Y),
+        ClothFlyCamera::default(),
     ));
     commands.spawn((
         DirectionalLight {
