@@ -50,7 +50,7 @@ pub mod wind;
 /// The types most apps need.
 pub mod prelude {
     pub use crate::cloth::{
-        Cloth, ClothConfig, ClothError, ClothFailed, ClothInvalid, ClothPin, ClothPins,
+        Cloth, ClothConfig, ClothError, ClothFailed, ClothInvalid, ClothPick, ClothPin, ClothPins,
         ClothPlugin, ClothPlugins, ClothSelfCollision, ClothSim, ClothSystems, ClothTearing,
         ClothTethers, ClothTorn, PinAnchor, grid_mesh,
     };

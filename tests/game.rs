@@ -995,3 +995,47 @@ fn a_cloth_at_rest_sleeps_keeps_its_mesh_and_wakes_when_its_pole_moves() {
         after[bottom].z
     );
 }
+
+/// Grabbing cloth with the mouse: a ray from above onto a hanging, moved and rotated cloth
+/// picks the vertex under it (as a camera's `viewport_to_world` ray would); pinning that
+/// vertex holds it there while the rest falls.
+#[test]
+fn a_ray_picks_the_vertex_under_it_and_pinning_it_holds_it() {
+    let mut app = app();
+    let grid = Grid::new(9, 9, 1.0, 1.0);
+    let mesh = add_mesh(&mut app, grid_mesh(&grid));
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(2.0, 1.0, -1.0).with_rotation(Quat::from_rotation_y(0.7)),
+            Cloth::default(),
+        ))
+        .id();
+    run(&mut app, 3);
+    let vertex = grid.index(6, 2);
+    let at = sim(&app, e).position(vertex);
+    let ray = Ray3d::new(at + Vec3::new(0.02, 3.0, -0.01), Dir3::NEG_Y);
+    let pick = sim(&app, e).pick(ray).expect("the ray meets the cloth");
+    assert_eq!(pick.vertex, vertex);
+    assert!((pick.distance - 3.0).abs() < 0.01, "{pick:?}");
+    // A ray beside the cloth meets nothing.
+    assert!(
+        sim(&app, e)
+            .pick(Ray3d::new(at + Vec3::new(5.0, 3.0, 0.0), Dir3::NEG_Y))
+            .is_none()
+    );
+    // Pin it where it is: it stays, the rest of the cloth falls.
+    let held = sim(&app, e).position(pick.vertex);
+    app.world_mut()
+        .entity_mut(e)
+        .insert(ClothPins::default().with(pick.vertex, PinAnchor::World(held)));
+    run(&mut app, 30);
+    let s = sim(&app, e);
+    assert!((s.position(vertex) - at).length() < 1e-4);
+    let other = s.position(grid.index(0, 8));
+    assert!(
+        other.y < at.y - 0.3,
+        "the free corner did not fall: {other}"
+    );
+}

@@ -22,4 +22,6 @@ pub use components::{
 pub use mesh::{MeshData, grid_mesh, read_mesh};
 pub use plugin::{ClothPlugin, ClothPlugins, ClothSystems};
 pub use pose::FixedPoses;
-pub use sim::{ClothError, ClothFailed, ClothInvalid, ClothSim, ClothSource, TaskPoolParallel};
+pub use sim::{
+    ClothError, ClothFailed, ClothInvalid, ClothPick, ClothSim, ClothSource, TaskPoolParallel,
+};

@@ -234,6 +234,26 @@ impl ClothSim {
         self.binding.weld().particle(vertex)
     }
 
+    /// Where a world-space ray (e.g. from `Camera::viewport_to_world` under the cursor)
+    /// meets the cloth first, from either side, and the mesh vertex nearest that point: for
+    /// grabbing the cloth or choosing vertices to pin. A cloth on the GPU is picked where
+    /// [`ClothSim`] knows it to be (see [`ClothReadback`](crate::gpu::ClothReadback)).
+    #[must_use]
+    pub fn pick(&self, ray: Ray3d) -> Option<ClothPick> {
+        let hit = crate::solver::ray_hit(
+            &self.sim.state().positions,
+            self.sim.topology().triangles(),
+            ray.origin,
+            *ray.direction,
+        )?;
+        Some(ClothPick {
+            vertex: self.binding.weld().representative(hit.nearest),
+            particle: hit.nearest,
+            point: hit.point,
+            distance: hit.t,
+        })
+    }
+
     /// World position of mesh vertex `vertex` now.
     ///
     /// # Panics
@@ -289,6 +309,20 @@ impl ClothSim {
     pub fn is_sleeping(&self) -> bool {
         self.sim.is_sleeping()
     }
+}
+
+/// What [`ClothSim::pick`] found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClothPick {
+    /// The mesh vertex nearest the point hit (the first copy of its particle, for a welded
+    /// mesh): what [`ClothPins`] and [`ClothSim::position`] take.
+    pub vertex: u32,
+    /// Its particle.
+    pub particle: u32,
+    /// The point hit, in world space.
+    pub point: Vec3,
+    /// Distance from the ray's origin to the point, in metres.
+    pub distance: f32,
 }
 
 /// The mesh a cloth was built from and the cloth's own copy of it (which its [`Mesh3d`] shows

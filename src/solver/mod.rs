@@ -43,6 +43,7 @@ mod lanes;
 mod metrics;
 mod parallel;
 mod params;
+mod pick;
 mod sdf;
 mod self_collision;
 mod shading;
@@ -70,6 +71,7 @@ pub use parallel::{Parallel, Serial};
 pub use params::{
     BendingSolve, DEFAULT_BENDING_COMPLIANCE, LAB_WEIGHT, ParamError, Solver, SolverParams,
 };
+pub use pick::{RayHit, ray_hit};
 pub use sdf::{SdfError, SdfGrid, point_triangle_distance};
 pub use self_collision::{
     MAX_SELF_NEIGHBOURS, SelfCollision, SelfCollisionScratch, count_self_crossings,
