@@ -208,6 +208,22 @@ fn compare_with_teleport(
     errors
 }
 
+/// Checks a run's worst position difference per frame: the first frame's (rounding only)
+/// against `first`, if given, and every frame's against `worst`.
+fn within(errors: &[f32], what: &str, first: Option<f32>, worst: f32) {
+    eprintln!("{what}, worst per frame: {errors:?}");
+    if let Some(first) = first {
+        assert!(errors[0] < first, "{what}, first frame: {}", errors[0]);
+    }
+    let most = errors.iter().copied().fold(0.0, f32::max);
+    assert!(most < worst, "{what}, worst {most}");
+}
+
+/// Pin targets that slide from `start` by `per_step` every step.
+fn sliding(start: Vec<Vec3>, per_step: Vec3) -> impl Fn(usize) -> Vec<Vec3> {
+    move |k| start.iter().map(|p| *p + per_step * k as f32).collect()
+}
+
 fn gpu(test: &str) -> Option<(wgpu::Device, wgpu::Queue, GpuKernels)> {
     let (adapter, device, queue) = common::gpu_or_skip(test)?;
     eprintln!("adapter: {:?}", adapter.get_info().name);
@@ -262,10 +278,7 @@ fn hanging_cloth_in_wind_matches_the_cpu() {
             (Vec::new(), air)
         },
     );
-    eprintln!("hanging cloth, worst per frame: {errors:?}");
-    assert!(errors[0] < 2e-5, "first step: {}", errors[0]);
-    let worst = errors.iter().copied().fold(0.0, f32::max);
-    assert!(worst < 2e-3, "worst {worst}");
+    within(&errors, "hanging cloth", Some(2e-5), 2e-3);
 }
 
 /// A cloth falling onto a moving sphere, a rotated box, a capsule and the ground, PBD with
@@ -333,7 +346,6 @@ fn cloth_on_colliders_matches_the_cpu() {
         |_| Vec::new(),
         |k| (shapes(k), Vec::new()),
     );
-    eprintln!("colliders, worst per frame: {errors:?}");
     eprintln!(
         "colliders, worst relative impulse difference: {}",
         IMPULSE_ERR.with(|e| e.get())
@@ -343,9 +355,7 @@ fn cloth_on_colliders_matches_the_cpu() {
         most > 1e-3,
         "the colliders were hardly touched ({most} N·s)"
     );
-    assert!(errors[0] < 2e-5, "first step: {}", errors[0]);
-    let worst = errors.iter().copied().fold(0.0, f32::max);
-    assert!(worst < 5e-3, "worst {worst}");
+    within(&errors, "colliders", Some(2e-5), 5e-3);
 }
 
 /// XPBD with three iterations (multipliers carried across iterations), three steps recorded
@@ -363,23 +373,10 @@ fn several_iterations_and_steps_per_frame_match_the_cpu() {
     let n = 24;
     let mut s = sim(n, params, |p| Vec3::new(p.x, 1.0 - (p.z + 0.5), 0.2 * p.x));
     let start = corners(&mut s, n);
-    let errors = compare(
-        &g,
-        &mut s,
-        10,
-        3,
-        |k| {
-            start
-                .iter()
-                .map(|p| *p + Vec3::X * (0.01 * k as f32))
-                .collect()
-        },
-        |_| (Vec::new(), Vec::new()),
-    );
-    eprintln!("iterations, worst per frame: {errors:?}");
-    let worst = errors.iter().copied().fold(0.0, f32::max);
-    assert!(worst < 2e-3, "worst {worst}");
-    assert!(errors[0] < 5e-5, "first frame: {}", errors[0]);
+    let errors = compare(&g, &mut s, 10, 3, sliding(start, Vec3::X * 0.01), |_| {
+        (Vec::new(), Vec::new())
+    });
+    within(&errors, "iterations", Some(5e-5), 2e-3);
 }
 
 /// What the GPU can run (every feature, every solver) and what it refuses with a reason
@@ -493,10 +490,7 @@ fn dihedral_bending_and_tethers_match_the_cpu() {
         },
         |_| (Vec::new(), Vec::new()),
     );
-    eprintln!("dihedral + tethers, worst per frame: {errors:?}");
-    assert!(errors[0] < 2e-5, "first step: {}", errors[0]);
-    let worst = errors.iter().copied().fold(0.0, f32::max);
-    assert!(worst < 2e-3, "worst {worst}");
+    within(&errors, "dihedral + tethers", Some(2e-5), 2e-3);
 }
 
 /// A closed box mesh baked into an SDF grid, rotated, scaled and moving, with friction: the
@@ -552,10 +546,7 @@ fn cloth_on_a_baked_mesh_collider_matches_the_cpu() {
         |_| Vec::new(),
         |k| (shapes(k), Vec::new()),
     );
-    eprintln!("SDF collider, worst per frame: {errors:?}");
-    assert!(errors[0] < 2e-5, "first step: {}", errors[0]);
-    let worst = errors.iter().copied().fold(0.0, f32::max);
-    assert!(worst < 5e-3, "worst {worst}");
+    within(&errors, "SDF collider", Some(2e-5), 5e-3);
 }
 
 /// A NaN that reaches the GPU state (here through a pin target, which the plugin never sends)
@@ -634,10 +625,7 @@ fn self_collision_matches_the_cpu_twin() {
         |_| Vec::new(),
         |_| (shapes.clone(), Vec::new()),
     );
-    eprintln!("self-collision, worst per frame: {errors:?}");
-    assert!(errors[0] < 2e-5, "first step: {}", errors[0]);
-    let worst = errors.iter().copied().fold(0.0, f32::max);
-    assert!(worst < 5e-3, "worst {worst}");
+    within(&errors, "self-collision", Some(2e-5), 5e-3);
 }
 
 /// The teleport rule on the GPU: at step 12 the pins' anchors jump 5 m and the whole cloth
@@ -665,9 +653,7 @@ fn a_teleport_matches_the_cpu() {
         |_| (Vec::new(), Vec::new()),
         Some((12, jump)),
     );
-    eprintln!("teleport, worst per frame: {errors:?}");
-    let worst = errors.iter().copied().fold(0.0, f32::max);
-    assert!(worst < 2e-3, "worst {worst}");
+    within(&errors, "teleport", None, 2e-3);
 }
 
 /// The mesh kernel (`mesh.wgsl`) against the CPU write-back (`MeshBinding::update_shading`
@@ -950,21 +936,8 @@ fn the_lab_solver_matches_the_cpu() {
     let n = 21;
     let mut s = sim(n, params, |p| p + Vec3::Y);
     let start = corners(&mut s, n);
-    let errors = compare(
-        &g,
-        &mut s,
-        40,
-        1,
-        |k| {
-            start
-                .iter()
-                .map(|p| *p + Vec3::X * (0.005 * k as f32))
-                .collect()
-        },
-        |_| (Vec::new(), Vec::new()),
-    );
-    eprintln!("lab, worst per frame: {errors:?}");
-    assert!(errors[0] < 2e-5, "first step: {}", errors[0]);
-    let worst = errors.iter().copied().fold(0.0, f32::max);
-    assert!(worst < 2e-3, "worst {worst}");
+    let errors = compare(&g, &mut s, 40, 1, sliding(start, Vec3::X * 0.005), |_| {
+        (Vec::new(), Vec::new())
+    });
+    within(&errors, "lab", Some(2e-5), 2e-3);
 }
