@@ -57,6 +57,8 @@ pub mod prelude {
     #[cfg(feature = "rapier")]
     pub use crate::collider::rapier::ClothRapierPlugin;
     pub use crate::collider::{ClothCollider, ClothContactImpulse, ColliderShape};
+    #[cfg(feature = "editor")]
+    pub use crate::editor::ClothEditorPlugin;
     pub use crate::editor::{ClothCameraPlugin, ClothFlyCamera};
     pub use crate::gpu::{ClothBackend, ClothBackendInUse, ClothGpuPlugin, ClothReadback};
     pub use crate::render::{

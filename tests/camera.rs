@@ -6,6 +6,7 @@ use std::time::Duration;
 use bevy::input::mouse::AccumulatedMouseMotion;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
+use bevy_cloth::editor::ClothCameraBlock;
 use bevy_cloth::prelude::*;
 
 const DT: f32 = 0.1;
@@ -129,4 +130,38 @@ fn the_mouse_looks_only_with_the_right_button_and_never_flips_over() {
     app.update();
     assert_eq!(*app.world().get::<ClothFlyCamera>(e).unwrap(), fly);
     assert!(transform(&app, e).rotation.is_finite());
+}
+
+#[test]
+fn a_ui_that_holds_the_pointer_or_keyboard_keeps_the_camera_still() {
+    let (mut app, e) = app(Transform::from_xyz(0.0, 1.0, 5.0));
+    let start = transform(&app, e);
+    // Typing into a text field: WASD is text, not motion.
+    app.world_mut().resource_mut::<ClothCameraBlock>().keyboard = true;
+    hold(&mut app, &[KeyCode::KeyW, KeyCode::KeyQ], 5);
+    assert_eq!(transform(&app, e).translation, start.translation);
+    app.world_mut().resource_mut::<ClothCameraBlock>().keyboard = false;
+    // A right press over the panel does not start a look, however long it is held, even
+    // after the pointer leaves the panel.
+    app.world_mut().resource_mut::<ClothCameraBlock>().pointer = true;
+    app.world_mut()
+        .resource_mut::<ButtonInput<MouseButton>>()
+        .press(MouseButton::Right);
+    app.world_mut()
+        .resource_mut::<AccumulatedMouseMotion>()
+        .delta = Vec2::new(100.0, 0.0);
+    app.update();
+    app.world_mut().resource_mut::<ClothCameraBlock>().pointer = false;
+    app.update();
+    assert!((transform(&app, e).forward().as_vec3() - Vec3::NEG_Z).length() < 1e-5);
+    // Released and pressed again outside the panel: it looks.
+    app.world_mut()
+        .resource_mut::<ButtonInput<MouseButton>>()
+        .release(MouseButton::Right);
+    app.update();
+    app.world_mut()
+        .resource_mut::<ButtonInput<MouseButton>>()
+        .press(MouseButton::Right);
+    app.update();
+    assert!((transform(&app, e).forward().as_vec3() - Vec3::NEG_Z).length() > 0.1);
 }

@@ -53,6 +53,7 @@ impl_reflect_opaque!((in bevy_cloth::solver) Sleep(Debug, Clone, PartialEq, Defa
     // The simulation writes world positions back through the entity's transform.
     Transform
 )]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Cloth {
     /// Total mass in kilograms (finite, > 0).
     pub mass: f32,
@@ -97,6 +98,7 @@ impl Default for Cloth {
 }
 
 /// Keeps a cloth from passing through itself (opt-in: add it to the cloth entity).
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq)]
 #[reflect(Component, Default, Clone, PartialEq)]
 pub struct ClothSelfCollision {
@@ -110,6 +112,7 @@ pub struct ClothSelfCollision {
 /// Long-range attachments: no vertex gets farther from its nearest pin than its rest distance
 /// along the cloth (plus `slack`), so capes and banners do not stretch like rubber at few
 /// iterations (opt-in).
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component, Default, Clone, PartialEq)]
 pub struct ClothTethers {
@@ -130,6 +133,7 @@ impl Default for ClothTethers {
 
 /// Lets a cloth tear: an edge stretched past `threshold ×` its rest length breaks, its
 /// triangles disappear, and a [`ClothTorn`] message says which (opt-in).
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component, Default, Clone, PartialEq)]
 pub struct ClothTearing {
@@ -161,6 +165,7 @@ pub struct ClothTorn {
 /// [`ClothFailed`](crate::cloth::ClothFailed) message); the cloth keeps running with its last
 /// valid settings ([`ClothSim::rejected`](crate::cloth::ClothSim::rejected) says why) and
 /// takes the new ones as soon as they are valid.
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component, Default, Clone, PartialEq)]
 pub struct ClothConfig {

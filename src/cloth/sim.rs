@@ -6,7 +6,7 @@ use bevy::tasks::{ComputeTaskPool, TaskPool};
 use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
 use crate::solver::{
     Environment, Features, ManyItem, MeshBinding, Parallel, Pin, SelfCollision, Serial, Simulation,
-    SolverError, SolverParams, StateError, StepReport, TetherParams, TopologyOptions, Weld,
+    SolverError, SolverParams, StateError, StepReport, TetherParams, TopologyOptions, Weld, limits,
     step_many,
 };
 use crate::wind::ClothWindField;
@@ -35,11 +35,11 @@ pub enum ClothError {
     MeshNotInMainWorld,
     /// The entity's [`Mesh3d`] handle points at no mesh asset (it failed to load or was removed).
     MeshMissing,
-    /// The cloth's total mass is not finite and positive.
+    /// The cloth's total mass is outside [`limits::MASS`].
     BadMass(f32),
-    /// [`Cloth::teleport_distance`] is NaN or not positive.
+    /// [`Cloth::teleport_distance`] is outside [`limits::TELEPORT_DISTANCE`].
     BadTeleportDistance(f32),
-    /// [`Cloth::weld_tolerance`] is negative or not finite.
+    /// [`Cloth::weld_tolerance`] is outside [`limits::WELD_TOLERANCE`].
     BadWeldTolerance(f32),
     /// The solver rejected the mesh, masses, pins or parameters.
     Solver(SolverError),
@@ -59,15 +59,21 @@ impl core::fmt::Display for ClothError {
                 "mesh data is only in the render world; create it with RenderAssetUsages::MAIN_WORLD"
             ),
             ClothError::MeshMissing => write!(f, "the Mesh3d handle points at no mesh asset"),
-            ClothError::BadMass(m) => write!(f, "cloth mass {m} must be finite and > 0"),
+            ClothError::BadMass(m) => {
+                let l = limits::MASS;
+                write!(f, "cloth mass {m} is outside [{}, {}] kg", l.min, l.max)
+            }
             ClothError::BadTeleportDistance(d) => {
+                let l = limits::TELEPORT_DISTANCE;
                 write!(
                     f,
-                    "teleport distance {d} must be > 0 (infinity turns it off)"
+                    "teleport distance {d} is outside [{}, {}] m (infinity turns it off)",
+                    l.min, l.max
                 )
             }
             ClothError::BadWeldTolerance(t) => {
-                write!(f, "weld tolerance {t} must be finite and ≥ 0")
+                let l = limits::WELD_TOLERANCE;
+                write!(f, "weld tolerance {t} is outside [{}, {}]", l.min, l.max)
             }
             ClothError::Solver(e) => e.fmt(f),
         }
@@ -121,6 +127,8 @@ pub struct ClothSim {
     pub(crate) indices_dirty: bool,
     torn_edges: usize,
     recoveries: u32,
+    /// Wall-clock seconds of the last CPU step.
+    step_seconds: f32,
     /// Calls of [`ClothSim::simulation_mut`] so far (a GPU cloth restarts from an edited state).
     pub(crate) edits: u64,
     /// How far the whole cloth jumped with its pins' anchors at the start of this fixed step
@@ -225,6 +233,13 @@ impl ClothSim {
         self.binding.weld()
     }
 
+    /// The rest position of every particle in the mesh's own space (before the entity's
+    /// transform): where [`PinAnchor::Rest`](crate::cloth::PinAnchor::Rest) pins hold them.
+    #[must_use]
+    pub fn rest_shape(&self) -> &[Vec3] {
+        &self.rest_local
+    }
+
     /// The particle that simulates mesh vertex `vertex`.
     ///
     /// # Panics
@@ -300,6 +315,14 @@ impl ClothSim {
     #[must_use]
     pub fn rejected(&self) -> Option<&ClothError> {
         self.settings_error.as_ref().or(self.pins_error.as_ref())
+    }
+
+    /// Wall-clock seconds the last CPU step of this cloth took (0 before the first step and
+    /// for a cloth stepped on the GPU). Cloths are stepped in parallel with each other, so
+    /// this is the time of this cloth's own step, not its share of the frame.
+    #[must_use]
+    pub fn step_seconds(&self) -> f32 {
+        self.step_seconds
     }
 
     /// Whether the cloth is asleep: it came to rest, its steps are skipped and its mesh is not
@@ -499,13 +522,13 @@ fn build(
     own: &GlobalTransform,
     poses: &FixedPoses,
 ) -> Result<Built, ClothError> {
-    if !(cloth.mass.is_finite() && cloth.mass > 0.0) {
+    if !limits::MASS.contains(cloth.mass) {
         return Err(ClothError::BadMass(cloth.mass));
     }
-    if cloth.teleport_distance.is_nan() || cloth.teleport_distance <= 0.0 {
+    if !limits::TELEPORT_DISTANCE.contains(cloth.teleport_distance) {
         return Err(ClothError::BadTeleportDistance(cloth.teleport_distance));
     }
-    if !(cloth.weld_tolerance.is_finite() && cloth.weld_tolerance >= 0.0) {
+    if !limits::WELD_TOLERANCE.contains(cloth.weld_tolerance) {
         return Err(ClothError::BadWeldTolerance(cloth.weld_tolerance));
     }
     let data = read_mesh(mesh)?;
@@ -674,6 +697,7 @@ pub(crate) fn init_cloths(
                         indices_dirty: false,
                         torn_edges: 0,
                         recoveries: 0,
+                        step_seconds: 0.0,
                         edits: 0,
                         teleport: None,
                         settings_error: None,
@@ -904,22 +928,24 @@ pub(crate) fn step_cloths(
     // Big cloths one after another with their parts in parallel, then the small ones in
     // parallel with each other (`step_many`).
     let mut list: Vec<(Entity, Mut<ClothSim>)> = cloths.iter_mut().collect();
-    let reports: Vec<StepReport> = {
+    let reports: Vec<(StepReport, f32)> = {
         let mut items: Vec<ManyItem<'_>> = list
             .iter_mut()
             .map(|(_, c)| ManyItem {
                 sim: &mut c.sim,
                 report: StepReport::default(),
+                seconds: 0.0,
             })
             .collect();
         match pool {
             Some(pool) => step_many(&mut items, dt, &env, &TaskPoolParallel(pool)),
             None => step_many(&mut items, dt, &env, &Serial),
         }
-        items.into_iter().map(|i| i.report).collect()
+        items.into_iter().map(|i| (i.report, i.seconds)).collect()
     };
-    for ((entity, mut cloth), report) in list.into_iter().zip(reports) {
+    for ((entity, mut cloth), (report, seconds)) in list.into_iter().zip(reports) {
         let cloth = &mut *cloth;
+        cloth.step_seconds = seconds;
         if report.recovered {
             // The solver already reset to its rest shape where the cloth was created; place
             // the rest shape where the entity is now.

@@ -25,7 +25,7 @@ use std::sync::Arc;
 use bevy::prelude::*;
 
 use crate::cloth::{ClothSystems, DEFAULT_TELEPORT_DISTANCE, FixedPoses, read_mesh};
-use crate::solver::{Collider, ContactImpulse, Pose, SdfGrid, Shape};
+use crate::solver::{Collider, ContactImpulse, Pose, SdfGrid, Shape, limits};
 
 /// A baked signed distance field, shared between colliders.
 #[derive(Reflect, Clone, Debug, PartialEq)]
@@ -180,6 +180,8 @@ pub struct ColliderRuntime {
     last: Option<Pose>,
     baked: Option<Arc<SdfGrid>>,
     failed: bool,
+    /// The mesh and resolution the field was baked (or refused) for: a change bakes again.
+    baked_for: Option<(AssetId<Mesh>, u32)>,
 }
 
 /// Every collider of this step, ready for the solver, with its entity.
@@ -278,30 +280,40 @@ fn bake_mesh_colliders(
         let ColliderShape::Mesh { mesh, resolution } = &collider.shape else {
             continue;
         };
+        let Some(handle) = mesh.as_ref().or(mesh3d.map(|m| &m.0)) else {
+            if !runtime.as_ref().is_some_and(|r| r.failed) {
+                error!("cloth collider {entity}: a Mesh shape needs a mesh handle or a Mesh3d");
+                commands.entity(entity).insert(ColliderRuntime {
+                    failed: true,
+                    ..default()
+                });
+            }
+            continue;
+        };
+        let key = (handle.id(), *resolution);
+        // Baked (or refused) for this mesh and resolution already: nothing to do. A new mesh
+        // or resolution (the editor's slider) bakes again.
         if runtime
             .as_ref()
-            .is_some_and(|r| r.baked.is_some() || r.failed)
+            .is_some_and(|r| r.baked_for == Some(key) && (r.baked.is_some() || r.failed))
         {
             continue;
         }
-        let Some(handle) = mesh.as_ref().or(mesh3d.map(|m| &m.0)) else {
-            error!("cloth collider {entity}: a Mesh shape needs a mesh handle or a Mesh3d");
-            commands.entity(entity).insert(ColliderRuntime {
-                failed: true,
-                ..default()
-            });
-            continue;
-        };
         let Some(source) = meshes.as_ref().and_then(|m| m.get(handle)) else {
             continue; // not loaded yet
         };
-        let baked = read_mesh(source)
+        let baked = limits::SDF_RESOLUTION
+            .check_count(*resolution)
             .map_err(|e| e.to_string())
+            .and_then(|()| read_mesh(source).map_err(|e| e.to_string()))
             .and_then(|data| {
                 SdfGrid::from_mesh(&data.positions, &data.indices, *resolution)
                     .map_err(|e| e.to_string())
             });
-        let mut rt = ColliderRuntime::default();
+        let mut rt = ColliderRuntime {
+            baked_for: Some(key),
+            ..default()
+        };
         match baked {
             Ok(grid) => {
                 debug!("cloth collider {entity}: baked a {} SDF", grid.dims());
@@ -316,6 +328,7 @@ fn bake_mesh_colliders(
             Some(mut r) => {
                 r.baked = rt.baked;
                 r.failed = rt.failed;
+                r.baked_for = rt.baked_for;
             }
             None => {
                 commands.entity(entity).insert(rt);
@@ -371,14 +384,10 @@ fn gather_colliders(
             friction: collider.friction,
         };
         // An invalid collider is left out, and said once (again after it was fixed).
-        let valid = if collider.teleport_distance > 0.0 {
-            c.validate()
-        } else {
-            Err(format!(
-                "teleport distance {} must be > 0 (infinity turns it off)",
-                collider.teleport_distance
-            ))
-        };
+        let valid = limits::TELEPORT_DISTANCE
+            .check(collider.teleport_distance)
+            .map_err(|e| e.to_string())
+            .and_then(|()| c.validate());
         if let Err(problem) = valid {
             if reported.insert(entity) {
                 error!("cloth collider {entity}: {problem}; it is ignored");

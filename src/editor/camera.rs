@@ -13,6 +13,7 @@ pub struct ClothCameraPlugin;
 impl Plugin for ClothCameraPlugin {
     fn build(&self, app: &mut App) {
         app.register_type::<ClothFlyCamera>()
+            .init_resource::<ClothCameraBlock>()
             .add_systems(Update, fly_cameras);
     }
 }
@@ -55,14 +56,41 @@ impl Default for ClothFlyCamera {
     }
 }
 
+/// Tells the fly camera to ignore input that belongs to someone else: a UI under the pointer
+/// or a text field with the keyboard. [`ClothEditorPlugin`](crate::editor::ClothEditorPlugin)
+/// sets it every frame; other UIs can too.
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ClothCameraBlock {
+    /// The pointer is over a UI: a right-button press there does not start looking around.
+    pub pointer: bool,
+    /// A UI takes the keyboard: WASD/QE do not move the camera.
+    pub keyboard: bool,
+}
+
 fn fly_cameras(
     time: Res<Time>,
+    block: Option<Res<ClothCameraBlock>>,
+    mut looking: Local<(bool, bool)>,
     keys: Option<Res<ButtonInput<KeyCode>>>,
     buttons: Option<Res<ButtonInput<MouseButton>>>,
     motion: Option<Res<AccumulatedMouseMotion>>,
     mut cameras: Query<(&mut Transform, &mut ClothFlyCamera)>,
 ) {
     let dt = time.delta_secs();
+    let block = block.as_deref().copied().unwrap_or_default();
+    // A look starts with a right press outside any UI and lasts while the button is held.
+    let held = buttons
+        .as_deref()
+        .is_some_and(|b| b.pressed(MouseButton::Right));
+    let (was_looking, was_held) = *looking;
+    let looking_now = held
+        && if was_held {
+            was_looking
+        } else {
+            !block.pointer
+        };
+    *looking = (looking_now, held);
+    let keys = keys.filter(|_| !block.keyboard);
     for (mut transform, mut fly) in &mut cameras {
         if !fly.initialized {
             let (yaw, pitch, _) = transform.rotation.to_euler(EulerRot::YXZ);
@@ -70,10 +98,7 @@ fn fly_cameras(
             fly.pitch = pitch.clamp(-ClothFlyCamera::MAX_PITCH, ClothFlyCamera::MAX_PITCH);
             fly.initialized = true;
         }
-        let looking = buttons
-            .as_deref()
-            .is_some_and(|b| b.pressed(MouseButton::Right));
-        if looking && let Some(m) = motion.as_deref() {
+        if looking_now && let Some(m) = motion.as_deref() {
             let d = m.delta * fly.sensitivity;
             if d.is_finite() {
                 fly.yaw -= d.x;

@@ -42,6 +42,7 @@ use crate::wind::ClothWindField;
 /// Put it on a [`Cloth`](crate::cloth::Cloth) entity; without it the cloth uses
 /// [`ClothGpuPlugin::default_backend`]. Which one a cloth actually runs on, and why, is in
 /// [`ClothBackendInUse`].
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[reflect(Component)]
 pub enum ClothBackend {

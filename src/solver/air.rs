@@ -3,6 +3,7 @@
 
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
+use super::limits;
 use super::params::ParamError;
 
 /// How a cloth meets the air: `½·ρ·C` coefficients in kg/m³.
@@ -24,6 +25,7 @@ use super::params::ParamError;
 /// a velocity change `Δv = F·h/m` damped to `Δv/(1 + |Δv|/s)`: it never carries a vertex past
 /// the air's speed, whatever the wind or the time step, and is the plain force when
 /// `|Δv| ≪ s`.
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Aerodynamics {
     /// Pressure drag against the relative flow, scaled by how squarely the surface faces it.
@@ -46,7 +48,7 @@ impl Aerodynamics {
     };
 
     /// Largest accepted coefficient, kg/m³ (a thousand times water's `½ρ`).
-    pub const MAX: f32 = 5.0e5;
+    pub const MAX: f32 = limits::AIR_DRAG.max;
 
     /// Whether every coefficient is zero (no air pass at all).
     #[must_use]
@@ -59,19 +61,9 @@ impl Aerodynamics {
     /// # Errors
     /// A [`ParamError`] naming the first coefficient out of range.
     pub fn validate(&self) -> Result<(), ParamError> {
-        for (name, v, lo) in [
-            ("air.drag", self.drag, 0.0),
-            ("air.lift", self.lift, -Self::MAX),
-            ("air.friction", self.friction, 0.0),
-        ] {
-            if !(v >= lo && v <= Self::MAX) {
-                return Err(ParamError {
-                    name,
-                    reason: format!("{v} is outside [{lo}, {}]", Self::MAX),
-                });
-            }
-        }
-        Ok(())
+        limits::AIR_DRAG.check(self.drag)?;
+        limits::AIR_LIFT.check(self.lift)?;
+        limits::AIR_FRICTION.check(self.friction)
     }
 }
 

@@ -12,6 +12,7 @@
 //! `v` is caught as long as `v·h < r + thickness`, with `h` the substep length. At 60 Hz and 10
 //! substeps (`h` ≈ 1.7 ms) a 0.2 m ball survives speeds up to about 120 m/s.
 
+use super::limits;
 use super::state::within_range;
 use super::topology::MAX_COORDINATE;
 use std::sync::Arc;
@@ -190,27 +191,20 @@ impl Collider {
         }
     }
 
-    /// Checks that the collider can be collided with: thickness, friction and sizes finite,
-    /// non-negative and at most [`MAX_COORDINATE`], poses finite and within range, scale
-    /// positive.
+    /// Checks that the collider can be collided with: thickness, friction and sizes within
+    /// their [`limits`](super::limits), poses finite and within range, scale positive.
     ///
     /// # Errors
     /// What is wrong, in words (the step itself drops any push that lands out of range, so an
     /// invalid collider cannot poison the cloth; this is for reporting it).
     pub fn validate(&self) -> Result<(), String> {
-        let ok = |v: f32| (0.0..=MAX_COORDINATE).contains(&v);
-        if !ok(self.thickness) {
-            return Err(format!(
-                "thickness {} is not in [0, {MAX_COORDINATE}]",
-                self.thickness
-            ));
-        }
-        if !ok(self.friction) {
-            return Err(format!(
-                "friction {} is not in [0, {MAX_COORDINATE}]",
-                self.friction
-            ));
-        }
+        limits::COLLIDER_THICKNESS
+            .check(self.thickness)
+            .map_err(|e| e.to_string())?;
+        limits::COLLIDER_FRICTION
+            .check(self.friction)
+            .map_err(|e| e.to_string())?;
+        let ok = |v: f32| limits::COLLIDER_SIZE.contains(v);
         let sizes_ok = match &self.shape {
             Shape::Sphere { radius } => ok(*radius),
             Shape::Cuboid { half_extents } => half_extents.to_array().into_iter().all(ok),

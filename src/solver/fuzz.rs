@@ -157,7 +157,7 @@ pub fn fuzz_one(bytes: &[u8]) -> FuzzOutcome {
         }),
         tethers: (flags & 2 != 0).then(|| TetherParams {
             slack: r.f32(0.1),
-            pins_per_vertex: usize::from(r.u8() % 4),
+            pins_per_vertex: 1 + usize::from(r.u8() % 4),
         }),
         tear_threshold: (flags & 4 != 0).then(|| 1.0 + r.f32(2.0)),
     };

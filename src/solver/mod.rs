@@ -40,6 +40,7 @@ mod implicit;
 mod isometric;
 mod lab;
 mod lanes;
+pub mod limits;
 mod metrics;
 mod parallel;
 mod params;
@@ -71,7 +72,7 @@ pub use parallel::{Parallel, Serial};
 pub use params::{
     BendingSolve, DEFAULT_BENDING_COMPLIANCE, LAB_WEIGHT, ParamError, Solver, SolverParams,
 };
-pub use pick::{RayHit, ray_hit};
+pub use pick::{RayHit, ray_hit, ray_shape};
 pub use sdf::{SdfError, SdfGrid, point_triangle_distance};
 pub use self_collision::{
     MAX_SELF_NEIGHBOURS, SelfCollision, SelfCollisionScratch, count_self_crossings,
@@ -115,42 +116,23 @@ impl core::fmt::Display for SolverError {
 impl std::error::Error for SolverError {}
 
 impl Features {
-    /// Checks every setting.
+    /// Checks every setting against its [`limits`] entry.
     ///
     /// # Errors
-    /// [`ParamError`] naming the first setting out of range: a self-collision thickness that
-    /// is not finite and positive, a negative or NaN friction or slack, a tear threshold not
-    /// above 1.
+    /// [`ParamError`] naming the first setting out of range: self-collision thickness or
+    /// friction, tether slack or pins per vertex, tear threshold.
     pub fn validate(&self) -> Result<(), ParamError> {
-        let bad = |name: &'static str, v: f32, want: &str| ParamError {
-            name,
-            reason: format!("{v} must be {want}"),
-        };
         if let Some(sc) = self.self_collision {
-            if !(sc.thickness.is_finite() && sc.thickness > 0.0) {
-                return Err(bad(
-                    "self_collision.thickness",
-                    sc.thickness,
-                    "finite and > 0",
-                ));
-            }
-            if !(sc.friction.is_finite() && sc.friction >= 0.0) {
-                return Err(bad(
-                    "self_collision.friction",
-                    sc.friction,
-                    "finite and ≥ 0",
-                ));
-            }
+            limits::SELF_COLLISION_THICKNESS.check(sc.thickness)?;
+            limits::SELF_COLLISION_FRICTION.check(sc.friction)?;
         }
-        if let Some(t) = self.tethers
-            && !(t.slack.is_finite() && t.slack >= 0.0)
-        {
-            return Err(bad("tethers.slack", t.slack, "finite and ≥ 0"));
+        if let Some(t) = self.tethers {
+            limits::TETHER_SLACK.check(t.slack)?;
+            // Pins per vertex are far below 2^24: the conversion is exact.
+            limits::TETHER_PINS.check(t.pins_per_vertex as f32)?;
         }
-        if let Some(t) = self.tear_threshold
-            && !(t.is_finite() && t > 1.0)
-        {
-            return Err(bad("tear_threshold", t, "finite and > 1"));
+        if let Some(t) = self.tear_threshold {
+            limits::TEAR_THRESHOLD.check(t)?;
         }
         Ok(())
     }
@@ -252,6 +234,9 @@ pub struct ManyItem<'a> {
     pub sim: &'a mut Simulation,
     /// Its step's report (set by [`step_many`]).
     pub report: StepReport,
+    /// Wall-clock seconds its step took (set by [`step_many`]; with other cloths running on
+    /// the other threads at the same time).
+    pub seconds: f32,
 }
 
 impl<'a> ManyItem<'a> {
@@ -261,6 +246,7 @@ impl<'a> ManyItem<'a> {
             .map(|sim| ManyItem {
                 sim,
                 report: StepReport::default(),
+                seconds: 0.0,
             })
             .collect()
     }
@@ -286,7 +272,9 @@ pub fn step_many(items: &mut [ManyItem<'_>], dt: f32, env: &Environment<'_>, par
     let mut rest: Vec<&mut ManyItem<'_>> = Vec::with_capacity(items.len());
     for item in items.iter_mut() {
         if item.sim.batches.part_count() > 1 && work(item.sim) > share {
+            let start = std::time::Instant::now();
             item.report = item.sim.step_in(dt, env, par);
+            item.seconds = start.elapsed().as_secs_f32();
         } else {
             rest.push(item);
         }
@@ -294,7 +282,9 @@ pub fn step_many(items: &mut [ManyItem<'_>], dt: f32, env: &Environment<'_>, par
     // Biggest first: the pool hands tasks out roughly in order, so the long ones start early.
     rest.sort_by_key(|i| core::cmp::Reverse(work(i.sim)));
     par.for_each_mut(&mut rest, |item| {
+        let start = std::time::Instant::now();
         item.report = item.sim.step_in(dt, env, &Serial);
+        item.seconds = start.elapsed().as_secs_f32();
     });
 }
 

@@ -6,6 +6,7 @@
 use glam::Vec3;
 
 use super::air::Aerodynamics;
+use super::limits;
 use super::sleep::Sleep;
 
 /// Relaxation weight of the lab rule (seed 000): `x ← (0.2·x + Σx)/(0.2 + n)`.
@@ -15,6 +16,7 @@ pub const LAB_WEIGHT: f32 = 0.2;
 pub const DEFAULT_BENDING_COMPLIANCE: f32 = 1.0e4;
 
 /// Which constraint solver projects the cloth, with its material parameters.
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Solver {
     /// Seed 000's Jacobi averaging: every edge projection is summed per vertex, then
@@ -98,6 +100,7 @@ impl Default for Solver {
 }
 
 /// How XPBD solves isometric bending (see the README's "Stiffness" section).
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum BendingSolve {
     /// Projected while a substep can carry the stiffness, implicit where it cannot (the
@@ -184,89 +187,68 @@ impl core::fmt::Display for ParamError {
 
 impl std::error::Error for ParamError {}
 
-fn check_range(name: &'static str, v: f32, lo: f32, hi: f32) -> Result<(), ParamError> {
-    if v.is_nan() || v < lo || v > hi {
-        return Err(ParamError {
-            name,
-            reason: format!("{v} is outside [{lo}, {hi}]"),
-        });
-    }
-    Ok(())
-}
-
 impl SolverParams {
     /// Largest accepted substep and iteration counts: enough for any converged reference.
-    pub const MAX_COUNT: u32 = 10_000;
+    pub const MAX_COUNT: u32 = limits::SUBSTEPS.max as u32;
     /// Largest accepted gravity, m/s² (about 10 000 g).
-    pub const MAX_GRAVITY: f32 = 1.0e5;
+    pub const MAX_GRAVITY: f32 = limits::GRAVITY.max;
     /// Largest accepted speed limit, m/s (ten times the speed of sound in air: nothing a cloth
     /// survives).
-    pub const MAX_SPEED: f32 = 3.5e3;
+    pub const MAX_SPEED: f32 = limits::MAX_SPEED.max;
     /// Largest accepted [`Sleep::energy`], J/kg (an rms speed of about 1.4 m/s: a cloth
     /// moving that fast is not at rest).
-    pub const MAX_SLEEP_ENERGY: f32 = 1.0;
+    pub const MAX_SLEEP_ENERGY: f32 = limits::SLEEP_ENERGY.max;
 
-    /// Checks every parameter and says which one is wrong.
+    /// Checks every parameter against its [`limits`] entry and says which one is wrong.
     ///
     /// # Errors
-    /// A [`ParamError`] naming the first parameter out of range: counts (substeps, iterations)
-    /// of zero or over
-    /// [`Self::MAX_COUNT`], non-finite gravity, negative or NaN damping, stiffness outside
-    /// `[0, 1]`, negative or NaN compliance (infinite bending compliance is allowed: it means
-    /// no bending), gravity over [`Self::MAX_GRAVITY`], a `max_speed` outside
-    /// `(0, MAX_SPEED]`, an air coefficient out of [`Aerodynamics::validate`]'s range.
+    /// A [`ParamError`] naming the first parameter out of range: substeps or iterations
+    /// outside [`limits::SUBSTEPS`], gravity not finite or longer than
+    /// [`limits::GRAVITY`], damping, speed limit, air coefficients, sleep energy or steps, or
+    /// a solver's stiffness or compliance outside its limit (infinite bending compliance is
+    /// allowed: it means no bending).
     pub fn validate(&self) -> Result<(), ParamError> {
-        for (name, n) in [("substeps", self.substeps), ("iterations", self.iterations)] {
-            if n == 0 || n > Self::MAX_COUNT {
-                return Err(ParamError {
-                    name,
-                    reason: format!("{n} is outside [1, {}]", Self::MAX_COUNT),
-                });
-            }
-        }
-        if !(self.gravity.is_finite() && self.gravity.length() <= Self::MAX_GRAVITY) {
-            return Err(ParamError {
-                name: "gravity",
-                reason: format!(
-                    "{} must be finite and at most {} m/s² long",
-                    self.gravity,
-                    Self::MAX_GRAVITY
-                ),
-            });
-        }
-        check_range("damping", self.damping, 0.0, f32::MAX)?;
-        if !(self.max_speed > 0.0 && self.max_speed <= Self::MAX_SPEED) {
-            return Err(ParamError {
-                name: "max_speed",
-                reason: format!("{} must be in (0, {}] m/s", self.max_speed, Self::MAX_SPEED),
-            });
-        }
+        limits::SUBSTEPS.check_count(self.substeps)?;
+        limits::ITERATIONS.check_count(self.iterations)?;
+        limits::GRAVITY.check_length(self.gravity)?;
+        limits::DAMPING.check(self.damping)?;
+        limits::MAX_SPEED.check(self.max_speed)?;
         self.air.validate()?;
-        check_range(
-            "sleep.energy",
-            self.sleep.energy,
-            0.0,
-            Self::MAX_SLEEP_ENERGY,
-        )?;
-        match self.solver {
-            Solver::Lab { velocity_keep } => check_range("velocity_keep", velocity_keep, 0.0, 1.0),
+        limits::SLEEP_ENERGY.check(self.sleep.energy)?;
+        limits::SLEEP_STEPS.check_count(self.sleep.steps)?;
+        self.solver.validate()
+    }
+}
+
+impl Solver {
+    /// Checks the material parameters against their [`limits`].
+    ///
+    /// # Errors
+    /// A [`ParamError`] naming the first parameter out of range.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        match *self {
+            Solver::Lab { velocity_keep } => limits::LAB_VELOCITY_KEEP.check(velocity_keep),
             Solver::Pbd {
                 stretch,
                 shear,
                 bending,
             } => {
-                check_range("stretch", stretch, 0.0, 1.0)?;
-                check_range("shear", shear, 0.0, 1.0)?;
-                check_range("bending", bending, 0.0, 1.0)
+                limits::PBD_STIFFNESS.named("stretch").check(stretch)?;
+                limits::PBD_STIFFNESS.named("shear").check(shear)?;
+                limits::PBD_STIFFNESS.named("bending").check(bending)
             }
             Solver::Xpbd {
                 stretch,
                 shear,
                 bending,
             } => {
-                check_range("stretch", stretch, 0.0, f32::MAX)?;
-                check_range("shear", shear, 0.0, f32::MAX)?;
-                check_range("bending", bending, 0.0, f32::INFINITY)
+                limits::XPBD_COMPLIANCE.named("stretch").check(stretch)?;
+                limits::XPBD_COMPLIANCE.named("shear").check(shear)?;
+                if bending == f32::INFINITY {
+                    Ok(())
+                } else {
+                    limits::XPBD_BENDING_COMPLIANCE.check(bending)
+                }
             }
         }
     }

@@ -3,6 +3,8 @@
 
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
+use super::collide::{Pose, Shape};
+
 /// Where a ray meets a cloth.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RayHit {
@@ -124,5 +126,111 @@ mod tests {
         assert!(ray_hit(&p, &t, Vec3::new(-3.0, 0.25, 0.1), Vec3::X).is_none());
         assert!(ray_hit(&p, &t, Vec3::NAN, Vec3::NEG_Y).is_none());
         assert!(ray_hit(&p, &t, Vec3::Y, Vec3::ZERO).is_none());
+    }
+}
+
+/// Where the ray `origin + t·dir` (`t ≥ 0`, `dir` of any non-zero length) first meets the
+/// surface of `shape` placed at `pose`, as `t`: analytically for a plane, by sphere tracing
+/// the signed distance inside the shape's bounding ball for the others. A ray starting inside
+/// a shape meets it at `t = 0`. Non-finite or zero rays and poses meet nothing.
+#[must_use]
+pub fn ray_shape(shape: &Shape, pose: &Pose, origin: Vec3, dir: Vec3) -> Option<f32> {
+    if !(origin.is_finite() && dir.is_finite() && pose.translation.is_finite())
+        || !(pose.rotation.is_finite() && pose.scale > 0.0 && pose.scale.is_finite())
+    {
+        return None;
+    }
+    let len = dir.length();
+    if len == 0.0 || !len.is_finite() {
+        return None;
+    }
+    // Work in the shape's frame, with a unit direction (distances in local units).
+    let o = pose.inverse_apply(origin);
+    let d = (pose.rotation.inverse() * dir) / pose.scale;
+    let dl = d.length();
+    let d = d / dl;
+    // Local distance along the unit local direction → world `t` for `dir`.
+    let to_t = |s: f32| s / dl;
+    if let Shape::Plane = shape {
+        if o.y <= 0.0 {
+            return Some(0.0);
+        }
+        return (d.y < 0.0).then(|| to_t(-o.y / d.y));
+    }
+    let r = shape.bounding_radius();
+    // Entry and exit of the bounding ball.
+    let b = o.dot(d);
+    let c = o.length_squared() - r * r;
+    let disc = b * b - c;
+    if !(disc >= 0.0) {
+        return None;
+    }
+    let root = disc.sqrt();
+    let (mut s, exit) = ((-b - root).max(0.0), -b + root);
+    if exit < 0.0 {
+        return None;
+    }
+    let eps = 1e-5 * r.max(1e-3);
+    for _ in 0..256 {
+        let (dist, _) = shape.distance(o + d * s);
+        if !dist.is_finite() {
+            return None;
+        }
+        if dist <= eps {
+            return Some(to_t(s));
+        }
+        s += dist;
+        if s > exit {
+            return None;
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod shape_tests {
+    use super::*;
+    use glam::Quat;
+
+    #[test]
+    fn rays_meet_shapes_where_they_should() {
+        let pose = Pose {
+            translation: Vec3::new(0.0, 1.0, 0.0),
+            rotation: Quat::from_rotation_y(0.7),
+            scale: 2.0,
+        };
+        let down = Vec3::new(0.0, -2.0, 0.0);
+        let above = Vec3::new(0.0, 5.0, 0.0);
+        // Ball of radius 0.5 × 2: top at y = 2, t = 3 in units of |dir| = 2.
+        let t = ray_shape(&Shape::Sphere { radius: 0.5 }, &pose, above, down).unwrap();
+        assert!((t - 1.5).abs() < 1e-3, "{t}");
+        // Box of half height 0.25 × 2: top at y = 1.5.
+        let cube = Shape::Cuboid {
+            half_extents: Vec3::new(0.3, 0.25, 0.3),
+        };
+        let t = ray_shape(&cube, &pose, above, down).unwrap();
+        assert!((t - 1.75).abs() < 1e-3, "{t}");
+        // Capsule along y: top of its cap at 1 + 2·(0.2 + 0.1).
+        let cap = Shape::Capsule {
+            half_height: 0.2,
+            radius: 0.1,
+        };
+        let t = ray_shape(&cap, &pose, above, down).unwrap();
+        assert!((t - (5.0 - 1.6) / 2.0).abs() < 1e-3, "{t}");
+        // The floor through y = 1.
+        let t = ray_shape(&Shape::Plane, &pose, above, down).unwrap();
+        assert!((t - 2.0).abs() < 1e-5, "{t}");
+        // Missing: beside the ball, pointing away, upward over the floor, broken rays.
+        let beside = Vec3::new(3.0, 5.0, 0.0);
+        assert_eq!(
+            ray_shape(&Shape::Sphere { radius: 0.5 }, &pose, beside, down),
+            None
+        );
+        assert_eq!(ray_shape(&cube, &pose, above, -down), None);
+        assert_eq!(ray_shape(&Shape::Plane, &pose, above, -down), None);
+        assert_eq!(ray_shape(&cube, &pose, Vec3::NAN, down), None);
+        assert_eq!(ray_shape(&cube, &pose, above, Vec3::ZERO), None);
+        // Inside: met at once.
+        assert_eq!(ray_shape(&cube, &pose, pose.translation, down), Some(0.0));
     }
 }

@@ -36,6 +36,7 @@ pub const WAKE_DISTANCE: f32 = 1e-4;
 pub const WAKE_AIR_SPEED: f32 = 0.05;
 
 /// When a cloth at rest stops being stepped (see [`SolverParams::sleep`](super::SolverParams::sleep)).
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sleep {
     /// Mean kinetic energy per kilogram, J/kg (= m²/s²), below which a step counts as quiet:

@@ -52,6 +52,7 @@ pub struct Bend {
 }
 
 /// Rest angle of the bending constraints.
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum BendRest {
     /// ψ0 = 0: the cloth wants to be flat (the report's φ0 = π).
@@ -65,6 +66,7 @@ pub enum BendRest {
 /// How bending is measured. Both take the same material parameter (a compliance `1/B`, `B`
 /// the flexural rigidity in N·m) and weigh each hinge by its rest geometry, so a setting means
 /// the same cloth at any resolution.
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum BendingModel {
     /// Quadratic isometric bending (Bergou et al. 2006): the hinge's curvature vector is
@@ -78,6 +80,7 @@ pub enum BendingModel {
 }
 
 /// How vertex masses are spread over the cloth.
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum MassDistribution {
     /// Each vertex gets a third of the area of its triangles (lumped mass): physically right.

@@ -31,9 +31,11 @@ use glam::{Quat, Vec3, Vec4, Vec4Swizzles};
 use noise::{NoiseFn, Perlin};
 
 use super::collide::Pose;
+use super::limits;
 use super::params::ParamError;
 
 /// A wind: base velocity, gusts and turbulence.
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WindParams {
     /// Base air velocity in m/s.
@@ -52,44 +54,20 @@ pub struct WindParams {
 
 impl WindParams {
     /// Largest accepted wind speed, m/s (ten times the speed of sound in air).
-    pub const MAX_SPEED: f32 = 3.5e3;
+    pub const MAX_SPEED: f32 = limits::WIND_SPEED.max;
 
     /// Checks that the wind can be sampled: a finite velocity no faster than
-    /// [`Self::MAX_SPEED`], finite non-negative gust amplitude, frequency and turbulence, and a
-    /// positive eddy size.
+    /// [`Self::MAX_SPEED`], gust amplitude, frequency, turbulence and eddy size within their
+    /// [`limits`](super::limits).
     ///
     /// # Errors
     /// A [`ParamError`] naming the first field out of range.
     pub fn validate(&self) -> Result<(), ParamError> {
-        if !(self.velocity.is_finite() && self.velocity.length() <= Self::MAX_SPEED) {
-            return Err(ParamError {
-                name: "wind.velocity",
-                reason: format!(
-                    "{} must be finite and at most {} m/s",
-                    self.velocity,
-                    Self::MAX_SPEED
-                ),
-            });
-        }
-        for (name, v) in [
-            ("wind.gust_amplitude", self.gust_amplitude),
-            ("wind.gust_frequency", self.gust_frequency),
-            ("wind.turbulence", self.turbulence),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(ParamError {
-                    name,
-                    reason: format!("{v} must be finite and ≥ 0"),
-                });
-            }
-        }
-        if !(self.turbulence_scale.is_finite() && self.turbulence_scale > 0.0) {
-            return Err(ParamError {
-                name: "wind.turbulence_scale",
-                reason: format!("{} must be finite and > 0", self.turbulence_scale),
-            });
-        }
-        Ok(())
+        limits::WIND_SPEED.check_length(self.velocity)?;
+        limits::GUST_AMPLITUDE.check(self.gust_amplitude)?;
+        limits::GUST_FREQUENCY.check(self.gust_frequency)?;
+        limits::TURBULENCE.check(self.turbulence)?;
+        limits::TURBULENCE_SCALE.check(self.turbulence_scale)
     }
 }
 
@@ -191,6 +169,12 @@ impl WindField {
     #[must_use]
     pub fn is_empty(&self) -> bool {
         self.sources.is_empty()
+    }
+
+    /// How many winds blow (the global one and every valid zone).
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.sources.len()
     }
 
     /// The smallest eddy size of the sources (the grid spacing a cloth needs), if any.

@@ -11,7 +11,7 @@ use bevy::prelude::*;
 use bevy::reflect::impl_reflect_opaque;
 
 use crate::cloth::ClothSystems;
-use crate::solver::{Pose, WindField, WindParams, WindRegion};
+use crate::solver::{ParamError, Pose, WindField, WindParams, WindRegion, limits};
 
 impl_reflect_opaque!((in bevy_cloth::solver) WindParams(Debug, Clone, PartialEq, Default));
 
@@ -27,12 +27,14 @@ impl_reflect_opaque!((in bevy_cloth::solver) WindParams(Debug, Clone, PartialEq,
 ///     ..default()
 /// }));
 /// ```
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Resource, Reflect, Clone, Copy, Debug, Default, PartialEq, Deref, DerefMut)]
 #[reflect(Resource, Default, Clone, PartialEq)]
 pub struct Wind(pub WindParams);
 
 /// Wind blowing inside a box around the entity (its transform places and turns the box),
 /// fading out over `falloff` metres outside it: a fan, a doorway draught, a vent.
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component, Clone, PartialEq)]
 #[require(Transform)]
@@ -43,6 +45,32 @@ pub struct WindZone {
     pub half_extents: Vec3,
     /// Fade-out distance outside the box.
     pub falloff: f32,
+}
+
+impl WindZone {
+    /// Checks the wind and the box: [`WindParams::validate`], and each half extent and the
+    /// falloff within [`limits::ZONE_HALF_EXTENT`] and [`limits::ZONE_FALLOFF`].
+    ///
+    /// # Errors
+    /// A [`ParamError`] naming the first value out of range.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        self.wind.validate()?;
+        for v in self.half_extents.to_array() {
+            limits::ZONE_HALF_EXTENT.check(v)?;
+        }
+        limits::ZONE_FALLOFF.check(self.falloff)
+    }
+}
+
+impl Default for WindZone {
+    /// The default wind in a 2 m box, fading out over 1 m.
+    fn default() -> Self {
+        Self {
+            wind: WindParams::default(),
+            half_extents: Vec3::ONE,
+            falloff: 1.0,
+        }
+    }
 }
 
 /// The wind field of this step, with the time that drives its gusts.
@@ -78,7 +106,7 @@ fn gather_wind(
 ) {
     out.time = time.elapsed_secs_f64() - time.delta_secs_f64();
     // An invalid wind (NaN velocity, negative drag, ...) is left out, and said once.
-    let mut valid = |source: Option<Entity>, w: &WindParams| match w.validate() {
+    let mut valid = |source: Option<Entity>, check: Result<(), ParamError>| match check {
         Ok(()) => {
             reported.remove(&source);
             true
@@ -93,11 +121,11 @@ fn gather_wind(
             false
         }
     };
-    let global = global.filter(|w| valid(None, &w.0));
+    let global = global.filter(|w| valid(None, w.0.validate()));
     let sources = global.map(|w| (w.0, None)).into_iter().chain(
         zones
             .iter()
-            .filter(|(e, z, gt)| valid(Some(*e), &z.wind) && gt.translation().is_finite())
+            .filter(|(e, z, gt)| valid(Some(*e), z.validate()) && gt.translation().is_finite())
             .map(|(_, z, gt)| {
                 let (scale, rotation, translation) = gt.to_scale_rotation_translation();
                 (

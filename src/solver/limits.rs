@@ -1,0 +1,318 @@
+//! The accepted range of every numeric setting, in one place.
+//!
+//! The solver's validation ([`SolverParams::validate`](super::SolverParams::validate),
+//! [`Features::validate`](super::Features::validate), [`WindParams::validate`](super::WindParams::validate),
+//! [`Collider::validate`](super::Collider::validate), ...) and the plugin's checks of
+//! [`Cloth`](crate::cloth::Cloth) and the colliders test values against these [`Limit`]s, and
+//! the editor's sliders span exactly them: a value a slider can reach is never refused.
+//!
+//! Every range is closed (`min ≤ v ≤ max`, NaN refused). Where a setting has to be positive,
+//! `min` is a small positive number rather than an open bound, so that the bottom of a slider
+//! is a value the solver takes.
+
+use super::params::ParamError;
+use super::topology::MAX_COORDINATE;
+
+/// How a slider should spread a [`Limit`]'s range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Spread {
+    /// Evenly.
+    Linear,
+    /// By orders of magnitude (for ranges over many decades).
+    Logarithmic,
+}
+
+/// The closed range `[min, max]` a setting must lie in, with its unit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Limit {
+    /// The setting's name as errors say it, e.g. `"substeps"` or `"air.drag"`.
+    pub name: &'static str,
+    /// Smallest accepted value.
+    pub min: f32,
+    /// Largest accepted value (may be `f32::INFINITY` where "never" is meaningful).
+    pub max: f32,
+    /// Unit, for display (`""` for pure numbers).
+    pub unit: &'static str,
+    /// How a slider over the range should be spread.
+    pub spread: Spread,
+    /// Whether the setting is a whole number (counts, resolutions).
+    pub integer: bool,
+}
+
+impl Limit {
+    const fn new(
+        name: &'static str,
+        min: f32,
+        max: f32,
+        unit: &'static str,
+        spread: Spread,
+    ) -> Self {
+        Self {
+            name,
+            min,
+            max,
+            unit,
+            spread,
+            integer: false,
+        }
+    }
+
+    const fn count(name: &'static str, min: f32, max: f32) -> Self {
+        Self {
+            name,
+            min,
+            max,
+            unit: "",
+            spread: Spread::Logarithmic,
+            integer: true,
+        }
+    }
+
+    /// The same range under another name (stretch, shear and bending share one).
+    #[must_use]
+    pub const fn named(self, name: &'static str) -> Self {
+        Self { name, ..self }
+    }
+
+    /// Whether `v` is accepted (`min ≤ v ≤ max`; NaN never is).
+    #[must_use]
+    pub fn contains(&self, v: f32) -> bool {
+        v >= self.min && v <= self.max
+    }
+
+    /// `v` brought into the range (NaN becomes `min`).
+    #[must_use]
+    pub fn clamp(&self, v: f32) -> f32 {
+        if v.is_nan() {
+            self.min
+        } else {
+            v.clamp(self.min, self.max)
+        }
+    }
+
+    /// Checks `v`.
+    ///
+    /// # Errors
+    /// A [`ParamError`] with this limit's name when `v` is outside the range or NaN.
+    pub fn check(&self, v: f32) -> Result<(), ParamError> {
+        if self.contains(v) {
+            Ok(())
+        } else {
+            Err(ParamError {
+                name: self.name,
+                reason: format!(
+                    "{v} is outside [{}, {}]{}",
+                    self.min,
+                    self.max,
+                    self.suffix()
+                ),
+            })
+        }
+    }
+
+    /// Checks a count (substeps, resolutions, ...).
+    ///
+    /// # Errors
+    /// As [`Limit::check`].
+    pub fn check_count(&self, n: u32) -> Result<(), ParamError> {
+        // Counts are far below 2^24: the conversion is exact.
+        self.check(n as f32)
+    }
+
+    /// Checks the length of a vector (gravity, wind velocity) against `max`.
+    ///
+    /// # Errors
+    /// A [`ParamError`] when the vector is not finite or longer than `max`.
+    pub fn check_length(&self, v: glam::Vec3) -> Result<(), ParamError> {
+        if v.is_finite() && v.length() <= self.max {
+            Ok(())
+        } else {
+            Err(ParamError {
+                name: self.name,
+                reason: format!(
+                    "{v} must be finite and at most {}{} long",
+                    self.max,
+                    self.suffix()
+                ),
+            })
+        }
+    }
+
+    /// The range of each component of a vector whose length this limits: any vector with
+    /// every component in `[-c, c]` is accepted (`c = max/√3`, rounded down).
+    #[must_use]
+    pub const fn component(&self) -> Limit {
+        // 1/√3, a hair under, so that rounding never lets the diagonal exceed `max`.
+        let c = self.max * 0.577_350_26 * (1.0 - 1e-6);
+        Limit {
+            min: -c,
+            max: c,
+            spread: Spread::Linear,
+            ..*self
+        }
+    }
+
+    fn suffix(&self) -> String {
+        if self.unit.is_empty() {
+            String::new()
+        } else {
+            format!(" {}", self.unit)
+        }
+    }
+}
+
+// ---- solver parameters (SolverParams / ClothConfig) ----
+
+/// Substeps per fixed step.
+pub const SUBSTEPS: Limit = Limit::count("substeps", 1.0, 10_000.0);
+/// Projection iterations per substep.
+pub const ITERATIONS: Limit = Limit::count("iterations", 1.0, 10_000.0);
+/// Length of the gravity vector, m/s² (about 10 000 g).
+pub const GRAVITY: Limit = Limit::new("gravity", 0.0, 1.0e5, "m/s²", Spread::Linear);
+/// Linear velocity damping, 1/s.
+pub const DAMPING: Limit = Limit::new("damping", 0.0, 1.0e4, "1/s", Spread::Logarithmic);
+/// Speed limit of free vertices, m/s (up to ten times the speed of sound in air).
+pub const MAX_SPEED: Limit = Limit::new("max_speed", 1.0e-3, 3.5e3, "m/s", Spread::Logarithmic);
+/// Fraction of the velocity the lab solver keeps each step.
+pub const LAB_VELOCITY_KEEP: Limit = Limit::new("velocity_keep", 0.0, 1.0, "", Spread::Linear);
+/// PBD stiffness (stretch, shear, bending): the fraction of the error removed per projection.
+pub const PBD_STIFFNESS: Limit = Limit::new("stiffness", 0.0, 1.0, "", Spread::Linear);
+/// XPBD stretch and shear compliance, m/N (0 is inextensible).
+pub const XPBD_COMPLIANCE: Limit = Limit::new("compliance", 0.0, 1.0e6, "m/N", Spread::Logarithmic);
+/// XPBD bending compliance `1/B`, 1/(N·m). `f32::INFINITY` (no bending) is accepted too.
+pub const XPBD_BENDING_COMPLIANCE: Limit =
+    Limit::new("bending", 0.0, 1.0e12, "1/(N·m)", Spread::Logarithmic);
+/// Air drag coefficient (½ρC), kg/m³.
+pub const AIR_DRAG: Limit = Limit::new("air.drag", 0.0, 5.0e5, "kg/m³", Spread::Logarithmic);
+/// Air lift coefficient (½ρC), kg/m³; negative lifts the other way.
+pub const AIR_LIFT: Limit = Limit::new("air.lift", -5.0e5, 5.0e5, "kg/m³", Spread::Logarithmic);
+/// Air skin-friction coefficient (½ρC), kg/m³.
+pub const AIR_FRICTION: Limit =
+    Limit::new("air.friction", 0.0, 5.0e5, "kg/m³", Spread::Logarithmic);
+/// Mean kinetic energy per kilogram below which a cloth counts as at rest, J/kg.
+pub const SLEEP_ENERGY: Limit = Limit::new("sleep.energy", 0.0, 1.0, "J/kg", Spread::Logarithmic);
+/// Steps at rest before a cloth falls asleep.
+pub const SLEEP_STEPS: Limit = Limit::count("sleep.steps", 0.0, 1.0e6);
+
+// ---- the cloth (Cloth component) ----
+
+/// Total mass of a cloth, kg.
+pub const MASS: Limit = Limit::new("mass", 1.0e-6, 1.0e6, "kg", Spread::Logarithmic);
+/// Teleport distance of pins and colliders, m (`f32::INFINITY`: never teleport).
+pub const TELEPORT_DISTANCE: Limit = Limit::new(
+    "teleport_distance",
+    1.0e-3,
+    f32::INFINITY,
+    "m",
+    Spread::Logarithmic,
+);
+/// Weld tolerance, as a fraction of the mesh's bounding-box diagonal. At most 0.1 %: more
+/// would weld the neighbours of fine meshes into one particle.
+pub const WELD_TOLERANCE: Limit =
+    Limit::new("weld_tolerance", 0.0, 1.0e-3, "", Spread::Logarithmic);
+
+// ---- opt-in features ----
+
+/// Self-collision thickness, m.
+pub const SELF_COLLISION_THICKNESS: Limit = Limit::new(
+    "self_collision.thickness",
+    1.0e-6,
+    1.0e3,
+    "m",
+    Spread::Logarithmic,
+);
+/// Self-collision friction.
+pub const SELF_COLLISION_FRICTION: Limit = Limit::new(
+    "self_collision.friction",
+    0.0,
+    100.0,
+    "",
+    Spread::Logarithmic,
+);
+/// Tether slack: allowed stretch beyond the rest distance to a pin (0.02 = 2 %).
+pub const TETHER_SLACK: Limit = Limit::new("tethers.slack", 0.0, 100.0, "", Spread::Logarithmic);
+/// Pins each vertex is tethered to.
+pub const TETHER_PINS: Limit = Limit::count("tethers.pins_per_vertex", 1.0, 64.0);
+/// Stretch factor at which an edge tears.
+pub const TEAR_THRESHOLD: Limit =
+    Limit::new("tear_threshold", 1.0001, 1.0e3, "", Spread::Logarithmic);
+
+// ---- colliders ----
+
+/// Collider sizes (radius, half extents, half height), m.
+pub const COLLIDER_SIZE: Limit = Limit::new("size", 0.0, MAX_COORDINATE, "m", Spread::Logarithmic);
+/// Gap kept between cloth and a collider's surface, m.
+pub const COLLIDER_THICKNESS: Limit = Limit::new("thickness", 0.0, 100.0, "m", Spread::Logarithmic);
+/// Coulomb friction between cloth and a collider.
+pub const COLLIDER_FRICTION: Limit = Limit::new("friction", 0.0, 100.0, "", Spread::Logarithmic);
+/// Cells along the longest side of a baked mesh collider.
+pub const SDF_RESOLUTION: Limit = Limit::count("resolution", 4.0, 128.0);
+
+// ---- wind ----
+
+/// Wind speed (length of the velocity), m/s.
+pub const WIND_SPEED: Limit = Limit::new("wind.velocity", 0.0, 3.5e3, "m/s", Spread::Linear);
+/// Gust amplitude, a fraction of the wind speed.
+pub const GUST_AMPLITUDE: Limit =
+    Limit::new("wind.gust_amplitude", 0.0, 100.0, "", Spread::Logarithmic);
+/// Gust angular frequency, rad/s.
+pub const GUST_FREQUENCY: Limit = Limit::new(
+    "wind.gust_frequency",
+    0.0,
+    1.0e3,
+    "rad/s",
+    Spread::Logarithmic,
+);
+/// Turbulence strength, a fraction of the wind speed.
+pub const TURBULENCE: Limit = Limit::new("wind.turbulence", 0.0, 100.0, "", Spread::Logarithmic);
+/// Size of the turbulent eddies, m.
+pub const TURBULENCE_SCALE: Limit = Limit::new(
+    "wind.turbulence_scale",
+    1.0e-3,
+    1.0e4,
+    "m",
+    Spread::Logarithmic,
+);
+/// Half size of a wind zone's box along each axis, m.
+pub const ZONE_HALF_EXTENT: Limit = Limit::new(
+    "half_extents",
+    0.0,
+    MAX_COORDINATE,
+    "m",
+    Spread::Logarithmic,
+);
+/// Distance over which a wind zone fades out, m.
+pub const ZONE_FALLOFF: Limit =
+    Limit::new("falloff", 0.0, MAX_COORDINATE, "m", Spread::Logarithmic);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn closed_ranges_refuse_nan_and_the_outside() {
+        assert!(SUBSTEPS.contains(1.0) && SUBSTEPS.contains(10_000.0));
+        assert!(!SUBSTEPS.contains(0.0) && !SUBSTEPS.contains(10_001.0));
+        assert!(!DAMPING.contains(f32::NAN));
+        assert!(TELEPORT_DISTANCE.contains(f32::INFINITY));
+        assert_eq!(MASS.clamp(f32::NAN), MASS.min);
+        let e = TEAR_THRESHOLD.check(1.0).unwrap_err();
+        assert_eq!(e.name, "tear_threshold");
+        assert!(SUBSTEPS.check_count(0).is_err() && SUBSTEPS.check_count(10).is_ok());
+    }
+
+    #[test]
+    fn component_ranges_keep_vectors_within_the_length() {
+        let c = GRAVITY.component();
+        let corner = glam::Vec3::splat(c.max);
+        assert!(GRAVITY.check_length(corner).is_ok());
+        assert!(GRAVITY.check_length(-corner).is_ok());
+        assert!(
+            GRAVITY
+                .check_length(glam::Vec3::splat(GRAVITY.max))
+                .is_err()
+        );
+        let w = WIND_SPEED.component();
+        assert!(WIND_SPEED.check_length(glam::Vec3::splat(w.min)).is_ok());
+    }
+}
