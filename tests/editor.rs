@@ -649,3 +649,33 @@ fn the_panel_draws_every_card() {
     run(&mut app, 2);
     assert!(sim(&app, cloth).rejected().is_none());
 }
+
+#[test]
+fn the_toggle_key_shows_and_hides_the_panel() {
+    let mut app = common::app();
+    app.add_plugins(ClothEditorPlugin {
+        toggle: KeyCode::F9,
+        open: false,
+    })
+    .init_resource::<ButtonInput<KeyCode>>();
+    app.update();
+    assert!(!app.world().resource::<ClothEditor>().open);
+    let tap = |app: &mut App, key: KeyCode| {
+        app.world_mut()
+            .resource_mut::<ButtonInput<KeyCode>>()
+            .press(key);
+        app.update();
+        let mut keys = app.world_mut().resource_mut::<ButtonInput<KeyCode>>();
+        keys.release(key);
+        keys.clear();
+    };
+    tap(&mut app, KeyCode::F2);
+    assert!(
+        !app.world().resource::<ClothEditor>().open,
+        "F2 is not the key here"
+    );
+    tap(&mut app, KeyCode::F9);
+    assert!(app.world().resource::<ClothEditor>().open);
+    tap(&mut app, KeyCode::F9);
+    assert!(!app.world().resource::<ClothEditor>().open);
+}

@@ -94,14 +94,18 @@ fn three_pins_pulling_a_coincident_soup() {
     );
 }
 
-/// Finding 4 (seed 7): shear compliance 6.6e35, bending 2e28, stretch 4.5e-44, three pins.
+/// Finding 4 (seed 7): shear compliance 6.6e35, bending 2e28, stretch 4.5e-44, three pins
+/// (a NaN then; refused as out of range now).
 #[test]
 fn fourteen_vertex_soup_with_enormous_shear_compliance() {
     let outcome = sane(&hex(
         "0b429eaa1ad0287eb94e7975d2b68fc5ab738fb53c0080299e39a8d1c9cef5dc1dfe8e2000000000b3768237238a3abf800fc6b95321dcbf89053cc88063d9bb8b2c77f19b3c0080299e39a8d1c9def5f41dfe0020000000000000007bf0d886816e6b99c87271cc46e88a3aaf800fc6b85321c3bf89053dc89e63d9bb8b2c67f1273c008229de39a8d1c9ce75c41dfe0000100000000000007bf09486816e6bb1c872f1cc46e9ef244ccc2d028d02a3587e129c9249aae96d92eb0e5eecb743293b8b2c77f1273c008229de39a8d1c9cef5d41dfe00000000000000",
     ));
-    assert!(
-        matches!(outcome, FuzzOutcome::Simulated { .. }),
-        "{outcome:?}"
-    );
+    // Since compliances have a closed range (`solver::limits::XPBD_COMPLIANCE`, at most
+    // 1e6 m/N), this input is refused by name instead of simulated; the solver at the largest
+    // accepted compliance is covered by tests/editor.rs and tests/stability.rs.
+    match outcome {
+        FuzzOutcome::Refused(why) => assert!(why.contains("`shear`"), "{why}"),
+        other => panic!("{other:?}"),
+    }
 }

@@ -264,7 +264,7 @@ pub fn add_mesh_collider(world: &mut World, path: &str) -> Result<Entity, String
         world,
         format!("{stem} {n}"),
         ClothCollider::mesh(48),
-        Transform::from_xyz(0.0, 0.0, 1.2),
+        Transform::from_xyz(0.0, 0.6, 1.2),
         Some(handle.clone()),
     );
     let mut editor = world.get_resource_or_init::<ClothEditor>();
@@ -641,9 +641,12 @@ pub fn click(world: &mut World, ray: Ray3d) -> Option<Entity> {
     hit
 }
 
+/// Colliders whose shape changed and whose mesh the editor draws.
+type ChangedShapes = (With<EditorShape>, Changed<ClothCollider>);
+
 /// Keeps the visible mesh of [`EditorShape`] colliders in step with their shape.
 pub(crate) fn sync_shape_meshes(
-    changed: Query<(&ClothCollider, &Mesh3d), (With<EditorShape>, Changed<ClothCollider>)>,
+    changed: Query<(&ClothCollider, &Mesh3d), ChangedShapes>,
     meshes: Option<ResMut<Assets<Mesh>>>,
 ) {
     let Some(mut meshes) = meshes else {

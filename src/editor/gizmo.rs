@@ -36,7 +36,8 @@ pub fn axis_parameter(ray: Ray3d, origin: Vec3, axis: Vec3) -> Option<f32> {
     let e = d.dot(w0);
     let denom = a * c - b * b;
     // Lines within about half a degree of parallel: the nearest point is ill-defined.
-    if !(denom > 1e-4 * a * c) {
+    let parallel = denom.is_nan() || denom <= 1e-4 * a * c;
+    if parallel {
         return None;
     }
     let s = (b * e - c * dd) / denom;

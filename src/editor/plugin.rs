@@ -27,7 +27,10 @@ use crate::solver::Grid;
 ///     .run();
 /// ```
 ///
-/// The panel needs a renderer and a camera (bevy_egui draws it on the first camera spawned).
+/// The panel needs a renderer and a camera: bevy_egui draws it on the first camera spawned,
+/// and the editor picks and draws arrows through that camera (to choose another, set
+/// `EguiGlobalSettings::auto_create_primary_context` to `false` and put `PrimaryEguiContext`
+/// on it).
 /// In an app without a renderer (a headless test) the plugin still adds its state, the
 /// OBJ loader and the live numbers, so [`actions`] and
 /// [`scene`](super::scene) work the same way there.
@@ -83,7 +86,10 @@ impl Plugin for ClothEditorPlugin {
             }
             app.add_systems(bevy_egui::EguiPrimaryContextPass, super::ui::editor_ui);
         } else {
-            debug!("ClothEditorPlugin: no renderer, so no panel (actions and scene files work)");
+            info!(
+                "ClothEditorPlugin: no renderer (none in this app, or the plugin was added \
+                 before DefaultPlugins), so no panel; actions and scene files work"
+            );
         }
     }
 }

@@ -936,10 +936,19 @@ fn wind_card(ui: &mut egui::Ui, world: &mut World) {
             for knob in knobs::WIND {
                 knob_slider(ui, knob, &mut w);
             }
+            seed_row(ui, &mut w);
             if w != before {
                 world.resource_mut::<Wind>().0 = w;
             }
         });
+}
+
+/// The noise seed (any whole number).
+fn seed_row(ui: &mut egui::Ui, wind: &mut WindParams) {
+    ui.horizontal(|ui| {
+        ui.add(egui::DragValue::new(&mut wind.seed).speed(1.0));
+        ui.label("noise seed");
+    });
 }
 
 fn zone_card(ui: &mut egui::Ui, world: &mut World, e: Entity) {

@@ -135,9 +135,13 @@ mod tests {
 /// a shape meets it at `t = 0`. Non-finite or zero rays and poses meet nothing.
 #[must_use]
 pub fn ray_shape(shape: &Shape, pose: &Pose, origin: Vec3, dir: Vec3) -> Option<f32> {
-    if !(origin.is_finite() && dir.is_finite() && pose.translation.is_finite())
-        || !(pose.rotation.is_finite() && pose.scale > 0.0 && pose.scale.is_finite())
-    {
+    let usable = origin.is_finite()
+        && dir.is_finite()
+        && pose.translation.is_finite()
+        && pose.rotation.is_finite()
+        && pose.scale > 0.0
+        && pose.scale.is_finite();
+    if !usable {
         return None;
     }
     let len = dir.length();
@@ -162,7 +166,8 @@ pub fn ray_shape(shape: &Shape, pose: &Pose, origin: Vec3, dir: Vec3) -> Option<
     let b = o.dot(d);
     let c = o.length_squared() - r * r;
     let disc = b * b - c;
-    if !(disc >= 0.0) {
+    // A miss (or NaN).
+    if disc.is_nan() || disc < 0.0 {
         return None;
     }
     let root = disc.sqrt();
