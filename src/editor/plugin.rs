@@ -10,6 +10,7 @@ use super::camera::ClothCameraBlock;
 use super::gizmo::AxisDrag;
 use super::obj::ObjMeshLoader;
 use super::{actions, stats};
+use crate::gpu::{ClothBackendInUse, ClothReadback};
 use crate::solver::Grid;
 
 /// The cloth editor: a panel beside the game with a card per cloth, collider and wind, pin
@@ -68,6 +69,7 @@ impl Plugin for ClothEditorPlugin {
             Update,
             (
                 toggle_panel,
+                read_back_gpu_cloths,
                 actions::sync_shape_meshes,
                 actions::watch_mesh_loads,
                 stats::record,
@@ -90,6 +92,33 @@ impl Plugin for ClothEditorPlugin {
                 "ClothEditorPlugin: no renderer (none in this app, or the plugin was added \
                  before DefaultPlugins), so no panel; actions and scene files work"
             );
+        }
+    }
+}
+
+/// Marks a [`ClothReadback`] the editor added (and removes again when the panel closes).
+#[derive(Component)]
+struct EditorReadback;
+
+/// While the panel is open, GPU cloths read their state back, so that picking, pins and the
+/// live numbers see where they are.
+fn read_back_gpu_cloths(
+    mut commands: Commands,
+    editor: Res<ClothEditor>,
+    gpu: Query<(Entity, &ClothBackendInUse), Without<ClothReadback>>,
+    added: Query<Entity, With<EditorReadback>>,
+) {
+    if editor.open {
+        for (e, used) in &gpu {
+            if used.gpu {
+                commands.entity(e).insert((ClothReadback, EditorReadback));
+            }
+        }
+    } else {
+        for e in &added {
+            commands
+                .entity(e)
+                .remove::<(ClothReadback, EditorReadback)>();
         }
     }
 }
