@@ -62,7 +62,8 @@ pub mod prelude {
     pub use crate::editor::{ClothCameraPlugin, ClothFlyCamera};
     pub use crate::gpu::{ClothBackend, ClothBackendInUse, ClothGpuPlugin, ClothReadback};
     pub use crate::render::{
-        VelvetExtension, VelvetMaterial, VelvetPlugin, velvet_material, velvet_material_from,
+        VelvetExtension, VelvetMaterial, VelvetPlugin, lined_velvet, velvet_material,
+        velvet_material_from,
     };
     pub use crate::solver::{
         Aerodynamics, BendRest, BendingModel, BendingSolve, Grid, MassDistribution, Sleep, Solver,

@@ -53,7 +53,7 @@ fn pins_change_only_when_updated_and_follow_presets_and_clicks() {
     // The top edge: the 12 vertices of row 0, in the draft only.
     let n = actions::pin_preset(app.world_mut(), e, PinPreset::TopEdge).unwrap();
     assert_eq!(n, 12);
-    let draft = actions::pin_draft(app.world_mut(), e).unwrap();
+    let draft = actions::pin_draft(app.world(), e).unwrap();
     assert_eq!(
         draft.vertices,
         (0..12).map(|i| grid.index(i, 0)).collect(),
@@ -78,7 +78,7 @@ fn pins_change_only_when_updated_and_follow_presets_and_clicks() {
     }
     // Two corners: the ends of row 0.
     actions::pin_preset(app.world_mut(), e, PinPreset::TwoCorners).unwrap();
-    let draft = actions::pin_draft(app.world_mut(), e).unwrap();
+    let draft = actions::pin_draft(app.world(), e).unwrap();
     assert_eq!(
         draft.vertices,
         [grid.index(0, 0), grid.index(11, 0)].into_iter().collect()
@@ -89,16 +89,13 @@ fn pins_change_only_when_updated_and_follow_presets_and_clicks() {
     app.world_mut().resource_mut::<ClothEditor>().pin_edit = Some(e);
     let clicked = actions::click(app.world_mut(), ray(at + Vec3::new(0.0, 0.0, 3.0), at));
     assert_eq!(clicked, Some(e));
-    let draft = actions::pin_draft(app.world_mut(), e).unwrap();
+    let draft = actions::pin_draft(app.world(), e).unwrap();
     assert!(draft.vertices.contains(&v), "{:?}", draft.vertices);
     assert_eq!(draft.vertices.len(), 3);
     // Clicking it again takes it out.
     actions::click(app.world_mut(), ray(at + Vec3::new(0.0, 0.0, 3.0), at));
     assert_eq!(
-        actions::pin_draft(app.world_mut(), e)
-            .unwrap()
-            .vertices
-            .len(),
+        actions::pin_draft(app.world(), e).unwrap().vertices.len(),
         2
     );
     // No pins: the cloth falls.

@@ -420,18 +420,6 @@ pub fn max_penetration(world: &mut World) -> f32 {
 #[derive(Component, Clone, Copy, Debug)]
 pub struct ClothLook(pub Color);
 
-/// The examples' cloth material: velvet with `color` in front and a lining behind.
-pub fn cloth_material(color: Color) -> VelvetMaterial {
-    let lining = color.to_linear().mix(&LinearRgba::rgb(0.75, 0.7, 0.6), 0.5);
-    velvet_material(
-        color,
-        VelvetExtension {
-            back_color: Some(lining.into()),
-            ..default()
-        },
-    )
-}
-
 fn dress_cloths(
     mut commands: Commands,
     looks: Query<(Entity, &ClothLook), Without<MeshMaterial3d<VelvetMaterial>>>,
@@ -443,6 +431,6 @@ fn dress_cloths(
     for (entity, look) in &looks {
         commands
             .entity(entity)
-            .insert(MeshMaterial3d(materials.add(cloth_material(look.0))));
+            .insert(MeshMaterial3d(materials.add(lined_velvet(look.0))));
     }
 }

@@ -19,8 +19,8 @@ use super::plugin::{
 };
 use crate::cloth::{Cloth, ClothPin, ClothPins, ClothSim, PinAnchor, grid_mesh};
 use crate::collider::{ClothCollider, ClothColliders, ColliderShape};
-use crate::render::{VelvetExtension, VelvetMaterial, velvet_material};
-use crate::solver::{Pose, Shape, Topology, WindParams, ray_shape};
+use crate::render::{VelvetMaterial, lined_velvet};
+use crate::solver::{Shape, Topology, WindParams, ray_shape};
 use crate::wind::{Wind, WindZone};
 
 /// Colours given to new cloths in turn.
@@ -72,14 +72,7 @@ fn material(
 /// renderer.
 pub fn dress_cloth(world: &mut World, cloth: Entity, color: Color) {
     if let Some(mut velvet) = world.get_resource_mut::<Assets<VelvetMaterial>>() {
-        let lining = color.to_linear().mix(&LinearRgba::rgb(0.75, 0.7, 0.6), 0.5);
-        let m = velvet.add(velvet_material(
-            color,
-            VelvetExtension {
-                back_color: Some(lining.into()),
-                ..default()
-            },
-        ));
+        let m = velvet.add(lined_velvet(color));
         world.entity_mut(cloth).insert(MeshMaterial3d(m));
     } else if let Some(m) = material(world, color, true) {
         world.entity_mut(cloth).insert(m);
@@ -372,9 +365,9 @@ fn vertex_of(sim: &ClothSim, particle: u32) -> u32 {
     sim.weld().representative(particle)
 }
 
-/// The pin draft of `cloth`, started from its current pins if there is none yet. `None` if
-/// the entity is not a simulated cloth.
-pub fn pin_draft(world: &mut World, cloth: Entity) -> Option<PinDraft> {
+/// The pin draft of `cloth`, or its current pins as a draft if none is being edited (nothing
+/// is stored). `None` if the entity is not a simulated cloth.
+pub fn pin_draft(world: &World, cloth: Entity) -> Option<PinDraft> {
     if let Some(d) = world
         .get_resource::<ClothEditor>()
         .and_then(|e| e.drafts.get(&cloth))
@@ -389,12 +382,7 @@ pub fn pin_draft(world: &mut World, cloth: Entity) -> Option<PinDraft> {
         .filter(|p| (p.vertex as usize) < sim.weld().vertex_count())
         .map(|p| vertex_of(sim, sim.particle(p.vertex)))
         .collect();
-    let draft = PinDraft { vertices };
-    world
-        .get_resource_or_init::<ClothEditor>()
-        .drafts
-        .insert(cloth, draft.clone());
-    Some(draft)
+    Some(PinDraft { vertices })
 }
 
 fn set_draft(world: &mut World, cloth: Entity, draft: PinDraft) {
@@ -602,16 +590,11 @@ pub fn pick(world: &mut World, ray: Ray3d) -> Option<(Entity, f32)> {
     }
     let mut zones = world.query::<(Entity, &WindZone, &GlobalTransform)>();
     for (e, zone, gt) in zones.iter(world) {
-        let (scale, rotation, translation) = gt.to_scale_rotation_translation();
+        let region = zone.region(gt);
         let shape = Shape::Cuboid {
-            half_extents: zone.half_extents * scale.abs(),
+            half_extents: region.half_extents,
         };
-        let pose = Pose {
-            translation,
-            rotation,
-            scale: 1.0,
-        };
-        if let Some(t) = ray_shape(&shape, &pose, ray.origin, *ray.direction) {
+        if let Some(t) = ray_shape(&shape, &region.pose, ray.origin, *ray.direction) {
             consider(e, t);
         }
     }

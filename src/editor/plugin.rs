@@ -123,8 +123,13 @@ fn read_back_gpu_cloths(
     }
 }
 
-fn toggle_panel(keys: Option<Res<ButtonInput<KeyCode>>>, mut editor: ResMut<ClothEditor>) {
-    if keys.is_some_and(|k| k.just_pressed(editor.toggle)) && !editor.typing {
+fn toggle_panel(
+    keys: Option<Res<ButtonInput<KeyCode>>>,
+    block: Res<ClothCameraBlock>,
+    mut editor: ResMut<ClothEditor>,
+) {
+    // While a text field has the keyboard, the key is typed, not obeyed.
+    if keys.is_some_and(|k| k.just_pressed(editor.toggle)) && !block.keyboard {
         editor.open = !editor.open;
     }
 }
@@ -156,8 +161,6 @@ pub struct ClothEditor {
     pub(crate) drag: Option<AxisDrag>,
     /// Mesh colliders whose file is still loading, with the path asked for.
     pub(crate) loading: Vec<(Entity, Handle<Mesh>, String)>,
-    /// A text field has the keyboard (the toggle key is typed, not obeyed).
-    pub(crate) typing: bool,
     /// Names given so far, for "Cloth 3", "Sphere 2", ...
     pub(crate) counter: u32,
     /// The selected object whose card was last opened for it.
@@ -178,7 +181,6 @@ impl Default for ClothEditor {
             status: String::new(),
             drag: None,
             loading: Vec::new(),
-            typing: false,
             counter: 0,
             opened: None,
         }

@@ -440,33 +440,21 @@ pub fn scene_from_ron(text: &str) -> Result<ClothScene, String> {
     ron::from_str(text).map_err(|e| e.to_string())
 }
 
-fn build_mesh(world: &mut World, saved: &SavedMesh) -> Result<Handle<Mesh>, String> {
+/// The mesh of an entry [`check_mesh`] accepted.
+fn build_mesh(world: &mut World, saved: &SavedMesh) -> Handle<Mesh> {
     let mesh = match saved {
         SavedMesh::Grid {
             columns,
             rows,
             width,
             height,
-        } => {
-            let grid = crate::solver::Grid::new(*columns, *rows, *width, *height);
-            grid.validate().map_err(|e| e.to_string())?;
-            grid_mesh(&grid)
-        }
-        SavedMesh::Asset(path) => {
-            let server = world
-                .get_resource::<AssetServer>()
-                .ok_or_else(|| format!("this app has no asset server to load {path}"))?;
-            return Ok(server.load(path.clone()));
-        }
+        } => grid_mesh(&crate::solver::Grid::new(*columns, *rows, *width, *height)),
+        SavedMesh::Asset(path) => return world.resource::<AssetServer>().load(path.clone()),
         SavedMesh::Inline {
             positions,
             uvs,
             indices,
         } => {
-            let n = positions.len();
-            if indices.iter().any(|&i| i as usize >= n) {
-                return Err(format!("an index is beyond the {n} vertices"));
-            }
             let mut m = Mesh::new(
                 PrimitiveTopology::TriangleList,
                 RenderAssetUsages::default(),
@@ -474,29 +462,24 @@ fn build_mesh(world: &mut World, saved: &SavedMesh) -> Result<Handle<Mesh>, Stri
             .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions.clone())
             .with_inserted_indices(Indices::U32(indices.clone()));
             if let Some(uv) = uvs {
-                if uv.len() != n {
-                    return Err(format!("{} texture coordinates for {n} vertices", uv.len()));
-                }
                 m.insert_attribute(Mesh::ATTRIBUTE_UV_0, uv.clone());
             }
             m
         }
     };
-    Ok(world
-        .get_resource_mut::<Assets<Mesh>>()
-        .ok_or("this app has no mesh assets (MeshPlugin)")?
-        .add(mesh))
+    world.resource_mut::<Assets<Mesh>>().add(mesh)
 }
 
-/// Replaces the scene's cloths, colliders, wind zones and wind with `scene`'s. Nothing is
-/// changed when the scene cannot be built (a bad grid or mesh in it): the error says which.
+/// Replaces the scene's cloths, colliders, wind zones and wind with `scene`'s. Everything is
+/// checked first: nothing is changed when the scene cannot be built (a bad grid or mesh in
+/// it, a pin naming an object it lacks), and the error says which.
 ///
 /// # Errors
 /// Which object of the file is broken, and why.
 pub fn load_scene(world: &mut World, scene: &ClothScene) -> Result<(), String> {
     // Check the meshes first, so a broken file changes nothing.
     for (k, c) in scene.cloths.iter().enumerate() {
-        check_mesh(&c.mesh).map_err(|e| format!("cloth {k}: {e}"))?;
+        check_mesh(world, &c.mesh).map_err(|e| format!("cloth {k}: {e}"))?;
         for p in &c.pins {
             match p.anchor {
                 SavedAnchor::Collider(i, _) if i >= scene.colliders.len() => {
@@ -516,7 +499,7 @@ pub fn load_scene(world: &mut World, scene: &ClothScene) -> Result<(), String> {
     for (k, c) in scene.colliders.iter().enumerate() {
         match (&c.shape, &c.mesh) {
             (SavedShape::Mesh { .. }, Some(m)) => {
-                check_mesh(m).map_err(|e| format!("collider {k}: {e}"))?;
+                check_mesh(world, m).map_err(|e| format!("collider {k}: {e}"))?;
             }
             (SavedShape::Mesh { .. }, None) => {
                 return Err(format!("collider {k}: a mesh collider without its mesh"));
@@ -571,7 +554,7 @@ pub fn load_scene(world: &mut World, scene: &ClothScene) -> Result<(), String> {
                         mesh: None,
                         resolution,
                     },
-                    Some(build_mesh(world, m)?),
+                    Some(build_mesh(world, m)),
                 )
             }
         };
@@ -588,7 +571,7 @@ pub fn load_scene(world: &mut World, scene: &ClothScene) -> Result<(), String> {
     // Cloths: spawned first, pinned after (pins may name other cloths).
     let mut cloths = Vec::with_capacity(scene.cloths.len());
     for c in &scene.cloths {
-        let mesh = build_mesh(world, &c.mesh)?;
+        let mesh = build_mesh(world, &c.mesh);
         let mut e = world.spawn((
             Mesh3d(mesh),
             Transform::from(c.transform),
@@ -671,7 +654,12 @@ fn set_name(world: &mut World, e: Entity, name: &Option<String>) {
     }
 }
 
-fn check_mesh(m: &SavedMesh) -> Result<(), String> {
+/// Whether `m` can be built in this app: a valid grid, an asset path with an asset server,
+/// triangles that index their vertices; and mesh assets to put it in.
+fn check_mesh(world: &World, m: &SavedMesh) -> Result<(), String> {
+    if !world.contains_resource::<Assets<Mesh>>() {
+        return Err("this app has no mesh assets (MeshPlugin)".into());
+    }
     match m {
         SavedMesh::Grid {
             columns,
@@ -682,6 +670,9 @@ fn check_mesh(m: &SavedMesh) -> Result<(), String> {
             .validate()
             .map_err(|e| e.to_string()),
         SavedMesh::Asset(p) if p.trim().is_empty() => Err("an empty asset path".into()),
+        SavedMesh::Asset(p) if !world.contains_resource::<AssetServer>() => {
+            Err(format!("this app has no asset server to load {p}"))
+        }
         SavedMesh::Asset(_) => Ok(()),
         SavedMesh::Inline {
             positions,

@@ -61,17 +61,25 @@ pub(crate) fn record(
     stats.last = now;
     stats.cloths.retain(|e, _| cloths.contains(*e));
     for (e, sim, backend) in &cloths {
-        let strain = sim.simulation().strain();
+        let history = stats.cloths.entry(e).or_default();
+        let asleep = sim.is_sleeping();
+        // An asleep cloth has not moved: its strain is the last sample's (no pass over edges).
+        let (max_strain, mean_strain) = match history.back() {
+            Some(last) if asleep && last.asleep => (last.max_strain, last.mean_strain),
+            _ => {
+                let s = sim.simulation().strain();
+                (s.max, s.mean)
+            }
+        };
         let gpu = backend.is_some_and(|b| b.gpu);
         let sample = Sample {
             time: now,
             step_ms: if gpu { 0.0 } else { sim.step_seconds() * 1e3 },
-            max_strain: strain.max,
-            mean_strain: strain.mean,
+            max_strain,
+            mean_strain,
             torn: sim.torn_edges(),
-            asleep: sim.is_sleeping(),
+            asleep,
         };
-        let history = stats.cloths.entry(e).or_default();
         history.push_back(sample);
         while history
             .front()

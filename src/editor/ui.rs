@@ -44,7 +44,6 @@ pub(crate) fn editor_ui(world: &mut World) {
     };
     if !world.resource::<ClothEditor>().open {
         *world.resource_mut::<ClothCameraBlock>() = ClothCameraBlock::default();
-        world.resource_mut::<ClothEditor>().typing = false;
         return;
     }
     let mut root = egui::Ui::new(
@@ -78,12 +77,10 @@ fn overlay_and_pointer(world: &mut World, ctx: &egui::Context, panel_rect: egui:
     let over_ui = hover.is_some_and(|p| panel_rect.contains(p))
         || ctx.is_pointer_over_egui()
         || ctx.egui_is_using_pointer();
-    let typing = ctx.egui_wants_keyboard_input();
     *world.resource_mut::<ClothCameraBlock>() = ClothCameraBlock {
         pointer: over_ui,
-        keyboard: typing,
+        keyboard: ctx.egui_wants_keyboard_input(),
     };
-    world.resource_mut::<ClothEditor>().typing = typing;
     let Some((camera, eye)) = world
         .query_filtered::<(&Camera, &GlobalTransform), With<PrimaryEguiContext>>()
         .iter(world)
@@ -455,7 +452,8 @@ fn panel(ui: &mut egui::Ui, world: &mut World) {
 
 /// Cards in name order (then entity order), stable from frame to frame.
 fn by_name(world: &World, list: &mut [Entity]) {
-    list.sort_by_cached_key(|e| (world.get::<Name>(*e).map(|n| n.to_string()), *e));
+    let name = |e: &Entity| world.get::<Name>(*e).map(Name::as_str);
+    list.sort_by(|a, b| name(a).cmp(&name(b)).then(a.cmp(b)));
 }
 
 fn add_section(ui: &mut egui::Ui, world: &mut World) {

@@ -242,6 +242,20 @@ pub fn velvet_material(base_color: impl Into<Color>, velvet: VelvetExtension) ->
     )
 }
 
+/// A lined cloth: velvet of `color` in front and a paler, warmer lining behind (the colour
+/// mixed halfway with a cream), as the examples and the editor dress their cloths.
+#[must_use]
+pub fn lined_velvet(color: Color) -> VelvetMaterial {
+    let lining = color.to_linear().mix(&LinearRgba::rgb(0.75, 0.7, 0.6), 0.5);
+    velvet_material(
+        color,
+        VelvetExtension {
+            back_color: Some(lining.into()),
+            ..default()
+        },
+    )
+}
+
 /// A velvet material on your own `base` (base colour texture, normal map, occlusion,
 /// emissive, alpha, fog, UV transform are used; roughness, metallic, reflectance and the
 /// other lighting fields are replaced by the velvet BRDF). Culling is turned off and the

@@ -60,6 +60,22 @@ impl WindZone {
         }
         limits::ZONE_FALLOFF.check(self.falloff)
     }
+
+    /// The box the wind blows in, placed by the entity's global transform (its scale
+    /// stretches the box).
+    #[must_use]
+    pub fn region(&self, at: &GlobalTransform) -> WindRegion {
+        let (scale, rotation, translation) = at.to_scale_rotation_translation();
+        WindRegion {
+            pose: Pose {
+                translation,
+                rotation,
+                scale: 1.0,
+            },
+            half_extents: self.half_extents * scale.abs(),
+            falloff: self.falloff,
+        }
+    }
 }
 
 impl Default for WindZone {
@@ -126,21 +142,7 @@ fn gather_wind(
         zones
             .iter()
             .filter(|(e, z, gt)| valid(Some(*e), z.validate()) && gt.translation().is_finite())
-            .map(|(_, z, gt)| {
-                let (scale, rotation, translation) = gt.to_scale_rotation_translation();
-                (
-                    z.wind,
-                    Some(WindRegion {
-                        pose: Pose {
-                            translation,
-                            rotation,
-                            scale: 1.0,
-                        },
-                        half_extents: z.half_extents * scale.abs(),
-                        falloff: z.falloff,
-                    }),
-                )
-            }),
+            .map(|(_, z, gt)| (z.wind, Some(z.region(gt)))),
     );
     out.field = WindField::new(sources);
 }
