@@ -6,11 +6,9 @@
 
 use std::hint::black_box;
 
-use bevy::tasks::TaskPoolBuilder;
-use bevy_cloth::cloth::TaskPoolParallel;
 use bevy_cloth::solver::{
     BendingSolve, DEFAULT_BENDING_COMPLIANCE, Environment, Grid, ManyItem, MassDistribution, Pin,
-    Serial, Simulation, Sleep, Solver, SolverParams, TopologyOptions, step_many,
+    Serial, Simulation, Sleep, Solver, SolverParams, TopologyOptions, Workers, step_many,
 };
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 
@@ -48,10 +46,8 @@ fn scene(n: u32, solver: Solver, substeps: u32, bending_solve: BendingSolve) -> 
 
 fn bench(c: &mut Criterion) {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let pool = TaskPoolBuilder::new()
-        .num_threads(threads.saturating_sub(1).max(1))
-        .build();
-    let par = TaskPoolParallel(&pool);
+    // What the plugin steps on (`ClothWorkers`): one helper per core besides this thread.
+    let par = Workers::new(threads.saturating_sub(1));
     // The default fabric (B = 1e-4 N·m): projected bending at every size here.
     let xpbd = Solver::Xpbd {
         stretch: 0.0,

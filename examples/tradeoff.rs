@@ -54,13 +54,11 @@ mod support;
 
 use std::time::Instant;
 
-use bevy::tasks::TaskPoolBuilder;
-use bevy_cloth::cloth::TaskPoolParallel;
 use bevy_cloth::gpu::{GpuCloth, GpuKernels, GpuStage, GpuStepInput};
 use bevy_cloth::solver::{
     Aerodynamics, BendingModel, Collider, DEFAULT_BENDING_COMPLIANCE, Environment, Features, Grid,
     ManyItem, MassDistribution, Pin, Pose, SelfCollision, Shape, Simulation, Sleep, Solver,
-    SolverParams, TetherParams, TopologyOptions, WindField, WindParams, position_distance,
+    SolverParams, TetherParams, TopologyOptions, WindField, WindParams, Workers, position_distance,
     step_many,
 };
 use glam::{Vec3, Vec4};
@@ -184,12 +182,7 @@ struct Outcome {
 /// lowest of the per-run medians (the machine is shared: the minimum is the steadiest estimate
 /// of what the work itself costs). Every run computes the same result, so accuracy comes from
 /// the last.
-fn simulate(
-    make: impl Fn() -> Simulation,
-    frames: usize,
-    repeat: usize,
-    par: &TaskPoolParallel,
-) -> Outcome {
+fn simulate(make: impl Fn() -> Simulation, frames: usize, repeat: usize, par: &Workers) -> Outcome {
     let mut best = f64::INFINITY;
     let mut sim = make();
     for r in 0..repeat.max(1) {
@@ -232,7 +225,7 @@ struct Variant {
     tearing: bool,
 }
 
-fn scene_costs(args: &Args, par: &TaskPoolParallel, threads: usize) {
+fn scene_costs(args: &Args, par: &Workers, threads: usize) {
     let off = Variant {
         name: "plain",
         collider: false,
@@ -367,6 +360,9 @@ fn json_number(line: &str, key: &str) -> Option<f64> {
     rest[..end].parse().ok()
 }
 
+/// Frames the peer runs untimed after its first.
+const PEER_WARMUP: usize = 3;
+
 /// Runs the peer benchmark (`--peer "PYTHON SCRIPT"`: pypbd's `pbd_cloth_bench.py`, see the
 /// README) on the standard scene, XPBD with dihedral bending, and prints its JSON line.
 fn run_peer(
@@ -384,7 +380,14 @@ fn run_peer(
         .args(["--n", &n.to_string()])
         .args(["--substeps", &substeps.to_string()])
         .args(["--iterations", &iterations.to_string()])
-        .args(["--method", "xpbd", "--frames", &frames.to_string()])
+        // The peer steps one frame (building its colouring) and `--warmup` frames before the
+        // `--frames` it times: together they must be our `frames`, or the two strains are
+        // read at different moments of the swing (they change by ±40 % within 0.1 s).
+        .args(["--method", "xpbd", "--warmup", &PEER_WARMUP.to_string()])
+        .args([
+            "--frames",
+            &frames.saturating_sub(1 + PEER_WARMUP).max(1).to_string(),
+        ])
         .env("OMP_NUM_THREADS", threads.to_string())
         .output();
     let out = match out {
@@ -401,6 +404,13 @@ fn run_peer(
     let text = String::from_utf8_lossy(&out.stdout);
     let line = text.lines().rev().find(|l| l.starts_with('{'))?;
     println!("{line}");
+    let ours = frames as f64 * f64::from(DT);
+    match json_number(line, "sim_time_s") {
+        Some(t) if (t - ours).abs() < 1e-3 => {}
+        other => eprintln!(
+            "the peer simulated {other:?} s, we simulate {ours} s: its strain is from another moment"
+        ),
+    }
     Some(PeerPoint {
         n,
         substeps,
@@ -530,7 +540,7 @@ fn time_many(
     make: impl Fn() -> Vec<Simulation>,
     frames: usize,
     repeat: usize,
-    par: &TaskPoolParallel,
+    par: &Workers,
 ) -> f64 {
     let mut best = f64::INFINITY;
     for _ in 0..repeat.max(1) {
@@ -551,11 +561,10 @@ fn time_many(
 
 /// `--many`: 64 cloths of 16² against one of 128² (the same vertex count), and one 128² with
 /// 64 × 16² on all threads against one thread, all on the standard scene (XPBD 10 × 1).
-fn many(args: &Args, par: &TaskPoolParallel, threads: usize, bending: Bending) {
+fn many(args: &Args, par: &Workers, threads: usize, bending: Bending) {
     let frames = args.frames.unwrap_or(60) as usize;
     let repeat: usize = args.get("repeat", 3);
-    let serial_pool = TaskPoolBuilder::new().num_threads(0).build();
-    let serial = TaskPoolParallel(&serial_pool);
+    let serial = Workers::new(0);
     let big = || vec![scene(128, "xpbd", 10, 1, bending)];
     let small = || (0..64).map(|_| scene(16, "xpbd", 10, 1, bending)).collect();
     let mixed = || {
@@ -600,7 +609,7 @@ fn many(args: &Args, par: &TaskPoolParallel, threads: usize, bending: Bending) {
 /// `--sleep`: what a cloth at rest costs. The standard scene with damping 2/s (it comes to
 /// rest in seconds) and the default [`Sleep`]: the median awake step over its first frames
 /// against the median step once it sleeps.
-fn sleep_cost(args: &Args, par: &TaskPoolParallel, bending: Bending) {
+fn sleep_cost(args: &Args, par: &Workers, bending: Bending) {
     let frames = args.frames.unwrap_or(60) as usize;
     for n in list(args, "sizes", &[64u32, 256]) {
         let make = || {
@@ -694,12 +703,10 @@ fn main() {
     let reference_substeps: u32 = args.get("reference-substeps", 100);
     let repeat: usize = args.get("repeat", 3);
     let bending = Bending::parse(&args);
-    // The calling thread works too: a pool of threads − 1 keeps one thread per core
-    // (with `--threads 1` the pool is empty and parts run one after another).
-    let pool = TaskPoolBuilder::new()
-        .num_threads(threads.saturating_sub(1))
-        .build();
-    let par = TaskPoolParallel(&pool);
+    // The calling thread works too: threads − 1 helpers keep one thread per core (with
+    // `--threads 1` there are none and parts run one after another). The same pool the
+    // plugin steps on (`ClothWorkers`).
+    let par = Workers::new(threads.saturating_sub(1));
     if args.rest.contains_key("scene-costs") {
         scene_costs(&args, &par, threads);
         return;
@@ -1005,7 +1012,7 @@ fn simulate_gpu(
 
 /// `--backend gpu`: CPU and GPU side by side on the standard scene, with and without
 /// self-collision.
-fn gpu_table(args: &Args, par: &TaskPoolParallel, bending: Bending) {
+fn gpu_table(args: &Args, par: &Workers, bending: Bending) {
     let sizes: Vec<u32> = list(args, "sizes", &[64, 128, 256, 512]);
     let frames = args.frames.unwrap_or(60) as usize;
     let (adapter, device, queue, timestamps) = match gpu_device() {

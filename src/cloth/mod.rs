@@ -23,5 +23,6 @@ pub use mesh::{MeshData, grid_mesh, read_mesh};
 pub use plugin::{ClothPlugin, ClothPlugins, ClothSystems};
 pub use pose::FixedPoses;
 pub use sim::{
-    ClothError, ClothFailed, ClothInvalid, ClothPick, ClothSim, ClothSource, TaskPoolParallel,
+    ClothError, ClothFailed, ClothInvalid, ClothPick, ClothSim, ClothSource, ClothWorkers,
+    TaskPoolParallel,
 };

@@ -7,7 +7,8 @@ use bevy::prelude::*;
 use bevy::transform::TransformSystems;
 
 use super::sim::{
-    ClothFailed, init_cloths, on_cloth_removed, retry_cloths, step_cloths, sync_cloths,
+    ClothFailed, ClothWorkers, init_cloths, on_cloth_removed, retry_cloths, step_cloths,
+    sync_cloths,
 };
 use super::writeback::write_back;
 use super::{
@@ -72,6 +73,7 @@ impl Plugin for ClothPlugin {
             .register_type::<ClothSelfCollision>()
             .register_type::<ClothTethers>()
             .register_type::<ClothTearing>()
+            .init_resource::<ClothWorkers>()
             .add_message::<ClothTorn>()
             .add_message::<ClothFailed>()
             .configure_sets(

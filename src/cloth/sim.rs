@@ -6,8 +6,8 @@ use bevy::tasks::{ComputeTaskPool, TaskPool};
 use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
 use crate::solver::{
     Environment, Features, ManyItem, MeshBinding, Parallel, Pin, SelfCollision, Serial, Simulation,
-    SolverError, SolverParams, StateError, StepReport, TetherParams, TopologyOptions, Weld, limits,
-    step_many,
+    SolverError, SolverParams, StateError, StepReport, TetherParams, TopologyOptions, Weld,
+    Workers, limits, step_many,
 };
 use crate::wind::ClothWindField;
 
@@ -904,8 +904,23 @@ type CpuCloths = (
     Without<crate::gpu::ClothLeavingGpu>,
 );
 
+/// The worker threads the plugin steps CPU cloths on ([`Workers::per_core`]: one helper per
+/// core besides the thread running the system). They spin for a moment after each parallel
+/// region and then sleep, so an idle app pays nothing for them. Remove the resource to step
+/// on Bevy's `ComputeTaskPool` instead (slower for one cloth: waking its threads takes about
+/// as long as a substep's work at 64 × 64), or insert `ClothWorkers(Workers::new(0))` to step
+/// on the calling thread only.
+#[derive(Resource, Debug)]
+pub struct ClothWorkers(pub Workers);
+
+impl Default for ClothWorkers {
+    fn default() -> Self {
+        Self(Workers::per_core())
+    }
+}
+
 pub(crate) fn step_cloths(
-    time: Res<Time>,
+    (time, workers): (Res<Time>, Option<Res<ClothWorkers>>),
     colliders: Option<Res<ClothColliders>>,
     wind: Option<Res<ClothWindField>>,
     mut cloths: Query<(Entity, &mut ClothSim), CpuCloths>,
@@ -937,9 +952,10 @@ pub(crate) fn step_cloths(
                 seconds: 0.0,
             })
             .collect();
-        match pool {
-            Some(pool) => step_many(&mut items, dt, &env, &TaskPoolParallel(pool)),
-            None => step_many(&mut items, dt, &env, &Serial),
+        match (workers.as_deref(), pool) {
+            (Some(workers), _) => step_many(&mut items, dt, &env, &workers.0),
+            (None, Some(pool)) => step_many(&mut items, dt, &env, &TaskPoolParallel(pool)),
+            (None, None) => step_many(&mut items, dt, &env, &Serial),
         }
         items.into_iter().map(|i| (i.report, i.seconds)).collect()
     };

@@ -56,6 +56,7 @@ mod tether;
 mod topology;
 mod weld;
 mod wind;
+mod workers;
 
 pub use air::{Aerodynamics, air_force, air_velocity_change, vertex_area_vectors};
 pub use batches::{ConstraintBatches, default_part_count};
@@ -89,6 +90,7 @@ pub use topology::{
 };
 pub use weld::{HARD_EDGE_COS, MeshAttributes, MeshBinding, MeshShading, Weld};
 pub use wind::{AirGrid, WindField, WindParams, WindRegion};
+pub use workers::Workers;
 
 use glam::{Vec3, Vec4};
 

@@ -1,8 +1,9 @@
 //! How the solver runs independent work items: serially or on a thread pool.
 //!
-//! The solver never spawns threads. It hands a slice of independent items (one per vertex
-//! range) to a [`Parallel`] implementation; the Bevy plugin passes one backed by Bevy's
-//! `ComputeTaskPool`, tests pass [`Serial`].
+//! The solver never starts threads on its own. It hands a slice of independent items (one per
+//! vertex range, or one per cloth) to a [`Parallel`] implementation: [`Workers`] (a pool you
+//! create, in [`workers`](super::workers), made for the solver's short parallel regions; the Bevy plugin keeps one), Bevy's
+//! task pool through `TaskPoolParallel`, or [`Serial`].
 
 /// Runs a function over independent items, possibly on several threads.
 pub trait Parallel: Sync {
