@@ -22,7 +22,8 @@ use super::parallel::Parallel;
 /// has not started (a worker the system does not schedule costs nothing but its share of the
 /// speed-up). The call returns once every claimed item is done. A worker spins for
 /// [`Workers::SPIN`] after its last work and then sleeps until the next call wakes it, so an
-/// idle pool costs no CPU. A call made from inside another call (nested) runs serially.
+/// idle pool costs no CPU. A call made while another runs (from inside it, or from another thread)
+/// runs serially on its own thread.
 ///
 /// The solver itself never starts threads: create one `Workers` (the Bevy plugin keeps one
 /// as a resource) and pass it where a [`Parallel`] is asked for.
