@@ -561,8 +561,8 @@ fn push_distances(part: &Part, range: core::ops::Range<usize>, out: &mut Vec<Gpu
     let d = &part.distance;
     for i in range {
         out.push(GpuDistance {
-            a: d.a[i] + base,
-            b: d.b[i] + base,
+            a: d.a()[i] + base,
+            b: d.b()[i] + base,
             rest: d.rest[i],
             param: d.param[i],
         });
@@ -576,7 +576,7 @@ fn push_bends(part: &Part, range: core::ops::Range<usize>, out: &mut Vec<GpuBend
     let b = &part.bending;
     for i in range {
         out.push(GpuBend {
-            v: [0, 1, 2, 3].map(|k| b.v[k][i] + base),
+            v: [0, 1, 2, 3].map(|k| b.v()[k][i] + base),
             a: if b.iso {
                 [0, 1, 2, 3].map(|k| b.a[k][i])
             } else {
@@ -584,6 +584,67 @@ fn push_bends(part: &Part, range: core::ops::Range<usize>, out: &mut Vec<GpuBend
             },
             param: [b.param[i], 0.0, 0.0, 0.0],
         });
+    }
+}
+
+/// Appends the passes of a group of parts that share no vertex (the parts, the seams of
+/// one parity, or the boundary alone): colour `c` of every member in one pass; each
+/// member's distances before its bending, as on the CPU.
+fn push_group(
+    parts: &[Part],
+    bending: bool,
+    dist: &mut Vec<GpuDistance>,
+    bend: &mut Vec<GpuBend>,
+    passes: &mut Vec<Pass>,
+) {
+    let pass = |kind, first: usize, end: usize, passes: &mut Vec<Pass>| {
+        if end > first {
+            passes.push(Pass {
+                kind,
+                first: first as u32,
+                count: (end - first) as u32,
+            });
+        }
+    };
+    let colours = parts
+        .iter()
+        .map(|p| p.distance.colours.independent.len())
+        .max()
+        .unwrap_or(0);
+    for c in 0..colours {
+        let first = dist.len();
+        for p in parts {
+            if let Some(r) = p.distance.colours.independent.get(c) {
+                push_distances(p, r.clone(), dist);
+            }
+        }
+        pass(PassKind::DistanceColour, first, dist.len(), passes);
+    }
+    let first = dist.len();
+    for p in parts {
+        push_distances(p, p.distance.colours.sequential.clone(), dist);
+    }
+    pass(PassKind::DistanceSerial, first, dist.len(), passes);
+    if bending {
+        let colours = parts
+            .iter()
+            .map(|p| p.bending.colours.independent.len())
+            .max()
+            .unwrap_or(0);
+        for c in 0..colours {
+            let first = bend.len();
+            for p in parts {
+                if let Some(r) = p.bending.colours.independent.get(c) {
+                    push_bends(p, r.clone(), bend);
+                }
+            }
+            pass(PassKind::BendColour, first, bend.len(), passes);
+        }
+        let first = bend.len();
+        for p in parts {
+            push_bends(p, p.bending.colours.sequential.clone(), bend);
+        }
+        pass(PassKind::BendSerial, first, bend.len(), passes);
     }
 }
 
@@ -595,78 +656,18 @@ fn flatten(
     let mut dist = Vec::new();
     let mut bend = Vec::new();
     let mut passes = Vec::new();
-    let pass = |kind, first: usize, end: usize, passes: &mut Vec<Pass>| {
-        if end > first {
-            passes.push(Pass {
-                kind,
-                first: first as u32,
-                count: (end - first) as u32,
-            });
-        }
-    };
-    // The parts: colour c of every part in one pass (parts share no vertex); each part's
-    // distances before its bending, as on the CPU.
-    let parts = &batches.parts;
-    let colours = parts
-        .iter()
-        .map(|p| p.distance.colours.independent.len())
-        .max()
-        .unwrap_or(0);
-    for c in 0..colours {
-        let first = dist.len();
-        for p in parts {
-            if let Some(r) = p.distance.colours.independent.get(c) {
-                push_distances(p, r.clone(), &mut dist);
-            }
-        }
-        pass(PassKind::DistanceColour, first, dist.len(), &mut passes);
+    // The parts, then the even seams, the odd seams and the boundary, as on the CPU.
+    push_group(&batches.parts, bending, &mut dist, &mut bend, &mut passes);
+    for seams in &batches.seams {
+        push_group(seams, bending, &mut dist, &mut bend, &mut passes);
     }
-    let first = dist.len();
-    for p in parts {
-        push_distances(p, p.distance.colours.sequential.clone(), &mut dist);
-    }
-    pass(PassKind::DistanceSerial, first, dist.len(), &mut passes);
-    if bending {
-        let colours = parts
-            .iter()
-            .map(|p| p.bending.colours.independent.len())
-            .max()
-            .unwrap_or(0);
-        for c in 0..colours {
-            let first = bend.len();
-            for p in parts {
-                if let Some(r) = p.bending.colours.independent.get(c) {
-                    push_bends(p, r.clone(), &mut bend);
-                }
-            }
-            pass(PassKind::BendColour, first, bend.len(), &mut passes);
-        }
-        let first = bend.len();
-        for p in parts {
-            push_bends(p, p.bending.colours.sequential.clone(), &mut bend);
-        }
-        pass(PassKind::BendSerial, first, bend.len(), &mut passes);
-    }
-    // The boundary, after the parts.
-    let b = &batches.boundary;
-    for r in &b.distance.colours.independent {
-        let first = dist.len();
-        push_distances(b, r.clone(), &mut dist);
-        pass(PassKind::DistanceColour, first, dist.len(), &mut passes);
-    }
-    let first = dist.len();
-    push_distances(b, b.distance.colours.sequential.clone(), &mut dist);
-    pass(PassKind::DistanceSerial, first, dist.len(), &mut passes);
-    if bending {
-        for r in &b.bending.colours.independent {
-            let first = bend.len();
-            push_bends(b, r.clone(), &mut bend);
-            pass(PassKind::BendColour, first, bend.len(), &mut passes);
-        }
-        let first = bend.len();
-        push_bends(b, b.bending.colours.sequential.clone(), &mut bend);
-        pass(PassKind::BendSerial, first, bend.len(), &mut passes);
-    }
+    push_group(
+        core::slice::from_ref(&batches.boundary),
+        bending,
+        &mut dist,
+        &mut bend,
+        &mut passes,
+    );
     (dist, bend, passes)
 }
 

@@ -431,21 +431,16 @@ fn project_distance(i: u32) {
     let wb = pb.w;
     let d = pa.xyz - pb.xyz;
     let len = sqrt(dot(d, d));
-    var s = ak.y * (-(len - c.rest) - ak.x * l) / (wa + wb + ak.x);
-    var inv = 0.0;
-    if len > MIN_LENGTH {
-        inv = 1.0 / len;
-    } else {
-        s = 0.0;
+    // One division: f = Δλ/len scales the unnormalised direction d (CPU twin:
+    // solver::distance::distance_correction).
+    var f = ak.y * (-(len - c.rest) - ak.x * l) / ((wa + wb + ak.x) * len);
+    if !(len > MIN_LENGTH) || !(wa + wb > 0.0) {
+        f = 0.0;
     }
-    if !(wa + wb > 0.0) {
-        s = 0.0;
-    }
-    let nrm = d * inv;
-    state[c.a] = vec4<f32>(pa.xyz + nrm * (wa * s), wa);
-    state[c.b] = vec4<f32>(pb.xyz + nrm * (-(wb * s)), wb);
+    state[c.a] = vec4<f32>(pa.xyz + d * (wa * f), wa);
+    state[c.b] = vec4<f32>(pb.xyz + d * (-(wb * f)), wb);
     if P.accumulate != 0u {
-        state[P.lambda_base + i].x = l + s;
+        state[P.lambda_base + i].x = l + f * len;
     }
 }
 

@@ -4,19 +4,33 @@
 //!
 //! 1. **Partition.** The vertices are cut into `K` contiguous index ranges (row strips on a
 //!    grid). A constraint whose vertices all lie in one range belongs to that *part*; the
-//!    others form the *boundary*. Parts touch disjoint vertices, so they are projected on
-//!    different threads with no locks; the boundary is projected after them. `K` depends only
-//!    on the vertex count, never on the thread count, so results are bit-identical however
-//!    many threads run.
+//!    others straddle parts. Parts touch disjoint vertices, so they are projected on
+//!    different threads with no locks. A straddling constraint whose vertices lie in two
+//!    neighbouring parts `s` and `s + 1` belongs to *seam* `s`; seams of one parity (every
+//!    even seam, then every odd one) touch disjoint vertices too, so they also run in
+//!    parallel, after the parts. What is left (constraints across more than two parts, on a
+//!    mesh whose vertex order jumps) is the *boundary*, projected last on one thread. `K`
+//!    depends only on the vertex count, never on the thread count, so results are
+//!    bit-identical however many threads run.
 //! 2. **Colouring.** Inside each part (and the boundary), constraints are greedily coloured so
 //!    that no two of one colour share a vertex. A colour is projected four constraints at a
 //!    time with SIMD lanes; the GPU backend will project a colour per dispatch. Constraints
 //!    that find no free colour among 128 go to a last batch projected one by one.
 //! 3. **Layout.** Each set stores its constraints colour by colour in parallel arrays
 //!    (indices, rest values, material parameter, XPBD multiplier λ).
+//!
+//! The SIMD loops gather and scatter positions without bounds checks (they cost 13 % of a
+//! step at 256²): a set's vertex indices are private to this module, checked against the
+//! set's vertex count when it is built and never changed after, and each projection first
+//! checks that the positions it is given are at least that long. This and
+//! [`workers`](super::workers) are the only modules with `unsafe` code.
+
+// See the last paragraph above.
+#![allow(unsafe_code)]
 
 use core::ops::Range;
 
+use bytemuck::cast;
 use glam::Vec4;
 
 use super::bending::bend_correction;
@@ -24,7 +38,7 @@ use super::distance::distance_correction;
 use super::isometric::iso_correction;
 use wide::f32x4;
 
-use super::lanes::{Real, V3, add1, add4, idx, lanes, load1, load4};
+use super::lanes::{Real, V3, add1, idx, lanes, load1};
 use super::params::{Solver, SolverParams};
 use super::topology::{BendingModel, EdgeKind, Topology};
 
@@ -101,11 +115,51 @@ fn colour<const N: usize>(constraints: &[[u32; N]], vertex_count: usize) -> (Vec
     )
 }
 
+/// Panics unless every index is below `vertex_count`; returns `vertex_count`, the bound the
+/// unchecked gathers rely on.
+fn checked_bound<'a>(indices: impl Iterator<Item = &'a u32>, vertex_count: usize) -> usize {
+    for &v in indices {
+        assert!(
+            (v as usize) < vertex_count,
+            "constraint vertex {v} outside its range"
+        );
+    }
+    vertex_count
+}
+
+/// Gathers four vertices into lanes `(xyz, w)` with one 4×4 transpose.
+///
+/// # Safety
+/// Every index in `i` is below `pos.len()`.
+#[inline(always)]
+unsafe fn load4(pos: &[Vec4], i: [u32; 4]) -> (V3<f32x4>, f32x4) {
+    // SAFETY: the caller guarantees every index is in bounds.
+    let at = |k: usize| cast(unsafe { *pos.get_unchecked(i[k] as usize) });
+    let [x, y, z, w] = f32x4::transpose([at(0), at(1), at(2), at(3)]);
+    (V3 { x, y, z }, w)
+}
+
+/// Adds four lane deltas back to their vertices (the four must be distinct).
+///
+/// # Safety
+/// Every index in `i` is below `pos.len()`.
+#[inline(always)]
+unsafe fn add4(pos: &mut [Vec4], i: [u32; 4], d: V3<f32x4>) {
+    let rows = f32x4::transpose([d.x, d.y, d.z, f32x4::splat(0.0)]);
+    for (k, row) in rows.into_iter().enumerate() {
+        // SAFETY: the caller guarantees every index is in bounds.
+        unsafe { *pos.get_unchecked_mut(i[k] as usize) += cast::<f32x4, Vec4>(row) };
+    }
+}
+
 /// Distance constraints of one part or of the boundary.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub(crate) struct DistanceSet {
-    pub a: Vec<u32>,
-    pub b: Vec<u32>,
+    /// Vertex indices, all below `bound` (private: the unchecked gathers rely on it).
+    a: Vec<u32>,
+    b: Vec<u32>,
+    /// The vertex count the indices were checked against.
+    bound: usize,
     pub rest: Vec<f32>,
     pub param: Vec<f32>,
     pub lambda: Vec<f32>,
@@ -117,7 +171,10 @@ pub(crate) struct DistanceSet {
 /// Bending constraints of one part or of the boundary, in one of the two models.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub(crate) struct BendSet {
-    pub v: [Vec<u32>; 4],
+    /// Vertex indices, all below `bound` (private: the unchecked gathers rely on it).
+    v: [Vec<u32>; 4],
+    /// The vertex count the indices were checked against.
+    bound: usize,
     /// Isometric model (`a` holds each hinge's weights) or dihedral (`rest`, `weight`).
     pub iso: bool,
     pub a: [Vec<f32>; 4],
@@ -153,7 +210,18 @@ impl DistanceSet {
         }
         s.param = vec![0.0; s.a.len()];
         s.lambda = vec![0.0; s.a.len()];
+        s.bound = checked_bound(s.a.iter().chain(&s.b), vertex_count);
         s
+    }
+
+    /// First vertex of each constraint (local to the set's range).
+    pub(crate) fn a(&self) -> &[u32] {
+        &self.a
+    }
+
+    /// Second vertex of each constraint (local to the set's range).
+    pub(crate) fn b(&self) -> &[u32] {
+        &self.b
     }
 
     fn set_params(&mut self, topology: &Topology, stretch: f32, shear: f32) {
@@ -168,6 +236,10 @@ impl DistanceSet {
     /// Projects every constraint once, colour by colour. `ACC`: read and accumulate the XPBD
     /// multipliers (only needed with more than one iteration; otherwise they stay zero).
     pub(crate) fn project<const ACC: bool>(&mut self, pos: &mut [Vec4], mode: Mode) {
+        assert!(
+            pos.len() >= self.bound,
+            "positions shorter than the constraints' range"
+        );
         for c in 0..self.colours.independent.len() {
             let r = self.colours.independent[c].clone();
             let simd_end = r.start + r.len() / 4 * 4;
@@ -179,13 +251,14 @@ impl DistanceSet {
                 .zip(self.lambda[r.start..simd_end].chunks_exact_mut(4));
             for ((((a, b), rest), param), lambda) in chunks {
                 let (ia, ib) = (idx(a), idx(b));
-                let (xa, wa) = load4(pos, ia);
-                let (xb, wb) = load4(pos, ib);
+                // SAFETY (all four here): indices < `self.bound` <= `pos.len()`.
+                let (xa, wa) = unsafe { load4(pos, ia) };
+                let (xb, wb) = unsafe { load4(pos, ib) };
                 let (alpha, k) = mode.lanes(lanes(param));
                 let l = if ACC { lanes(lambda) } else { f32x4::ZERO };
                 let (da, db, dl) = distance_correction(xa, wa, xb, wb, lanes(rest), alpha, k, l);
-                add4(pos, ia, da);
-                add4(pos, ib, db);
+                unsafe { add4(pos, ia, da) };
+                unsafe { add4(pos, ib, db) };
                 if ACC {
                     lambda.copy_from_slice(&(l + dl).to_array());
                 }
@@ -246,6 +319,7 @@ impl BendSet {
             s.bend.push(b);
         }
         let n = s.bend.len();
+        s.bound = checked_bound(s.v.iter().flatten(), vertex_count);
         s.param = vec![0.0; n];
         s.lambda = vec![0.0; n];
         if s.iso {
@@ -266,6 +340,11 @@ impl BendSet {
         }
     }
 
+    /// The four vertices of each hinge (local to the set's range), one column per vertex.
+    pub(crate) fn v(&self) -> &[Vec<u32>; 4] {
+        &self.v
+    }
+
     /// Zeroes the multipliers.
     fn reset_lambda(&mut self) {
         self.lambda.fill(0.0);
@@ -284,6 +363,10 @@ impl BendSet {
     }
 
     fn project_iso<const ACC: bool>(&mut self, pos: &mut [Vec4], mode: Mode) {
+        assert!(
+            pos.len() >= self.bound,
+            "positions shorter than the constraints' range"
+        );
         for c in 0..self.colours.independent.len() {
             let r = self.colours.independent[c].clone();
             let e = r.start + r.len() / 4 * 4;
@@ -307,10 +390,11 @@ impl BendSet {
                 .zip(lz[r.start..e].chunks_exact_mut(4));
             for (((((((((((i0, i1), i2), i3), a0), a1), a2), a3), param), lx), ly), lz) in chunks {
                 let (i0, i1, i2, i3) = (idx(i0), idx(i1), idx(i2), idx(i3));
-                let (x0, w0) = load4(pos, i0);
-                let (x1, w1) = load4(pos, i1);
-                let (x2, w2) = load4(pos, i2);
-                let (x3, w3) = load4(pos, i3);
+                // SAFETY (all eight here): indices < `self.bound` <= `pos.len()`.
+                let (x0, w0) = unsafe { load4(pos, i0) };
+                let (x1, w1) = unsafe { load4(pos, i1) };
+                let (x2, w2) = unsafe { load4(pos, i2) };
+                let (x3, w3) = unsafe { load4(pos, i3) };
                 let a = [lanes(a0), lanes(a1), lanes(a2), lanes(a3)];
                 let (alpha, k) = mode.lanes(lanes(param));
                 let l = if ACC {
@@ -327,10 +411,10 @@ impl BendSet {
                     }
                 };
                 let (dx, dl) = iso_correction([x0, x1, x2, x3], [w0, w1, w2, w3], a, alpha, k, l);
-                add4(pos, i0, dx[0]);
-                add4(pos, i1, dx[1]);
-                add4(pos, i2, dx[2]);
-                add4(pos, i3, dx[3]);
+                unsafe { add4(pos, i0, dx[0]) };
+                unsafe { add4(pos, i1, dx[1]) };
+                unsafe { add4(pos, i2, dx[2]) };
+                unsafe { add4(pos, i3, dx[3]) };
                 if ACC {
                     lx.copy_from_slice(&(l.x + dl.x).to_array());
                     ly.copy_from_slice(&(l.y + dl.y).to_array());
@@ -382,6 +466,10 @@ impl BendSet {
     }
 
     fn project_dihedral<const ACC: bool>(&mut self, pos: &mut [Vec4], mode: Mode) {
+        assert!(
+            pos.len() >= self.bound,
+            "positions shorter than the constraints' range"
+        );
         for c in 0..self.colours.independent.len() {
             let r = self.colours.independent[c].clone();
             let e = r.start + r.len() / 4 * 4;
@@ -396,18 +484,19 @@ impl BendSet {
                 .zip(self.lambda[r.start..e].chunks_exact_mut(4));
             for ((((((i0, i1), i2), i3), rest), param), lambda) in chunks {
                 let (i0, i1, i2, i3) = (idx(i0), idx(i1), idx(i2), idx(i3));
-                let (x0, w0) = load4(pos, i0);
-                let (x1, w1) = load4(pos, i1);
-                let (x2, w2) = load4(pos, i2);
-                let (x3, w3) = load4(pos, i3);
+                // SAFETY (all eight here): indices < `self.bound` <= `pos.len()`.
+                let (x0, w0) = unsafe { load4(pos, i0) };
+                let (x1, w1) = unsafe { load4(pos, i1) };
+                let (x2, w2) = unsafe { load4(pos, i2) };
+                let (x3, w3) = unsafe { load4(pos, i3) };
                 let (alpha, k) = mode.lanes(lanes(param));
                 let l = if ACC { lanes(lambda) } else { f32x4::ZERO };
                 let (dx, dl) =
                     bend_correction([x0, x1, x2, x3], [w0, w1, w2, w3], lanes(rest), alpha, k, l);
-                add4(pos, i0, dx[0]);
-                add4(pos, i1, dx[1]);
-                add4(pos, i2, dx[2]);
-                add4(pos, i3, dx[3]);
+                unsafe { add4(pos, i0, dx[0]) };
+                unsafe { add4(pos, i1, dx[1]) };
+                unsafe { add4(pos, i2, dx[2]) };
+                unsafe { add4(pos, i3, dx[3]) };
                 if ACC {
                     lambda.copy_from_slice(&(l + dl).to_array());
                 }
@@ -453,7 +542,8 @@ impl BendSet {
     }
 }
 
-/// The constraints of one vertex range (or of the boundary, with range `0..n`).
+/// The constraints of one vertex range: a part, a seam (two neighbouring parts' ranges), or
+/// the boundary (range `0..n`). Indices are relative to the range's start.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub(crate) struct Part {
     pub range: Range<usize>,
@@ -524,6 +614,9 @@ pub fn default_part_count(n: usize) -> usize {
 #[derive(Clone, Debug, PartialEq)]
 pub struct ConstraintBatches {
     pub(crate) parts: Vec<Part>,
+    /// Seams between neighbouring parts: `[even, odd]`, each in vertex order. Seams of one
+    /// parity share no vertex.
+    pub(crate) seams: [Vec<Part>; 2],
     pub(crate) boundary: Part,
     pub(crate) bending: bool,
     pub(crate) mode_is_xpbd: bool,
@@ -549,42 +642,44 @@ impl ConstraintBatches {
             }
             p
         };
-        let mut part_edges = vec![Vec::new(); k];
-        let mut boundary_edges = Vec::new();
+        // Where a constraint goes: its part, seam `k + s`, or the boundary `2k − 1`.
+        let home = |v: &[u32]| -> usize {
+            let (lo, hi) = v.iter().fold((usize::MAX, 0), |(lo, hi), &v| {
+                let p = part_of(v);
+                (lo.min(p), hi.max(p))
+            });
+            match hi - lo {
+                0 => lo,
+                1 => k + lo,
+                _ => 2 * k - 1,
+            }
+        };
+        let mut edges = vec![Vec::new(); 2 * k];
         for (i, e) in topology.edges().iter().enumerate() {
-            let p = part_of(e.v[0]);
-            if part_of(e.v[1]) == p {
-                part_edges[p].push(i as u32);
-            } else {
-                boundary_edges.push(i as u32);
-            }
+            edges[home(&e.v)].push(i as u32);
         }
-        let mut part_bends = vec![Vec::new(); k];
-        let mut boundary_bends = Vec::new();
+        let mut bends = vec![Vec::new(); 2 * k];
         for (i, b) in topology.bends().iter().enumerate() {
-            let p = part_of(b.v[0]);
-            if b.v.iter().all(|&v| part_of(v) == p) {
-                part_bends[p].push(i as u32);
-            } else {
-                boundary_bends.push(i as u32);
-            }
+            bends[home(&b.v)].push(i as u32);
         }
+        let build = |range: Range<usize>, slot: usize| Part {
+            distance: DistanceSet::build(topology, &edges[slot], range.start as u32, range.len()),
+            bending: BendSet::build(topology, &bends[slot], range.start as u32, range.len()),
+            range,
+        };
         let parts = ranges
             .iter()
             .enumerate()
-            .map(|(p, r)| Part {
-                range: r.clone(),
-                distance: DistanceSet::build(topology, &part_edges[p], r.start as u32, r.len()),
-                bending: BendSet::build(topology, &part_bends[p], r.start as u32, r.len()),
-            })
+            .map(|(p, r)| build(r.clone(), p))
             .collect();
-        let boundary = Part {
-            range: 0..n,
-            distance: DistanceSet::build(topology, &boundary_edges, 0, n),
-            bending: BendSet::build(topology, &boundary_bends, 0, n),
-        };
+        let mut seams = [Vec::new(), Vec::new()];
+        for s in 0..k - 1 {
+            seams[s % 2].push(build(ranges[s].start..ranges[s + 1].end, k + s));
+        }
+        let boundary = build(0..n, 2 * k - 1);
         let mut batches = Self {
             parts,
+            seams,
             boundary,
             bending: false,
             mode_is_xpbd: false,
@@ -611,9 +706,12 @@ impl ConstraintBatches {
         };
         self.bending = params.solver.bending_enabled();
         self.mode_is_xpbd = matches!(params.solver, Solver::Xpbd { .. });
+        let [even, odd] = &mut self.seams;
         for part in self
             .parts
             .iter_mut()
+            .chain(even.iter_mut())
+            .chain(odd.iter_mut())
             .chain(core::iter::once(&mut self.boundary))
         {
             part.distance.set_params(topology, stretch, shear);
@@ -627,10 +725,26 @@ impl ConstraintBatches {
         self.parts.len()
     }
 
-    /// Constraints (distance + bending) that straddle two parts and run after them.
+    /// Constraints (distance + bending) that straddle parts and run after them (on the
+    /// seams between neighbouring parts and on the boundary).
     #[must_use]
     pub fn boundary_len(&self) -> usize {
-        self.boundary.distance.a.len() + self.boundary.bending.rest.len()
+        self.after_parts()
+            .map(|p| p.distance.a.len() + p.bending.bend.len())
+            .sum()
+    }
+
+    /// The seams (even, then odd) and the boundary, in the order they are projected.
+    pub(crate) fn after_parts(&self) -> impl Iterator<Item = &Part> {
+        self.seams[0]
+            .iter()
+            .chain(&self.seams[1])
+            .chain(core::iter::once(&self.boundary))
+    }
+
+    /// Every part, seam and the boundary, in projection order.
+    fn all_parts(&self) -> impl Iterator<Item = &Part> {
+        self.parts.iter().chain(self.after_parts())
     }
 
     /// Every distance constraint's vertices in global indices, colour by colour:
@@ -638,7 +752,7 @@ impl ConstraintBatches {
     #[must_use]
     pub fn distance_colours(&self) -> Vec<Vec<[u32; 2]>> {
         let mut out = Vec::new();
-        for part in self.parts.iter().chain(core::iter::once(&self.boundary)) {
+        for part in self.all_parts() {
             let base = part.range.start as u32;
             let s = &part.distance;
             for r in &s.colours.independent {
@@ -652,7 +766,7 @@ impl ConstraintBatches {
     #[must_use]
     pub fn bending_colours(&self) -> Vec<Vec<[u32; 4]>> {
         let mut out = Vec::new();
-        for part in self.parts.iter().chain(core::iter::once(&self.boundary)) {
+        for part in self.all_parts() {
             let base = part.range.start as u32;
             let s = &part.bending;
             for r in &s.colours.independent {
@@ -705,9 +819,7 @@ mod tests {
                 seen += colour.len();
             }
             let seq: usize = b
-                .parts
-                .iter()
-                .chain([&b.boundary])
+                .all_parts()
                 .map(|p| p.distance.colours.sequential.len())
                 .sum();
             assert_eq!(seen + seq, t.edges().len());
@@ -738,15 +850,70 @@ mod tests {
     fn parts_only_hold_their_own_vertices() {
         let (t, b) = batches(20, 4);
         assert_eq!(b.part_count(), 4);
-        for p in &b.parts {
+        assert_eq!((b.seams[0].len(), b.seams[1].len()), (2, 1));
+        for p in b.all_parts() {
             for (&a, &bb) in p.distance.a.iter().zip(&p.distance.b) {
                 assert!((a as usize) < p.range.len() && (bb as usize) < p.range.len());
             }
+            for v in &p.bending.v {
+                assert!(v.iter().all(|&v| (v as usize) < p.range.len()));
+            }
         }
-        let inside: usize = b.parts.iter().map(|p| p.distance.a.len()).sum();
-        assert_eq!(inside + b.boundary.distance.a.len(), t.edges().len());
-        // Row strips: the boundary is a few rows' worth, not the whole cloth.
+        // Seams of one parity cover disjoint vertex ranges, each two neighbouring parts.
+        for (parity, seams) in b.seams.iter().enumerate() {
+            for (i, seam) in seams.iter().enumerate() {
+                let s = 2 * i + parity;
+                assert_eq!(seam.range, b.parts[s].range.start..b.parts[s + 1].range.end);
+            }
+        }
+        let count =
+            |it: &mut dyn Iterator<Item = &Part>| -> usize { it.map(|p| p.distance.a.len()).sum() };
+        let inside = count(&mut b.parts.iter());
+        let seams = count(&mut b.seams.iter().flatten());
+        assert!(seams > 0);
+        // On a grid in row order every straddling constraint joins neighbouring parts.
+        assert_eq!(
+            b.boundary.distance.a.len() + b.boundary.bending.bend.len(),
+            0
+        );
+        assert_eq!(inside + seams, t.edges().len());
+        // Row strips: the seams are a few rows' worth, not the whole cloth.
+        assert!(b.boundary_len() > 0);
         assert!(b.boundary_len() < (t.edges().len() + t.bends().len()) / 4);
+    }
+
+    #[test]
+    fn jumbled_vertex_order_puts_far_constraints_on_the_boundary() {
+        // A grid whose vertex order jumps (v → 7v mod n): many constraints join parts that
+        // are not neighbours; every constraint is still projected exactly once.
+        let g = Grid::new(12, 12, 1.0, 1.0);
+        let n = g.vertex_count() as u32;
+        let map = |v: u32| v * 7 % n;
+        let mut pos = vec![glam::Vec3::ZERO; n as usize];
+        for (v, p) in g.positions().into_iter().enumerate() {
+            pos[map(v as u32) as usize] = p;
+        }
+        let idx: Vec<u32> = g.indices().into_iter().map(map).collect();
+        let t = Topology::from_triangles(&pos, None, &idx, TopologyOptions::default()).unwrap();
+        let b = ConstraintBatches::new(&t, &SolverParams::default(), 4);
+        assert!(!b.boundary.distance.a.is_empty() && !b.boundary.bending.bend.is_empty());
+        let edges: usize = b.all_parts().map(|p| p.distance.a.len()).sum();
+        let bends: usize = b.all_parts().map(|p| p.bending.bend.len()).sum();
+        assert_eq!((edges, bends), (t.edges().len(), t.bends().len()));
+        // The seams still only hold constraints of their two parts.
+        for seam in b.seams.iter().flatten() {
+            for (&a, &bb) in seam.distance.a.iter().zip(&seam.distance.b) {
+                assert!((a as usize) < seam.range.len() && (bb as usize) < seam.range.len());
+            }
+        }
+    }
+
+    #[test]
+    #[should_panic(expected = "positions shorter")]
+    fn projecting_too_few_positions_panics_instead_of_reading_past_them() {
+        let (_, mut b) = batches(8, 1);
+        let mut pos = vec![Vec4::ZERO; 63];
+        b.parts[0].project(&mut pos, Mode::Pbd, true, false);
     }
 
     #[test]

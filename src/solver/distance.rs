@@ -30,14 +30,15 @@ pub(crate) fn distance_correction<T: Real>(
     let d = xa - xb;
     let len = d.length_squared().sqrt();
     let denom = wa + wb + alpha;
-    let s = k * (-(len - rest) - alpha * lambda) / denom;
+    // One division: `f = Δλ/len` scales the unnormalised direction `d`; `Δλ = f·len`.
+    let f = k * (-(len - rest) - alpha * lambda) / (denom * len);
     // No direction or nothing can move: no correction (and no NaN from 0/0). The test is on
     // wa + wb, not the denominator: with both ends pinned and a tiny (even denormal) α̃,
-    // −C/α̃ overflows to ∞ and 0·∞ would be NaN.
-    let s = len.if_gt(T::splat(MIN_LENGTH), s, zero);
-    let s = (wa + wb).if_gt(zero, s, zero);
-    let n = d.scale(len.if_gt(T::splat(MIN_LENGTH), T::splat(1.0) / len, zero));
-    (n.scale(wa * s), n.scale(-(wb * s)), s)
+    // −C/α̃ overflows to ∞ and 0·∞ would be NaN. A huge α̃ makes `denom·len` infinite and
+    // `f` zero.
+    let f = len.if_gt(T::splat(MIN_LENGTH), f, zero);
+    let f = (wa + wb).if_gt(zero, f, zero);
+    (d.scale(wa * f), d.scale(-(wb * f)), f * len)
 }
 
 #[cfg(test)]

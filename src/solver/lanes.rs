@@ -5,7 +5,6 @@
 //! constraints of one colour at once. Both share every formula, so they agree up to the
 //! rounding of `sqrt`/`atan2`.
 
-use bytemuck::cast;
 use core::ops::{Add, Div, Mul, Neg, Sub};
 use glam::Vec4;
 use wide::{CmpGt, f32x4};
@@ -183,27 +182,6 @@ pub(crate) fn add1(p: &mut Vec4, d: V3<f32>) {
     p.x += d.x;
     p.y += d.y;
     p.z += d.z;
-}
-
-/// Gathers four vertices into lanes `(xyz, w)` with one 4×4 transpose.
-#[inline(always)]
-pub(crate) fn load4(pos: &[Vec4], i: [u32; 4]) -> (V3<f32x4>, f32x4) {
-    let [x, y, z, w] = f32x4::transpose([
-        cast(pos[i[0] as usize]),
-        cast(pos[i[1] as usize]),
-        cast(pos[i[2] as usize]),
-        cast(pos[i[3] as usize]),
-    ]);
-    (V3 { x, y, z }, w)
-}
-
-/// Adds four lane deltas back to their vertices (the four must be distinct).
-#[inline(always)]
-pub(crate) fn add4(pos: &mut [Vec4], i: [u32; 4], d: V3<f32x4>) {
-    let rows = f32x4::transpose([d.x, d.y, d.z, f32x4::splat(0.0)]);
-    for k in 0..4 {
-        pos[i[k] as usize] += cast::<f32x4, Vec4>(rows[k]);
-    }
 }
 
 /// Four consecutive values of a slice chunk as lanes.

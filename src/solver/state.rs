@@ -298,10 +298,11 @@ impl ClothState {
     /// Whether every position and velocity is finite (cheap: one pass, no counting).
     #[must_use]
     pub fn is_finite(&self) -> bool {
+        // Branch-free: this runs after every step over every vertex.
         self.positions
             .iter()
             .chain(&self.velocities)
-            .all(|v| v.is_finite())
+            .fold(true, |ok, v| ok & v.is_finite())
     }
 
     /// Number of position or velocity components that are NaN or infinite.

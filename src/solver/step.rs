@@ -8,13 +8,15 @@
 //!    [`air_velocity_change`]), then `x ← x + v·h`;
 //!    If bending is solved implicitly (see [`BendingSolve`](super::BendingSolve)), one banded
 //!    solve `(M + h²K) δ = −h²K x̃` follows, and the projections below skip bending;
-//! 3. `iterations` times: each part's constraints (in parallel), then the boundary's;
+//! 3. `iterations` times: each part's constraints (in parallel), then the even seams' and
+//!    the odd seams' (each in parallel), then the boundary's;
 //! 4. tethers, then self-collision (if on; one pass each);
 //! 5. colliders (if any), each part in parallel;
 //! 6. `v ← (x − x_prev)/h` (done at the start of the next substep, or at the end).
 //!
-//! Step 2 and the first iteration of step 3 share one parallel region, so a substep with one
-//! iteration and no colliders costs one fork–join. Everything a scene does not use costs
+//! Step 2 and the parts' first iteration of step 3 share one parallel region, so a substep
+//! with one iteration and no colliders costs three fork–joins (parts, even seams, odd
+//! seams; a cloth of one part has no seams and costs one). Everything a scene does not use costs
 //! nothing: no collider pass without colliders, no tether or self-collision pass unless set,
 //! no air term with [`Aerodynamics::NONE`], no bending pass at zero bending stiffness. Each
 //! vertex's area vector is computed once per step, from the positions at its start.
@@ -126,6 +128,25 @@ fn split<'a>(
             area: ar,
             impulses,
         });
+    }
+    out
+}
+
+/// Each seam of one parity with the positions of its vertex range (the ranges are disjoint
+/// and in order).
+fn split_seams<'a>(
+    seams: &'a mut [Part],
+    mut pos: &'a mut [Vec4],
+) -> Vec<(&'a mut Part, &'a mut [Vec4])> {
+    let mut out = Vec::with_capacity(seams.len());
+    let mut offset = 0;
+    for seam in seams {
+        let r = seam.range.clone();
+        let (_, rest) = core::mem::take(&mut pos).split_at_mut(r.start - offset);
+        let (p, rest) = rest.split_at_mut(r.len());
+        pos = rest;
+        offset = r.end;
+        out.push((seam, p));
     }
     out
 }
@@ -405,6 +426,16 @@ pub fn step(
                 phase,
                 poses,
             );
+            // Then what straddles parts: even seams in parallel, odd seams, the rest.
+            for seams in &mut batches.seams {
+                let mut work = split_seams(seams, &mut state.positions);
+                par.for_each_mut(&mut work, |(seam, pos)| {
+                    if it == 0 && c.accumulate {
+                        seam.reset_lambda();
+                    }
+                    seam.project(pos, c.mode, c.bending, c.accumulate);
+                });
+            }
             if it == 0 && c.accumulate {
                 batches.boundary.reset_lambda();
             }
