@@ -18,6 +18,9 @@ pub struct RayHit {
     pub nearest: u32,
 }
 
+/// Barycentric slack of [`ray_hit`] (a fraction of the triangle).
+const EDGE_SLACK: f32 = 1e-5;
+
 /// The first triangle of `triangles` (particle indices into `positions`) that the ray
 /// `origin + t·dir`, `t ≥ 0`, meets, from either side (Möller–Trumbore). Degenerate
 /// triangles, non-finite positions and a zero or non-finite ray meet nothing.
@@ -48,12 +51,14 @@ pub fn ray_hit(
         let inv = 1.0 / det;
         let s = origin - a;
         let u = s.dot(p) * inv;
-        if !(0.0..=1.0).contains(&u) {
+        // A little slack on the barycentric tests: a ray through a shared edge or vertex
+        // must not slip between the triangles that share it by rounding.
+        if !(-EDGE_SLACK..=1.0 + EDGE_SLACK).contains(&u) {
             continue;
         }
         let q = s.cross(e1);
         let v = dir.dot(q) * inv;
-        if !(v >= 0.0 && u + v <= 1.0) {
+        if !(v >= -EDGE_SLACK && u + v <= 1.0 + EDGE_SLACK) {
             continue;
         }
         let t = e2.dot(q) * inv;
@@ -84,6 +89,50 @@ pub fn ray_hit(
 mod tests {
     use super::*;
     use crate::solver::Grid;
+
+    #[test]
+    fn rays_through_vertices_and_edges_do_not_slip_between_triangles() {
+        // A crumpled 12×10 sheet; rays from several eyes aimed exactly at every interior
+        // vertex and edge midpoint must meet it.
+        let g = Grid::new(12, 10, 1.0, 1.0);
+        let pos: Vec<Vec4> = g
+            .positions()
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let f = i as f32;
+                (*p + Vec3::new(
+                    0.013 * (f * 1.7).sin(),
+                    0.2 * (f * 0.37).sin() + 0.07 * (f * 2.3).cos(),
+                    0.011 * (f * 0.9).cos(),
+                ))
+                .extend(1.0)
+            })
+            .collect();
+        let tris: Vec<[u32; 3]> = g.indices().chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let mut misses = 0;
+        let mut tries = 0;
+        for eye in [
+            Vec3::new(0.0, 1.0, 8.0),
+            Vec3::new(0.3, 5.0, 0.2),
+            Vec3::new(-3.0, 2.0, 1.0),
+            Vec3::new(2.0, -4.0, 0.5),
+        ] {
+            for j in 1..9 {
+                for i in 1..11 {
+                    let v = pos[g.index(i, j) as usize].xyz();
+                    let w = pos[g.index(i + 1, j) as usize].xyz();
+                    for target in [v, (v + w) * 0.5] {
+                        tries += 1;
+                        if ray_hit(&pos, &tris, eye, target - eye).is_none() {
+                            misses += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert_eq!(misses, 0, "{misses} of {tries} rays slipped through");
+    }
 
     fn grid(y: f32) -> (Vec<Vec4>, Vec<[u32; 3]>) {
         let g = Grid::new(5, 5, 1.0, 1.0);
