@@ -7,7 +7,9 @@
 //! stiffness 1); XPBD shear 1e-6 and the library's default bending (isometric, the default
 //! fabric's `B` = 1e-4 N·m; `--bending dihedral` takes the dihedral model at compliance 1e-3,
 //! the setting earlier tables used) and 1.0 / 0.5 stiffness for PBD; the lab solver has no
-//! bending. No air (the peer has none).
+//! bending. No air (the peer has none). The solver `xpbd+tethers` is the XPBD scene with
+//! every vertex tethered to both pins (`TetherParams::default()`, long-range attachments),
+//! at 5, 10 and 20 substeps × 1 iteration; the budget summaries leave it out.
 //!
 //! Per case: `ms_per_frame` (median wall time of a step over the frames after 10 of warm-up),
 //! `max_strain` and `mean_strain` (|length − rest|/rest over all edges at the end), and
@@ -36,7 +38,7 @@
 //! with `step_many`, and one 128² with 64 × 16² on all threads against one thread.
 //!
 //! `--sleep`: the standard scene with damping 2/s until it sleeps, the median awake step
-//! against the median asleep step.
+//! against the median asleep step (`--tethers`: with tethers to both pins).
 //!
 //! `--backend gpu`: the standard scene (XPBD 10 × 1) at 64², 128², 256² and 512² (`--sizes`),
 //! without and with self-collision, on the CPU and on the GPU kernels (`src/gpu`) in the same
@@ -137,6 +139,11 @@ fn solver(name: &str, h: f32, bending: Bending) -> Solver {
 }
 
 fn scene(n: u32, name: &str, substeps: u32, iterations: u32, bending: Bending) -> Simulation {
+    // `xpbd+tethers`: the XPBD scene with each vertex tethered to both pins.
+    let (name, tethered) = match name.strip_suffix("+tethers") {
+        Some(base) => (base, true),
+        None => (name, false),
+    };
     let grid = Grid::new(n, n, 1.0, 1.0);
     let topology = grid
         .topology(TopologyOptions {
@@ -166,6 +173,13 @@ fn scene(n: u32, name: &str, substeps: u32, iterations: u32, bending: Bending) -
             target: rest[v as usize],
         }))
         .unwrap();
+    if tethered {
+        sim.set_features(Features {
+            tethers: Some(TetherParams::default()),
+            ..Default::default()
+        })
+        .unwrap();
+    }
     sim
 }
 
@@ -620,6 +634,13 @@ fn sleep_cost(args: &Args, par: &Workers, bending: Bending) {
                 ..*sim.params()
             };
             sim.set_params(params).unwrap();
+            if args.rest.contains_key("tethers") {
+                sim.set_features(Features {
+                    tethers: Some(TetherParams::default()),
+                    ..Default::default()
+                })
+                .unwrap();
+            }
             sim
         };
         let median = |mut t: Vec<f64>| {
@@ -685,7 +706,12 @@ fn main() {
     let solvers: Vec<String> = list(
         &args,
         "solvers",
-        &["xpbd".to_string(), "pbd".to_string(), "lab".to_string()],
+        &[
+            "xpbd".to_string(),
+            "xpbd+tethers".to_string(),
+            "pbd".to_string(),
+            "lab".to_string(),
+        ],
     );
     let substeps: Option<Vec<u32>> = args
         .rest
@@ -738,6 +764,7 @@ fn main() {
             let (default_s, default_i): (&[u32], &[u32]) = match (name.as_str(), quick) {
                 ("lab", true) => (&[1], &[32]),
                 ("lab", false) => (&[1, 4], &[8, 32]),
+                ("xpbd+tethers", _) => (&[5, 10, 20], &[1]),
                 (_, true) => (&[5, 10, 20], &[1]),
                 (_, false) => (&[1, 2, 5, 10, 20, 40], &[1, 3]),
             };
@@ -770,7 +797,9 @@ fn main() {
         for budget in [1.0, 4.0, 16.0] {
             let best = rows
                 .iter()
+                // Without tethers (the README's budget table says so).
                 .filter(|r| r.1 == n && r.4.ms <= budget && r.4.nan == 0)
+                .filter(|r| !r.0.ends_with("+tethers"))
                 .min_by(|a, b| a.4.max_strain.total_cmp(&b.4.max_strain));
             let mut j = Json::default()
                 .str("summary", "lowest_max_strain_within_budget")
@@ -804,17 +833,24 @@ fn main() {
                             .iter()
                             .find(|r| r.0 == "xpbd" && r.1 == n && r.2 == 10 && r.3 == 1)
                     {
-                        println!(
-                            "{}",
-                            Json::default()
-                                .str("summary", "against_peer_xpbd_10x1")
-                                .num("n", n)
-                                .num("ours_ms", (ours.4.ms * 1e4).round() / 1e4)
-                                .num("peer_ms", p.ms)
-                                .num("speed_ratio", p.ms / ours.4.ms)
-                                .num("ours_max_strain", ours.4.max_strain)
-                                .num("peer_max_strain", p.max_strain)
-                        );
+                        let mut j = Json::default()
+                            .str("summary", "against_peer_xpbd_10x1")
+                            .num("n", n)
+                            .num("ours_ms", (ours.4.ms * 1e4).round() / 1e4)
+                            .num("peer_ms", p.ms)
+                            .num("speed_ratio", p.ms / ours.4.ms)
+                            .num("ours_max_strain", ours.4.max_strain)
+                            .num("peer_max_strain", p.max_strain);
+                        if let Some(t) = rows
+                            .iter()
+                            .find(|r| r.0 == "xpbd+tethers" && r.1 == n && r.2 == 10 && r.3 == 1)
+                        {
+                            j = j
+                                .num("tethered_ms", (t.4.ms * 1e4).round() / 1e4)
+                                .num("tethered_speed_ratio", p.ms / t.4.ms)
+                                .num("tethered_max_strain", t.4.max_strain);
+                        }
+                        println!("{j}");
                     }
                     peer_points.push(p);
                 }
@@ -832,9 +868,9 @@ fn main() {
     }
     if args.rest.contains_key("markdown") && !peer_points.is_empty() {
         eprintln!(
-            "| n | ours ms/frame | pypbd ms/frame | ratio | our max strain | pypbd max strain |"
+            "| n | ours ms/frame | pypbd ms/frame | ratio | our max strain | pypbd max strain | ours + tethers: ms/frame | ratio | max strain |"
         );
-        eprintln!("|---|---|---|---|---|---|");
+        eprintln!("|---|---|---|---|---|---|---|---|---|");
         for p in peer_points
             .iter()
             .filter(|p| p.substeps == 10 && p.iterations == 1)
@@ -843,8 +879,19 @@ fn main() {
                 .iter()
                 .find(|r| r.0 == "xpbd" && r.1 == p.n && r.2 == 10 && r.3 == 1)
             {
+                let tethered = rows
+                    .iter()
+                    .find(|r| r.0 == "xpbd+tethers" && r.1 == p.n && r.2 == 10 && r.3 == 1)
+                    .map_or("– | – | –".to_string(), |t| {
+                        format!(
+                            "{:.2} | {:.1}× | {:.1} %",
+                            t.4.ms,
+                            p.ms / t.4.ms,
+                            t.4.max_strain * 100.0
+                        )
+                    });
                 eprintln!(
-                    "| {}² | {:.2} | {:.1} | {:.1}× | {:.0} % | {:.0} % |",
+                    "| {}² | {:.2} | {:.1} | {:.1}× | {:.1} % | {:.1} % | {tethered} |",
                     p.n,
                     o.4.ms,
                     p.ms,

@@ -283,6 +283,52 @@ mod tests {
         }
     }
 
+    /// Tethers hold the span below the pins, which a fine cloth stretches at rest: such
+    /// hard limits made the hierarchical and chain solvers cycle forever (README, "Tried for
+    /// stretch"); a tethered cloth must still come to rest. At 128² it does where the plain
+    /// solver keeps moving (it hangs stretched many times over, and slides).
+    #[test]
+    fn a_tethered_fine_cloth_comes_to_rest_where_the_plain_one_keeps_moving() {
+        let make = |tethers: bool| {
+            let grid = Grid::new(128, 128, 1.0, 1.0);
+            let topology = grid.topology(TopologyOptions::default()).unwrap();
+            let masses = topology.masses(1.0, MassDistribution::Uniform);
+            let mut sim = Simulation::new(topology, &masses, params()).unwrap();
+            let rest = grid.positions();
+            sim.state_mut()
+                .set_pins([grid.index(0, 0), grid.index(127, 0)].map(|v| Pin {
+                    vertex: v,
+                    target: rest[v as usize],
+                }))
+                .unwrap();
+            if tethers {
+                sim.set_features(crate::solver::Features {
+                    tethers: Some(crate::solver::TetherParams::default()),
+                    ..Default::default()
+                })
+                .unwrap();
+            }
+            sim
+        };
+        let env = Environment::default();
+        let steps = 900;
+        let mut tethered = make(true);
+        let slept = until_asleep(&mut tethered, &env, steps);
+        let strain = tethered.strain().max;
+        assert!(strain < 0.2, "tethered max strain {strain}");
+        let mut plain = make(false);
+        for _ in 0..steps {
+            plain.step_in(DT, &env, &Serial);
+        }
+        assert!(
+            !plain.is_sleeping() && plain.strain().max > 10.0 * strain,
+            "the plain cloth: asleep {}, max strain {} (tethered: asleep after {slept} \
+             steps, {strain})",
+            plain.is_sleeping(),
+            plain.strain().max
+        );
+    }
+
     #[test]
     fn a_moved_pin_wakes_it_and_a_pin_on_its_target_does_not() {
         let (mut sim, grid) = hanging();

@@ -72,6 +72,8 @@ pub struct StepScratch {
     impulses: Vec<ContactImpulse>,
     self_collision: SelfCollisionScratch,
     areas: Vec<Vec4>,
+    /// Where the tethers' pins were at the end of the substep whose tethers are due.
+    anchors: Vec<Vec4>,
     pub(crate) implicit: ImplicitBending,
 }
 
@@ -154,6 +156,9 @@ fn split_seams<'a>(
 /// What a parallel region does to each part, in this order.
 #[derive(Clone, Copy, Default)]
 struct Phase {
+    /// Pull over-stretched vertices back to their pins (the previous substep's tethers: they
+    /// run first in the next region over the parts instead of in a region of their own).
+    tethers: bool,
     /// `v ← (x − x_prev)/h` for unpinned vertices.
     finish_velocity: bool,
     /// Integrate (and zero λ).
@@ -204,7 +209,13 @@ fn run_part(
     c: Consts,
     colliders: &[Collider],
     poses: &[SubstepPose],
+    tethers: Option<(&Tethers, &[Vec4])>,
 ) {
+    if phase.tethers
+        && let Some((t, anchors)) = tethers
+    {
+        t.project_range(w.part.range.clone(), w.pos, anchors);
+    }
     if phase.finish_velocity {
         for ((v, x), p) in w.vel.iter_mut().zip(w.pos.iter()).zip(w.prev.iter()) {
             // Unpinned vertices have the same inverse mass in x and x_prev: w − w = 0.
@@ -367,12 +378,17 @@ pub fn step(
         p.clear();
         p.resize(colliders.len(), ContactImpulse::default());
     }
+    // Tethers built for this cloth's vertices (a stale set, after a tear, waits for its
+    // rebuild), and whether the last substep's tethers are still to be applied.
+    let tethers = input.tethers.filter(|t| t.vertex_count() == state.len());
+    let mut tethers_due = false;
     // One phase over every part, the parts in parallel.
     let run_parts = |parts: &mut [Part],
                      state: &mut ClothState,
                      impulses: &mut [Vec<ContactImpulse>],
                      phase: Phase,
-                     poses: &[SubstepPose]| {
+                     poses: &[SubstepPose],
+                     anchors: &[Vec4]| {
         let mut work = split(
             parts,
             &mut state.positions,
@@ -382,7 +398,10 @@ pub fn step(
             areas,
             impulses,
         );
-        par.for_each_mut(&mut work, |w| run_part(w, phase, c, colliders, poses));
+        let tethers = tethers.map(|t| (t, anchors));
+        par.for_each_mut(&mut work, |w| {
+            run_part(w, phase, c, colliders, poses, tethers);
+        });
     };
     for s in 0..substeps {
         // Pins: finish their velocity for the previous substep, then move.
@@ -399,6 +418,7 @@ pub fn step(
 
         if implicit {
             let phase = Phase {
+                tethers: core::mem::take(&mut tethers_due),
                 finish_velocity: s > 0,
                 integrate: true,
                 ..Default::default()
@@ -409,11 +429,13 @@ pub fn step(
                 &mut scratch.part_impulses,
                 phase,
                 poses,
+                &scratch.anchors,
             );
             scratch.implicit.solve(topology, &mut state.positions, h);
         }
         for it in 0..params.iterations.max(1) {
             let phase = Phase {
+                tethers: core::mem::take(&mut tethers_due),
                 finish_velocity: it == 0 && s > 0 && !implicit,
                 integrate: it == 0 && !implicit,
                 project: true,
@@ -425,6 +447,7 @@ pub fn step(
                 &mut scratch.part_impulses,
                 phase,
                 poses,
+                &scratch.anchors,
             );
             // Then what straddles parts: even seams in parallel, odd seams, the rest.
             for seams in &mut batches.seams {
@@ -443,10 +466,30 @@ pub fn step(
                 .boundary
                 .project(&mut state.positions, c.mode, c.bending, c.accumulate);
         }
-        if let Some(tethers) = input.tethers {
-            tethers.project(&mut state.positions);
+        // Tethers: where the pins are now, applied first in the next region over the parts
+        // (nothing between here and there moves a free vertex or a pin).
+        if let Some(t) = tethers {
+            scratch.anchors.clear();
+            scratch
+                .anchors
+                .extend(t.anchors().iter().map(|&p| state.positions[p as usize]));
+            tethers_due = true;
         }
         if let Some(sc) = input.self_collision {
+            if core::mem::take(&mut tethers_due) {
+                let phase = Phase {
+                    tethers: true,
+                    ..Default::default()
+                };
+                run_parts(
+                    &mut batches.parts,
+                    state,
+                    &mut scratch.part_impulses,
+                    phase,
+                    poses,
+                    &scratch.anchors,
+                );
+            }
             if input.parallel_self_collision {
                 self_collide_parallel(
                     &mut state.positions,
@@ -465,6 +508,7 @@ pub fn step(
         }
         if !colliders.is_empty() {
             let phase = Phase {
+                tethers: core::mem::take(&mut tethers_due),
                 collide: true,
                 ..Default::default()
             };
@@ -474,10 +518,12 @@ pub fn step(
                 &mut scratch.part_impulses,
                 phase,
                 poses,
+                &scratch.anchors,
             );
         }
     }
     let phase = Phase {
+        tethers: tethers_due,
         finish_velocity: true,
         ..Default::default()
     };
@@ -487,6 +533,7 @@ pub fn step(
         &mut scratch.part_impulses,
         phase,
         &scratch.poses,
+        &scratch.anchors,
     );
     finish_pin_velocities(state, c.inv_h);
     // Momentum per collider: the per-part sums of −m·Δx, over h.

@@ -15,7 +15,11 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
+use core::ops::Range;
+
+use bytemuck::cast;
 use glam::{Vec3, Vec4, Vec4Swizzles};
+use wide::{CmpGt, f32x4};
 
 use super::topology::Topology;
 
@@ -38,12 +42,26 @@ impl Default for TetherParams {
     }
 }
 
-/// Each tethered vertex, the pin it hangs from, and the longest distance allowed.
+/// Each tethered vertex's pins and the longest distance allowed from each.
+///
+/// Stored in rounds: round `r` holds, for every vertex, its `r`-th nearest pin (as a slot in
+/// [`Tethers::anchors`]) and the limit, `+∞` where a vertex has fewer tethers. So four
+/// neighbouring vertices are projected together in SIMD lanes, and a vertex range (a part)
+/// alone, in parallel with the others.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Tethers {
-    vertex: Vec<u32>,
-    pin: Vec<u32>,
+    /// The pinned vertex of each anchor slot.
+    anchors: Vec<u32>,
+    /// Vertex count.
+    n: usize,
+    /// Rounds stored (the most tethers any vertex has).
+    rounds: usize,
+    /// `rounds × n`: the anchor slot of each vertex's tether in each round.
+    slot: Vec<u32>,
+    /// `rounds × n`: the longest distance allowed (`+∞`: no tether).
     max_len: Vec<f32>,
+    /// Number of tethers.
+    len: usize,
 }
 
 impl Tethers {
@@ -95,7 +113,9 @@ impl Tethers {
             }
         }
         let pinned: std::collections::HashSet<u32> = pins.iter().copied().collect();
-        let mut t = Tethers::default();
+        let mut anchors: Vec<u32> = Vec::new();
+        let mut slot_of = std::collections::HashMap::new();
+        let mut lists: Vec<Vec<(u32, f32)>> = vec![Vec::new(); n];
         for (v, list) in settled.iter().enumerate() {
             if pinned.contains(&(v as u32)) {
                 continue;
@@ -112,10 +132,28 @@ impl Tethers {
                     path
                 };
                 if d > 0.0 && d.is_finite() {
-                    t.vertex.push(v as u32);
-                    t.pin.push(src);
-                    t.max_len.push(d * (1.0 + params.slack.max(0.0)));
+                    let slot = *slot_of.entry(src).or_insert_with(|| {
+                        anchors.push(src);
+                        anchors.len() as u32 - 1
+                    });
+                    lists[v].push((slot, d * (1.0 + params.slack.max(0.0))));
                 }
+            }
+        }
+        let rounds = lists.iter().map(Vec::len).max().unwrap_or(0);
+        let mut t = Tethers {
+            anchors,
+            n,
+            rounds,
+            slot: vec![0; rounds * n],
+            max_len: vec![f32::INFINITY; rounds * n],
+            len: 0,
+        };
+        for (v, list) in lists.iter().enumerate() {
+            for (r, &(slot, max_len)) in list.iter().enumerate() {
+                t.slot[r * n + v] = slot;
+                t.max_len[r * n + v] = max_len;
+                t.len += 1;
             }
         }
         t
@@ -124,40 +162,134 @@ impl Tethers {
     /// Number of tethers (a vertex may have several).
     #[must_use]
     pub fn len(&self) -> usize {
-        self.vertex.len()
+        self.len
     }
 
     /// Whether nothing is tethered.
     #[must_use]
     pub fn is_empty(&self) -> bool {
-        self.vertex.is_empty()
+        self.len == 0
     }
 
-    /// Pulls every over-stretched vertex back onto its tether's sphere.
-    /// Every attachment as `(vertex, pin, max_len)`, grouped by vertex in ascending order
-    /// (the order [`Self::project`] applies them; the GPU twin's layout).
+    /// The vertex count the tethers were built for.
+    #[must_use]
+    pub fn vertex_count(&self) -> usize {
+        self.n
+    }
+
+    /// The pinned vertex of each anchor slot: [`Self::project_range`] takes their positions in
+    /// this order.
+    #[must_use]
+    pub fn anchors(&self) -> &[u32] {
+        &self.anchors
+    }
+
+    /// Every attachment as `(vertex, pin, max_len)`, grouped by vertex in ascending order,
+    /// nearest pin first (the order [`Self::project`] applies them; the GPU twin's layout).
     pub(crate) fn entries(&self) -> impl Iterator<Item = (u32, u32, f32)> + Clone + '_ {
-        self.vertex
-            .iter()
-            .zip(&self.pin)
-            .zip(&self.max_len)
-            .map(|((&v, &p), &l)| (v, p, l))
+        (0..self.n).flat_map(move |v| {
+            (0..self.rounds).filter_map(move |r| {
+                let i = r * self.n + v;
+                let max_len = self.max_len[i];
+                (max_len < f32::INFINITY)
+                    .then(|| (v as u32, self.anchors[self.slot[i] as usize], max_len))
+            })
+        })
     }
 
+    /// Pulls every over-stretched vertex back onto its tethers' spheres, reading the pins
+    /// where they are in `pos` (the step projects part by part with [`Self::project_range`]).
+    #[cfg(test)]
     pub(crate) fn project(&self, pos: &mut [Vec4]) {
-        for ((&v, &p), &max_len) in self.vertex.iter().zip(&self.pin).zip(&self.max_len) {
-            let anchor: Vec3 = pos[p as usize].xyz();
-            let x = &mut pos[v as usize];
+        let anchors: Vec<Vec4> = self
+            .anchors
+            .iter()
+            .map(|&p| pos.get(p as usize).copied().unwrap_or(Vec4::ZERO))
+            .collect();
+        let n = self.n.min(pos.len());
+        self.project_range(0..n, &mut pos[..n], &anchors);
+    }
+
+    /// [`Self::project`] for the vertices of `range` only, whose positions are `pos`
+    /// (`pos[0]` is vertex `range.start`), with the pins at `anchors` (one per slot of
+    /// [`Self::anchors`]). Ranges that do not overlap may be projected in parallel. Each
+    /// vertex's tethers apply nearest pin first; four vertices go at once in SIMD lanes.
+    pub(crate) fn project_range(&self, range: Range<usize>, pos: &mut [Vec4], anchors: &[Vec4]) {
+        assert!(
+            pos.len() == range.len() && range.end <= self.n && anchors.len() == self.anchors.len(),
+            "tether range, positions and anchors disagree"
+        );
+        // Groups of eight (two sets of lanes, so one set's square root and division overlap
+        // the other's), then of four, then one by one.
+        let eights = range.len() / 8 * 8;
+        for (c, chunk) in pos[..eights].chunks_exact_mut(8).enumerate() {
+            self.project_lanes::<2>(range.start + 8 * c, chunk, anchors);
+        }
+        let simd = range.len() / 4 * 4;
+        if simd > eights {
+            self.project_lanes::<1>(range.start + eights, &mut pos[eights..simd], anchors);
+        }
+        for (k, x) in pos.iter_mut().enumerate().skip(simd) {
+            let v = range.start + k;
             if x.w <= 0.0 {
                 continue;
             }
-            let d = x.xyz() - anchor;
-            let len2 = d.length_squared();
-            if len2 > max_len * max_len {
-                let pulled = anchor + d * (max_len / len2.sqrt());
-                if pulled.is_finite() {
-                    *x = pulled.extend(x.w);
+            for r in 0..self.rounds {
+                let i = r * self.n + v;
+                let max_len = self.max_len[i];
+                let anchor = anchors[self.slot[i] as usize].xyz();
+                let d = x.xyz() - anchor;
+                let len2 = d.length_squared();
+                if len2 > max_len * max_len {
+                    let pulled = anchor + d * (max_len / len2.sqrt());
+                    if pulled.is_finite() {
+                        *x = pulled.extend(x.w);
+                    }
                 }
+            }
+        }
+    }
+
+    /// Projects the tethers of `4·G` consecutive vertices from `v` (`chunk` their positions)
+    /// in `G` sets of four lanes.
+    #[inline(always)]
+    fn project_lanes<const G: usize>(&self, v: usize, chunk: &mut [Vec4], anchors: &[Vec4]) {
+        let mut x = [[f32x4::ZERO; 4]; G];
+        for (g, x) in x.iter_mut().enumerate() {
+            let c = &chunk[4 * g..4 * g + 4];
+            *x = f32x4::transpose([cast(c[0]), cast(c[1]), cast(c[2]), cast(c[3])]);
+        }
+        let free = x.map(|x| x[3].cmp_gt(f32x4::ZERO));
+        for r in 0..self.rounds {
+            for (g, x) in x.iter_mut().enumerate() {
+                let i = r * self.n + v + 4 * g;
+                let slot = &self.slot[i..i + 4];
+                let max_len = &self.max_len[i..i + 4];
+                let max_len = f32x4::new([max_len[0], max_len[1], max_len[2], max_len[3]]);
+                let [ax, ay, az, _] = f32x4::transpose([
+                    cast(anchors[slot[0] as usize]),
+                    cast(anchors[slot[1] as usize]),
+                    cast(anchors[slot[2] as usize]),
+                    cast(anchors[slot[3] as usize]),
+                ]);
+                let (dx, dy, dz) = (x[0] - ax, x[1] - ay, x[2] - az);
+                let len2 = dx * dx + dy * dy + dz * dz;
+                let s = max_len / len2.sqrt();
+                let (px, py, pz) = (ax + dx * s, ay + dy * s, az + dz * s);
+                let pull = len2.cmp_gt(max_len * max_len)
+                    & free[g]
+                    & px.is_finite()
+                    & py.is_finite()
+                    & pz.is_finite();
+                x[0] = pull.blend(px, x[0]);
+                x[1] = pull.blend(py, x[1]);
+                x[2] = pull.blend(pz, x[2]);
+            }
+        }
+        for (g, x) in x.into_iter().enumerate() {
+            let rows = f32x4::transpose(x);
+            for (out, row) in chunk[4 * g..4 * g + 4].iter_mut().zip(rows) {
+                *out = cast(row);
             }
         }
     }
@@ -209,20 +341,13 @@ mod tests {
             },
         );
         assert_eq!(both.len(), 2 * (15 - 2));
-        let k = tethers
-            .vertex
-            .iter()
-            .position(|&v| v == g.index(1, 0))
-            .unwrap();
-        assert_eq!(tethers.pin[k], g.index(0, 0));
-        assert!((tethers.max_len[k] - 1.0).abs() < 1e-6);
+        let of = |t: &Tethers, v: u32| t.entries().find(|e| e.0 == v).unwrap();
+        let (_, pin, max_len) = of(&tethers, g.index(1, 0));
+        assert_eq!(pin, g.index(0, 0));
+        assert!((max_len - 1.0).abs() < 1e-6);
         // (1, 2) from pin (0, 0): the flat rest distance √5, not a path along edges.
-        let k = tethers
-            .vertex
-            .iter()
-            .position(|&v| v == g.index(1, 2))
-            .unwrap();
-        assert!((tethers.max_len[k] - 5f32.sqrt()).abs() < 1e-5);
+        let (_, _, max_len) = of(&tethers, g.index(1, 2));
+        assert!((max_len - 5f32.sqrt()).abs() < 1e-5);
         // A curved rest shape (the strip folded 90° along its middle row) keeps the longer
         // path: the straight line would cut the corner.
         let folded: Vec<Vec3> = g
@@ -244,9 +369,57 @@ mod tests {
         )
         .unwrap();
         let tf = Tethers::build(&ft, &[g.index(0, 0)], TetherParams::default());
-        let k = tf.vertex.iter().position(|&v| v == g.index(0, 2)).unwrap();
+        let (_, _, max_len) = of(&tf, g.index(0, 2));
         // Down the folded column: 1 m along z to the fold, then 1 m down; straight: √2.
-        assert!((tf.max_len[k] - 2.0).abs() < 1e-5, "{}", tf.max_len[k]);
+        assert!((max_len - 2.0).abs() < 1e-5, "{max_len}");
+    }
+
+    /// The lane projection against the plain one, tether by tether in `entries` order, on a
+    /// crumpled, over-stretched 9 × 5 grid (45 vertices: five groups of eight, one of four,
+    /// one alone) with three pins and a NaN vertex: the same bits.
+    #[test]
+    fn lanes_match_one_tether_at_a_time() {
+        let g = Grid::new(9, 5, 1.0, 1.0);
+        let t = g.topology(TopologyOptions::default()).unwrap();
+        let pins = [g.index(0, 0), g.index(8, 0), g.index(4, 4)];
+        let tethers = Tethers::build(&t, &pins, TetherParams::default());
+        assert_eq!(tethers.len(), 2 * (45 - 3));
+        let mut pos: Vec<Vec4> = g
+            .positions()
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let k = i as f32;
+                (*p * 1.7 + Vec3::new((k * 1.3).sin(), (k * 0.7).cos(), (k * 2.1).sin()))
+                    .extend(1.0)
+            })
+            .collect();
+        for &p in &pins {
+            pos[p as usize].w = 0.0;
+        }
+        pos[11] = Vec4::new(f32::NAN, 0.0, 0.0, 1.0);
+        let mut expected = pos.clone();
+        for (v, p, max_len) in tethers.entries() {
+            let anchor = expected[p as usize].xyz();
+            let x = &mut expected[v as usize];
+            let d = x.xyz() - anchor;
+            let len2 = d.length_squared();
+            if x.w > 0.0 && len2 > max_len * max_len {
+                let pulled = anchor + d * (max_len / len2.sqrt());
+                if pulled.is_finite() {
+                    *x = pulled.extend(x.w);
+                }
+            }
+        }
+        let moved = expected.iter().zip(&pos).filter(|(a, b)| a != b).count();
+        assert!(moved > 30, "only {moved} vertices were over-stretched");
+        tethers.project(&mut pos);
+        for (i, (a, b)) in pos.iter().zip(&expected).enumerate() {
+            assert!(
+                a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits),
+                "vertex {i}: {a} vs {b}"
+            );
+        }
     }
 
     #[test]
