@@ -449,27 +449,32 @@ fn draw_plot(
         bevy::text::DEFAULT_FONT_DATA,
     )
     .map_err(|_| "cannot load the font")?;
-    let (w, h) = (960u32, 640u32);
+    let (w, h) = (1240u32, 640u32);
     let mut buffer = vec![0u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area();
         root.fill(&WHITE)?;
-        let ours = |r: &&(String, u32, u32, u32, Outcome)| {
-            r.0 == "xpbd" && r.3 == 1 && r.4.nan == 0 && r.4.max_strain > 0.0
+        // The legend gets a panel of its own, so it covers no point.
+        let (plot_area, legend_area) = root.split_horizontally(w - 300);
+        let shown = |r: &&(String, u32, u32, u32, Outcome)| {
+            (r.0 == "xpbd" || r.0 == "xpbd+tethers")
+                && r.3 == 1
+                && r.4.nan == 0
+                && r.4.max_strain > 0.0
         };
         let xs = rows
             .iter()
-            .filter(ours)
+            .filter(shown)
             .map(|r| r.4.ms)
             .chain(peer.iter().map(|p| p.ms));
         let ys = rows
             .iter()
-            .filter(ours)
+            .filter(shown)
             .map(|r| f64::from(r.4.max_strain) * 100.0)
             .chain(peer.iter().map(|p| p.max_strain * 100.0));
         let (x0, x1) = xs.fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(x), b.max(x)));
         let (y0, y1) = ys.fold((f64::MAX, f64::MIN), |(a, b), y| (a.min(y), b.max(y)));
-        let mut chart = ChartBuilder::on(&root)
+        let mut chart = ChartBuilder::on(&plot_area)
             .caption(
                 // Bevy's built-in font is an ASCII subset: no ² or en dash here.
                 format!("Max strain against time per frame (1 m x 1 m cloth, {threads} threads)"),
@@ -498,46 +503,94 @@ fn draw_plot(
             RGBColor(230, 140, 0),
             BLACK,
         ];
+        // (label, what marks it, colour): drawn in the legend panel after the chart.
+        #[derive(Clone, Copy)]
+        enum Mark {
+            Line,
+            Dashed,
+            Triangle,
+        }
+        let mut legend: Vec<(String, Mark, RGBColor)> = Vec::new();
         for (k, &n) in sizes.iter().enumerate() {
             let colour = palette[k % palette.len()];
-            // In substep order (rows come that way): where more substeps cost less (1 and 2
-            // substeps at 64² solve bending implicitly), the curve turns back.
-            let line: Vec<(f64, f64)> = rows
-                .iter()
-                .filter(ours)
-                .filter(|r| r.1 == n)
-                .map(|r| (r.4.ms, f64::from(r.4.max_strain) * 100.0))
-                .collect();
-            chart
-                .draw_series(LineSeries::new(line.clone(), colour.stroke_width(2)))?
-                .label(format!("ours {n}x{n} (XPBD, 1 iteration, by substeps)"))
-                .legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2))
-                });
-            chart.draw_series(line.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
+            for (solver, mark) in [("xpbd", Mark::Line), ("xpbd+tethers", Mark::Dashed)] {
+                // In substep order (rows come that way): where more substeps cost less (1
+                // and 2 substeps at 64² solve bending implicitly), the curve turns back.
+                let line: Vec<(f64, f64)> = rows
+                    .iter()
+                    .filter(shown)
+                    .filter(|r| r.1 == n && r.0 == solver)
+                    .map(|r| (r.4.ms, f64::from(r.4.max_strain) * 100.0))
+                    .collect();
+                if line.is_empty() {
+                    continue;
+                }
+                if let Mark::Dashed = mark {
+                    chart.draw_series(DashedLineSeries::new(
+                        line.clone(),
+                        8,
+                        5,
+                        colour.stroke_width(2),
+                    ))?;
+                    chart.draw_series(line.iter().map(|&(x, y)| {
+                        EmptyElement::at((x, y))
+                            + Rectangle::new([(-4, -4), (4, 4)], colour.stroke_width(2))
+                    }))?;
+                    legend.push((format!("ours {n}x{n} + tethers"), mark, colour));
+                } else {
+                    chart.draw_series(LineSeries::new(line.clone(), colour.stroke_width(2)))?;
+                    chart.draw_series(line.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
+                    legend.push((format!("ours {n}x{n}"), mark, colour));
+                }
+            }
             let theirs: Vec<(f64, f64)> = peer
                 .iter()
                 .filter(|p| p.n == n)
                 .map(|p| (p.ms, p.max_strain * 100.0))
                 .collect();
             if !theirs.is_empty() {
-                chart
-                    .draw_series(
-                        theirs
-                            .iter()
-                            .map(|&p| TriangleMarker::new(p, 8, colour.filled())),
-                    )?
-                    .label(format!("pypbd {n}x{n}"))
-                    .legend(move |(x, y)| TriangleMarker::new((x + 10, y), 6, colour.filled()));
+                chart.draw_series(
+                    theirs
+                        .iter()
+                        .map(|&p| TriangleMarker::new(p, 8, colour.filled())),
+                )?;
+                legend.push((format!("pypbd {n}x{n}"), Mark::Triangle, colour));
             }
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 15))
-            .position(SeriesLabelPosition::LowerRight)
-            .draw()?;
+        let font = ("sans-serif", 16).into_font();
+        legend_area.draw(&Text::new(
+            "XPBD, 1 iteration, by substeps",
+            (10, 40),
+            font.clone(),
+        ))?;
+        for (i, (label, mark, colour)) in legend.iter().enumerate() {
+            let y = 80 + 28 * i as i32;
+            match mark {
+                Mark::Line => {
+                    legend_area.draw(&PathElement::new(
+                        [(10, y), (40, y)],
+                        colour.stroke_width(2),
+                    ))?;
+                    legend_area.draw(&Circle::new((25, y), 4, colour.filled()))?;
+                }
+                Mark::Dashed => {
+                    for x in [10, 24, 38] {
+                        legend_area.draw(&PathElement::new(
+                            [(x, y), (x + 8, y)],
+                            colour.stroke_width(2),
+                        ))?;
+                    }
+                    legend_area.draw(&Rectangle::new(
+                        [(21, y - 4), (29, y + 4)],
+                        colour.stroke_width(2),
+                    ))?;
+                }
+                Mark::Triangle => {
+                    legend_area.draw(&TriangleMarker::new((25, y), 8, colour.filled()))?;
+                }
+            }
+            legend_area.draw(&Text::new(label.as_str(), (52, y - 9), font.clone()))?;
+        }
         root.present()?;
     }
     let file = std::io::BufWriter::new(std::fs::File::create(path)?);
