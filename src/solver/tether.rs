@@ -45,9 +45,9 @@ impl Default for TetherParams {
 /// Each tethered vertex's pins and the longest distance allowed from each.
 ///
 /// Stored in rounds: round `r` holds, for every vertex, its `r`-th nearest pin (as a slot in
-/// [`Tethers::anchors`]) and the limit, `+∞` where a vertex has fewer tethers. So four
-/// neighbouring vertices are projected together in SIMD lanes, and a vertex range (a part)
-/// alone, in parallel with the others.
+/// a list of the pinned vertices) and the limit, `+∞` where a vertex has fewer tethers. So
+/// eight neighbouring vertices are projected together in SIMD lanes, and a vertex range (a
+/// part) alone, in parallel with the others.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Tethers {
     /// The pinned vertex of each anchor slot.
@@ -179,8 +179,7 @@ impl Tethers {
 
     /// The pinned vertex of each anchor slot: [`Self::project_range`] takes their positions in
     /// this order.
-    #[must_use]
-    pub fn anchors(&self) -> &[u32] {
+    pub(crate) fn anchors(&self) -> &[u32] {
         &self.anchors
     }
 
