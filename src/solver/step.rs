@@ -10,7 +10,11 @@
 //!    solve `(M + h²K) δ = −h²K x̃` follows, and the projections below skip bending;
 //! 3. `iterations` times: each part's constraints (in parallel), then the even seams' and
 //!    the odd seams' (each in parallel), then the boundary's;
-//! 4. tethers, then self-collision (if on; one pass each);
+//! 4. tethers, then self-collision (if on; one pass each). Tethers move only free vertices,
+//!    toward copies of the pins' positions, so they run part by part at the start of the
+//!    next parallel region (before self-collision in a region of their own; otherwise in
+//!    the collider pass, the next substep's first region or the final velocity update),
+//!    which costs no extra fork–join;
 //! 5. colliders (if any), each part in parallel;
 //! 6. `v ← (x − x_prev)/h` (done at the start of the next substep, or at the end).
 //!
