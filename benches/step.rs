@@ -1,14 +1,15 @@
 //! Criterion benchmarks of one 1/60 s solver step on the trade-off scene (1 m², 1 kg, two
-//! corner pins), serial and on a task pool with one thread per core; 64 cloths of 16² against
-//! one of 128² (`step_many`); a step of a sleeping cloth.
+//! corner pins), serial and on a task pool with one thread per core; the solvers and tethers
+//! at 64²; 64 cloths of 16² against one of 128² (`step_many`); a step of a sleeping cloth.
 //!
 //! `cargo bench --bench step`
 
 use std::hint::black_box;
 
 use bevy_cloth::solver::{
-    BendingSolve, DEFAULT_BENDING_COMPLIANCE, Environment, Grid, ManyItem, MassDistribution, Pin,
-    Serial, Simulation, Sleep, Solver, SolverParams, TopologyOptions, Workers, step_many,
+    BendingSolve, DEFAULT_BENDING_COMPLIANCE, Environment, Features, Grid, ManyItem,
+    MassDistribution, Pin, Serial, Simulation, Sleep, Solver, SolverParams, TetherParams,
+    TopologyOptions, Workers, step_many,
 };
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 
@@ -89,6 +90,16 @@ fn bench(c: &mut Criterion) {
         let mut sim = scene(64, solver, 10, BendingSolve::Auto);
         g.bench_function(name, |b| b.iter(|| sim.step(black_box(1.0 / 60.0), &par)));
     }
+    // XPBD with every vertex tethered to both pins: what the tether pass adds.
+    let mut sim = scene(64, xpbd, 10, BendingSolve::Auto);
+    sim.set_features(Features {
+        tethers: Some(TetherParams::default()),
+        ..Default::default()
+    })
+    .unwrap();
+    g.bench_function("xpbd_tethers", |b| {
+        b.iter(|| sim.step(black_box(1.0 / 60.0), &par))
+    });
     g.finish();
     // A stiff sheet (B = 0.1 N·m, saturation far above 0.5): the implicit bending solve
     // against the projection it replaces.
