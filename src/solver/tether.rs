@@ -184,7 +184,8 @@ impl Tethers {
     }
 
     /// Every attachment as `(vertex, pin, max_len)`, grouped by vertex in ascending order,
-    /// nearest pin first (the order [`Self::project`] applies them; the GPU twin's layout).
+    /// nearest pin first (the order [`Self::project_range`] applies each vertex's tethers
+    /// in; the GPU twin's layout).
     pub(crate) fn entries(&self) -> impl Iterator<Item = (u32, u32, f32)> + Clone + '_ {
         (0..self.n).flat_map(move |v| {
             (0..self.rounds).filter_map(move |r| {
@@ -212,7 +213,8 @@ impl Tethers {
     /// [`Self::project`] for the vertices of `range` only, whose positions are `pos`
     /// (`pos[0]` is vertex `range.start`), with the pins at `anchors` (one per slot of
     /// [`Self::anchors`]). Ranges that do not overlap may be projected in parallel. Each
-    /// vertex's tethers apply nearest pin first; four vertices go at once in SIMD lanes.
+    /// vertex's tethers apply nearest pin first; eight vertices go at once in SIMD lanes
+    /// (then four, then one by one), with the same arithmetic as one at a time.
     pub(crate) fn project_range(&self, range: Range<usize>, pos: &mut [Vec4], anchors: &[Vec4]) {
         assert!(
             pos.len() == range.len() && range.end <= self.n && anchors.len() == self.anchors.len(),
