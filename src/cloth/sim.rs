@@ -939,7 +939,6 @@ pub(crate) fn step_cloths(
         wind: wind.as_deref().map(|w| &w.field),
         time: wind.as_deref().map_or(0.0, |w| w.time),
     };
-    let pool = ComputeTaskPool::try_get();
     // Big cloths one after another with their parts in parallel, then the small ones in
     // parallel with each other (`step_many`).
     let mut list: Vec<(Entity, Mut<ClothSim>)> = cloths.iter_mut().collect();
@@ -952,10 +951,13 @@ pub(crate) fn step_cloths(
                 seconds: 0.0,
             })
             .collect();
-        match (workers.as_deref(), pool) {
-            (Some(workers), _) => step_many(&mut items, dt, &env, &workers.0),
-            (None, Some(pool)) => step_many(&mut items, dt, &env, &TaskPoolParallel(pool)),
-            (None, None) => step_many(&mut items, dt, &env, &Serial),
+        // The task pool only without `ClothWorkers` (then serial if there is none).
+        match workers.as_deref() {
+            Some(workers) => step_many(&mut items, dt, &env, &workers.0),
+            None => match ComputeTaskPool::try_get() {
+                Some(pool) => step_many(&mut items, dt, &env, &TaskPoolParallel(pool)),
+                None => step_many(&mut items, dt, &env, &Serial),
+            },
         }
         items.into_iter().map(|i| (i.report, i.seconds)).collect()
     };
