@@ -218,13 +218,18 @@ mod tests {
 
     /// A 12² cloth of 0.5 m, pinned at two corners, hanging from rest.
     fn hanging() -> (Simulation, Grid) {
-        let grid = Grid::new(12, 12, 0.5, 0.5);
+        hanging_square(12, 0.5, 0.2)
+    }
+
+    /// An `n`² cloth `size` metres square of `mass` kg, pinned at two corners of one edge.
+    fn hanging_square(n: u32, size: f32, mass: f32) -> (Simulation, Grid) {
+        let grid = Grid::new(n, n, size, size);
         let topology = grid.topology(TopologyOptions::default()).unwrap();
-        let masses = topology.masses(0.2, MassDistribution::Uniform);
+        let masses = topology.masses(mass, MassDistribution::Uniform);
         let mut sim = Simulation::new(topology, &masses, params()).unwrap();
         let rest = grid.positions();
         sim.state_mut()
-            .set_pins([grid.index(0, 0), grid.index(11, 0)].map(|v| Pin {
+            .set_pins([grid.index(0, 0), grid.index(n - 1, 0)].map(|v| Pin {
                 vertex: v,
                 target: rest[v as usize],
             }))
@@ -290,17 +295,7 @@ mod tests {
     #[test]
     fn a_tethered_fine_cloth_comes_to_rest_where_the_plain_one_keeps_moving() {
         let make = |tethers: bool| {
-            let grid = Grid::new(128, 128, 1.0, 1.0);
-            let topology = grid.topology(TopologyOptions::default()).unwrap();
-            let masses = topology.masses(1.0, MassDistribution::Uniform);
-            let mut sim = Simulation::new(topology, &masses, params()).unwrap();
-            let rest = grid.positions();
-            sim.state_mut()
-                .set_pins([grid.index(0, 0), grid.index(127, 0)].map(|v| Pin {
-                    vertex: v,
-                    target: rest[v as usize],
-                }))
-                .unwrap();
+            let (mut sim, _) = hanging_square(128, 1.0, 1.0);
             if tethers {
                 sim.set_features(crate::solver::Features {
                     tethers: Some(crate::solver::TetherParams::default()),

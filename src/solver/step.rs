@@ -362,7 +362,6 @@ pub fn step(
     } else {
         vertex_area_vectors(&state.positions, topology.triangles(), &mut scratch.areas);
     }
-    let areas = &scratch.areas;
     if let Some(sc) = input.self_collision {
         find_self_collision_candidates(
             &state.positions,
@@ -386,27 +385,25 @@ pub fn step(
     // rebuild), and whether the last substep's tethers are still to be applied.
     let tethers = input.tethers.filter(|t| t.vertex_count() == state.len());
     let mut tethers_due = false;
-    // One phase over every part, the parts in parallel.
-    let run_parts = |parts: &mut [Part],
-                     state: &mut ClothState,
-                     impulses: &mut [Vec<ContactImpulse>],
-                     phase: Phase,
-                     poses: &[SubstepPose],
-                     anchors: &[Vec4]| {
-        let mut work = split(
-            parts,
-            &mut state.positions,
-            &mut state.prev,
-            &mut state.velocities,
-            air_velocities,
-            areas,
-            impulses,
-        );
-        let tethers = tethers.map(|t| (t, anchors));
-        par.for_each_mut(&mut work, |w| {
-            run_part(w, phase, c, colliders, poses, tethers);
-        });
-    };
+    // One phase over every part, the parts in parallel (with this substep's collider poses
+    // and the due tethers' pin copies from `scratch`).
+    let run_parts =
+        |parts: &mut [Part], state: &mut ClothState, scratch: &mut StepScratch, phase: Phase| {
+            let mut work = split(
+                parts,
+                &mut state.positions,
+                &mut state.prev,
+                &mut state.velocities,
+                air_velocities,
+                &scratch.areas,
+                &mut scratch.part_impulses,
+            );
+            let (poses, anchors) = (&scratch.poses[..], &scratch.anchors[..]);
+            let tethers = tethers.map(|t| (t, anchors));
+            par.for_each_mut(&mut work, |w| {
+                run_part(w, phase, c, colliders, poses, tethers);
+            });
+        };
     for s in 0..substeps {
         // Pins: finish their velocity for the previous substep, then move.
         if s > 0 {
@@ -418,7 +415,6 @@ pub fn step(
         }
         state.place_pins(&scratch.pin_start, s, substeps);
         substep_poses(colliders, s, substeps, &mut scratch.poses);
-        let poses = &scratch.poses;
 
         if implicit {
             let phase = Phase {
@@ -427,14 +423,7 @@ pub fn step(
                 integrate: true,
                 ..Default::default()
             };
-            run_parts(
-                &mut batches.parts,
-                state,
-                &mut scratch.part_impulses,
-                phase,
-                poses,
-                &scratch.anchors,
-            );
+            run_parts(&mut batches.parts, state, scratch, phase);
             scratch.implicit.solve(topology, &mut state.positions, h);
         }
         for it in 0..params.iterations.max(1) {
@@ -445,14 +434,7 @@ pub fn step(
                 project: true,
                 collide: false,
             };
-            run_parts(
-                &mut batches.parts,
-                state,
-                &mut scratch.part_impulses,
-                phase,
-                poses,
-                &scratch.anchors,
-            );
+            run_parts(&mut batches.parts, state, scratch, phase);
             // Then what straddles parts: even seams in parallel, odd seams, the rest.
             for seams in &mut batches.seams {
                 let mut work = split_seams(seams, &mut state.positions);
@@ -485,14 +467,7 @@ pub fn step(
                     tethers: true,
                     ..Default::default()
                 };
-                run_parts(
-                    &mut batches.parts,
-                    state,
-                    &mut scratch.part_impulses,
-                    phase,
-                    poses,
-                    &scratch.anchors,
-                );
+                run_parts(&mut batches.parts, state, scratch, phase);
             }
             if input.parallel_self_collision {
                 self_collide_parallel(
@@ -516,14 +491,7 @@ pub fn step(
                 collide: true,
                 ..Default::default()
             };
-            run_parts(
-                &mut batches.parts,
-                state,
-                &mut scratch.part_impulses,
-                phase,
-                poses,
-                &scratch.anchors,
-            );
+            run_parts(&mut batches.parts, state, scratch, phase);
         }
     }
     let phase = Phase {
@@ -531,14 +499,7 @@ pub fn step(
         finish_velocity: true,
         ..Default::default()
     };
-    run_parts(
-        &mut batches.parts,
-        state,
-        &mut scratch.part_impulses,
-        phase,
-        &scratch.poses,
-        &scratch.anchors,
-    );
+    run_parts(&mut batches.parts, state, scratch, phase);
     finish_pin_velocities(state, c.inv_h);
     // Momentum per collider: the per-part sums of −m·Δx, over h.
     for part in &scratch.part_impulses {

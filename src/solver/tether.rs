@@ -60,8 +60,6 @@ pub struct Tethers {
     slot: Vec<u32>,
     /// `rounds × n`: the longest distance allowed (`+∞`: no tether).
     max_len: Vec<f32>,
-    /// Number of tethers.
-    len: usize,
 }
 
 impl Tethers {
@@ -147,13 +145,11 @@ impl Tethers {
             rounds,
             slot: vec![0; rounds * n],
             max_len: vec![f32::INFINITY; rounds * n],
-            len: 0,
         };
         for (v, list) in lists.iter().enumerate() {
             for (r, &(slot, max_len)) in list.iter().enumerate() {
                 t.slot[r * n + v] = slot;
                 t.max_len[r * n + v] = max_len;
-                t.len += 1;
             }
         }
         t
@@ -162,13 +158,13 @@ impl Tethers {
     /// Number of tethers (a vertex may have several).
     #[must_use]
     pub fn len(&self) -> usize {
-        self.len
+        self.max_len.iter().filter(|l| **l < f32::INFINITY).count()
     }
 
     /// Whether nothing is tethered.
     #[must_use]
     pub fn is_empty(&self) -> bool {
-        self.len == 0
+        self.max_len.iter().all(|l| *l == f32::INFINITY)
     }
 
     /// The vertex count the tethers were built for.
