@@ -7,37 +7,23 @@
 use std::hint::black_box;
 
 use bevy_cloth::solver::{
-    BendingSolve, DEFAULT_BENDING_COMPLIANCE, Environment, Features, Grid, ManyItem,
-    MassDistribution, Pin, Serial, Simulation, Sleep, Solver, SolverParams, TetherParams,
-    TopologyOptions, Workers, step_many,
+    BendingSolve, DEFAULT_BENDING_COMPLIANCE, Environment, Features, HangingCloth, ManyItem,
+    Serial, Simulation, Sleep, Solver, SolverParams, TetherParams, Workers, step_many,
 };
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 
 fn scene(n: u32, solver: Solver, substeps: u32, bending_solve: BendingSolve) -> Simulation {
-    let grid = Grid::new(n, n, 1.0, 1.0);
-    let topology = grid.topology(TopologyOptions::default()).unwrap();
-    let masses = topology.masses(1.0, MassDistribution::Uniform);
-    let mut sim = Simulation::new(
-        topology,
-        &masses,
-        SolverParams {
-            solver,
-            substeps,
-            iterations: 1,
-            bending_solve,
-            // Measured awake; the `asleep` group measures sleeping.
-            sleep: Sleep::NEVER,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let rest = grid.positions();
-    sim.state_mut()
-        .set_pins([grid.index(0, 0), grid.index(n - 1, 0)].map(|v| Pin {
-            vertex: v,
-            target: rest[v as usize],
-        }))
-        .unwrap();
+    let mut scene = HangingCloth::new(n);
+    scene.params = SolverParams {
+        solver,
+        substeps,
+        iterations: 1,
+        bending_solve,
+        // Measured awake; the `asleep` group measures sleeping.
+        sleep: Sleep::NEVER,
+        ..Default::default()
+    };
+    let mut sim = scene.build().unwrap();
     // Start from a hanging drape, not the flat start.
     for _ in 0..30 {
         sim.step(1.0 / 60.0, &Serial);

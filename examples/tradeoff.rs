@@ -23,7 +23,7 @@
 //! cargo run --release --example tradeoff -- --sizes 64 --solvers xpbd --substeps 10 --iterations 1
 //! ```
 //! `--peer "PYTHON SCRIPT"` also runs the peer benchmark (pypbd's `pbd_cloth_bench.py`, see
-//! the README) on the same scene in the same run, XPBD × 1 iteration at a few substep counts
+//! `docs/performance.md`) on the same scene in the same run, XPBD × 1 iteration at a few substep counts
 //! per size, prints its JSON lines and, per size, a `against_peer_xpbd_10x1` summary.
 //! `--plot FILE.png` draws max strain against ms per frame (log–log, one curve per size,
 //! ours and the peer's points) into a PNG.
@@ -58,10 +58,9 @@ use std::time::Instant;
 
 use bevy_cloth::gpu::{GpuCloth, GpuKernels, GpuStage, GpuStepInput};
 use bevy_cloth::solver::{
-    Aerodynamics, BendingModel, Collider, DEFAULT_BENDING_COMPLIANCE, Environment, Features, Grid,
-    ManyItem, MassDistribution, Pin, Pose, SelfCollision, Shape, Simulation, Sleep, Solver,
-    SolverParams, TetherParams, TopologyOptions, WindField, WindParams, Workers, position_distance,
-    step_many,
+    Aerodynamics, BendingModel, Collider, DEFAULT_BENDING_COMPLIANCE, Environment, Features,
+    HangingCloth, ManyItem, Pose, SelfCollision, Shape, Simulation, Sleep, Solver, SolverParams,
+    TetherParams, WindField, WindParams, Workers, position_distance, step_many,
 };
 use glam::{Vec3, Vec4};
 use support::{Args, Json};
@@ -144,18 +143,12 @@ fn scene(n: u32, name: &str, substeps: u32, iterations: u32, bending: Bending) -
         Some(base) => (base, true),
         None => (name, false),
     };
-    let grid = Grid::new(n, n, 1.0, 1.0);
-    let topology = grid
-        .topology(TopologyOptions {
-            bending: match bending {
-                Bending::Isometric => BendingModel::Isometric,
-                Bending::Dihedral => BendingModel::Dihedral,
-            },
-            ..Default::default()
-        })
-        .unwrap();
-    let masses = topology.masses(1.0, MassDistribution::Uniform);
-    let params = SolverParams {
+    let mut scene = HangingCloth::new(n);
+    scene.options.bending = match bending {
+        Bending::Isometric => BendingModel::Isometric,
+        Bending::Dihedral => BendingModel::Dihedral,
+    };
+    scene.params = SolverParams {
         solver: solver(name, DT / substeps as f32, bending),
         substeps,
         iterations,
@@ -165,22 +158,10 @@ fn scene(n: u32, name: &str, substeps: u32, iterations: u32, bending: Bending) -
         sleep: Sleep::NEVER,
         ..Default::default()
     };
-    let mut sim = Simulation::new(topology, &masses, params).unwrap();
-    let rest = grid.positions();
-    sim.state_mut()
-        .set_pins([grid.index(0, 0), grid.index(n - 1, 0)].map(|v| Pin {
-            vertex: v,
-            target: rest[v as usize],
-        }))
-        .unwrap();
     if tethered {
-        sim.set_features(Features {
-            tethers: Some(TetherParams::default()),
-            ..Default::default()
-        })
-        .unwrap();
+        scene.features.tethers = Some(TetherParams::default());
     }
-    sim
+    scene.build().unwrap()
 }
 
 struct Outcome {
@@ -377,8 +358,8 @@ fn json_number(line: &str, key: &str) -> Option<f64> {
 /// Frames the peer runs untimed after its first.
 const PEER_WARMUP: usize = 3;
 
-/// Runs the peer benchmark (`--peer "PYTHON SCRIPT"`: pypbd's `pbd_cloth_bench.py`, see the
-/// README) on the standard scene, XPBD with dihedral bending, and prints its JSON line.
+/// Runs the peer benchmark (`--peer "PYTHON SCRIPT"`: pypbd's `pbd_cloth_bench.py`, see
+/// `docs/performance.md`) on the standard scene, XPBD with dihedral bending, and prints its JSON line.
 fn run_peer(
     peer: &str,
     n: u32,
@@ -850,7 +831,7 @@ fn main() {
         for budget in [1.0, 4.0, 16.0] {
             let best = rows
                 .iter()
-                // Without tethers (the README's budget table says so).
+                // Without tethers (the budget table in `docs/performance.md` says so).
                 .filter(|r| r.1 == n && r.4.ms <= budget && r.4.nan == 0)
                 .filter(|r| !r.0.ends_with("+tethers"))
                 .min_by(|a, b| a.4.max_strain.total_cmp(&b.4.max_strain));

@@ -11,10 +11,9 @@ use bevy_cloth::prelude::*;
 
 mod common;
 use bevy_cloth::solver::{
-    Collider, Environment, Features, Parallel, Pin, Pose, SelfCollision, Serial, Shape, Simulation,
-    SolverParams, TetherParams, WindField, WindParams,
+    Collider, Environment, Features, HangingCloth, Parallel, Pose, SelfCollision, Serial, Shape,
+    Simulation, TetherParams, WindField, WindParams,
 };
-use common::placed_grid;
 
 /// Runs items on `n` scoped threads, each taking every n-th item.
 struct Threads(usize);
@@ -64,36 +63,20 @@ fn inputs(steps: usize) -> Vec<StepInput> {
 
 /// A 96×96 cloth (four vertex-range parts) with every feature on.
 fn scene() -> (Simulation, Vec<u32>) {
-    let grid = Grid::new(96, 96, 1.0, 1.0);
-    let topology = placed_grid(&grid, |p| p + Vec3::Y * 2.0);
-    let masses = topology.masses(0.5, MassDistribution::Area);
-    let mut sim = Simulation::new(
-        topology,
-        &masses,
-        SolverParams {
-            iterations: 2,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    sim.set_features(Features {
+    let mut scene = HangingCloth::new(96);
+    scene.offset = Vec3::Y * 2.0;
+    scene.mass = 0.5;
+    scene.mass_distribution = MassDistribution::Area;
+    scene.params.iterations = 2;
+    scene.features = Features {
         self_collision: Some(SelfCollision {
             thickness: 0.01,
             friction: 0.3,
         }),
         tethers: Some(TetherParams::default()),
         tear_threshold: Some(2.5),
-    })
-    .unwrap();
-    let pins = vec![grid.index(0, 0), grid.index(95, 0)];
-    let rest = sim.topology().rest_positions().to_vec();
-    sim.state_mut()
-        .set_pins(pins.iter().map(|&v| Pin {
-            vertex: v,
-            target: rest[v as usize],
-        }))
-        .unwrap();
-    (sim, pins)
+    };
+    (scene.build().unwrap(), scene.pins)
 }
 
 /// Runs the scene over `inputs`; returns a hash of the state after every step and the final

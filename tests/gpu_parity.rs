@@ -324,7 +324,7 @@ fn cloth_on_colliders_matches_the_cpu() {
             ),
             Collider::fixed(
                 Shape::Capsule {
-                    half_height: 0.3,
+                    half_length: 0.3,
                     radius: 0.08,
                 },
                 Pose {
@@ -523,7 +523,7 @@ fn cloth_on_a_baked_mesh_collider_matches_the_cpu() {
     let shapes = |k: usize| {
         let x = 0.1 * (k as f32 * 0.15).sin();
         vec![Collider {
-            shape: Shape::Sdf(grid.clone()),
+            shape: Shape::Mesh(grid.clone()),
             start: Pose {
                 translation: Vec3::new(x, 0.0, 0.0),
                 rotation: Quat::from_rotation_y(0.4),

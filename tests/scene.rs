@@ -4,9 +4,10 @@
 use std::sync::Arc;
 
 use bevy_cloth::solver::{
-    Aerodynamics, ClothState, Collider, Environment, Features, Grid, MassDistribution, Pin, Pose,
-    SdfGrid, SelfCollision, Serial, Shape, Simulation, Solver, SolverParams, TetherParams,
-    TopologyOptions, WindField, WindParams, count_self_crossings, position_distance,
+    Aerodynamics, ClothState, Collider, Environment, Features, Grid, HangingCloth,
+    MassDistribution, Pin, Pose, SdfGrid, SelfCollision, Serial, Shape, Simulation, Solver,
+    SolverParams, TetherParams, TopologyOptions, WindField, WindParams, count_self_crossings,
+    position_distance,
 };
 use glam::{Quat, Vec3};
 
@@ -14,10 +15,13 @@ mod common;
 use common::placed_grid;
 
 fn cloth(n: u32, size: f32, at: Vec3, params: SolverParams) -> (Grid, Simulation) {
-    let grid = Grid::new(n, n, size, size);
-    let topology = placed_grid(&grid, |p| p + at);
-    let masses = topology.masses(0.3, MassDistribution::Area);
-    (grid, Simulation::new(topology, &masses, params).unwrap())
+    let mut scene = HangingCloth::on(Grid::new(n, n, size, size));
+    scene.offset = at;
+    scene.mass = 0.3;
+    scene.mass_distribution = MassDistribution::Area;
+    scene.params = params;
+    scene.pins.clear();
+    (scene.grid, scene.build().unwrap())
 }
 
 fn run(sim: &mut Simulation, env: &Environment, seconds: f32) {
@@ -80,13 +84,13 @@ fn cloth_settles_on_every_collider_type_without_penetrating() {
         (
             "capsule",
             Shape::Capsule {
-                half_height: 0.3,
+                half_length: 0.3,
                 radius: 0.2,
             },
             Quat::from_rotation_z(core::f32::consts::FRAC_PI_2),
         ),
         ("plane", Shape::Plane, Quat::IDENTITY),
-        ("sdf", Shape::Sdf(sdf), Quat::IDENTITY),
+        ("sdf", Shape::Mesh(sdf), Quat::IDENTITY),
     ];
     for (name, shape, rotation) in shapes {
         let collider = Collider::fixed(

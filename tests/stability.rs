@@ -10,9 +10,9 @@
 use std::sync::Arc;
 
 use bevy_cloth::solver::{
-    Collider, Environment, Features, Grid, Pin, Pose, SdfGrid, SelfCollision, Serial, Shape,
-    Simulation, Solver, SolverParams, TetherParams, Topology, TopologyError, TopologyOptions,
-    WindField, WindParams,
+    Collider, Environment, Features, Grid, MeshShading, Pin, Pose, SdfGrid, SelfCollision, Serial,
+    Shape, Simulation, Solver, SolverParams, TetherParams, Topology, TopologyError,
+    TopologyOptions, WindField, WindParams,
 };
 use glam::{Quat, Vec2, Vec3};
 use proptest::prelude::*;
@@ -298,11 +298,11 @@ fn run_mesh(s: &Scenario, pos: &[Vec3], uvs: Option<&[Vec2]>, idx: &[u32]) -> Ou
         };
         let report = sim.step_in(s.dt, &env, &Serial);
         time += s.dt;
-        sim.update_shading();
+        let shading = MeshShading::of_particles(sim.topology(), &sim.state().positions);
         out.recoveries += usize::from(report.recovered);
         out.non_finite += sim.state().non_finite_count();
-        out.non_finite += sim.normals().iter().filter(|n| !n.is_finite()).count();
-        out.non_finite += sim.tangents().iter().filter(|t| !t.is_finite()).count();
+        out.non_finite += shading.normals().iter().filter(|n| !n.is_finite()).count();
+        out.non_finite += shading.tangents().iter().filter(|t| !t.is_finite()).count();
         let e = sim.state().kinetic_energy();
         out.max_energy = out.max_energy.max(e);
         if step + 1 == on {
@@ -548,9 +548,9 @@ fn every_edge_torn() {
         for _ in 0..400 {
             sim.state_mut().positions[far] += glam::Vec4::new(0.0, -1.0, 0.0, 0.0);
             torn += sim.step(s.dt, &Serial).torn.len();
-            sim.update_shading();
+            let shading = MeshShading::of_particles(sim.topology(), &sim.state().positions);
             assert_eq!(sim.state().non_finite_count(), 0);
-            assert!(sim.normals().iter().all(|n| n.is_finite()));
+            assert!(shading.normals().iter().all(|n| n.is_finite()));
         }
         assert!(torn > 0, "{kind:?}: nothing tore");
         for t in sim.topology().triangles() {
@@ -719,7 +719,7 @@ fn sdf_of_a_broken_mesh_is_finite_and_safe_to_collide_with() {
     let (cpos, uvs, cidx) = grid_mesh(s.n, s.size);
     let mut sim = simulation(&s, &cpos, Some(&uvs), &cidx);
     let colliders = [Collider::fixed(
-        Shape::Sdf(Arc::new(grid)),
+        Shape::Mesh(Arc::new(grid)),
         Pose {
             translation: Vec3::new(0.0, 0.5, 0.0),
             rotation: Quat::from_rotation_y(0.3),

@@ -41,8 +41,8 @@ use wgpu::util::DeviceExt;
 use std::sync::Arc;
 
 use super::append_lists;
-use crate::solver::batches::{ConstraintBatches, Part};
-use crate::solver::collide::substep_poses;
+use crate::solver::collision::substep_poses;
+use crate::solver::constraints::{ConstraintBatches, Part};
 use crate::solver::{
     Collider, MAX_SELF_NEIGHBOURS, SdfGrid, Shape, Simulation, Solver, SolverParams, Tethers,
 };
@@ -752,11 +752,11 @@ fn gpu_collider(
         Shape::Sphere { radius } => (0.0, [*radius, 0.0, 0.0, 0.0]),
         Shape::Cuboid { half_extents } => (1.0, half_extents.extend(0.0).to_array()),
         Shape::Capsule {
-            half_height,
+            half_length,
             radius,
-        } => (2.0, [*half_height, *radius, 0.0, 0.0]),
+        } => (2.0, [*half_length, *radius, 0.0, 0.0]),
         Shape::Plane => (3.0, [0.0; 4]),
-        Shape::Sdf(g) => (4.0, g.origin().extend(g.cell()).to_array()),
+        Shape::Mesh(g) => (4.0, g.origin().extend(g.cell()).to_array()),
     };
     GpuCollider {
         from_t: pose_t(from),
@@ -1363,7 +1363,7 @@ impl GpuCloth {
     ) -> bool {
         let mut grids: Vec<Arc<SdfGrid>> = Vec::new();
         for c in colliders {
-            if let Shape::Sdf(g) = &c.shape
+            if let Shape::Mesh(g) = &c.shape
                 && !grids.iter().any(|x| Arc::ptr_eq(x, g))
             {
                 grids.push(g.clone());
@@ -1397,7 +1397,7 @@ impl GpuCloth {
 
     /// Where a collider's grid sits in the SDF buffer: samples along x, y, z and the first.
     fn grid_of(&self, c: &Collider) -> [u32; 4] {
-        let Shape::Sdf(g) = &c.shape else {
+        let Shape::Mesh(g) = &c.shape else {
             return [0; 4];
         };
         let mut first = 0;

@@ -11,11 +11,12 @@ use std::sync::Arc;
 
 use glam::{Quat, Vec3};
 
-use super::{
-    Aerodynamics, BendingSolve, Collider, Environment, Features, MassDistribution, Pin, Pose,
-    SdfGrid, SelfCollision, Serial, Shape, Simulation, Sleep, Solver, SolverParams, TetherParams,
-    Topology, TopologyOptions, WindField, WindParams,
-};
+use super::air::{Aerodynamics, WindField, WindParams};
+use super::collision::{Collider, Pose, SdfGrid, SelfCollision, Shape};
+use super::constraints::{BendingSolve, Solver, TetherParams};
+use super::mesh::{MassDistribution, MeshShading, Topology, TopologyOptions};
+use super::parallel::Serial;
+use super::step::{Environment, Features, Pin, Simulation, Sleep, SolverParams};
 
 /// What one fuzz input did.
 #[derive(Clone, Debug, PartialEq)]
@@ -196,7 +197,7 @@ pub fn fuzz_one(bytes: &[u8]) -> FuzzOutcome {
         && let Ok(sdf) = SdfGrid::from_mesh(sim.topology().rest_positions(), &indices, 8)
     {
         colliders.push(Collider::fixed(
-            Shape::Sdf(Arc::new(sdf)),
+            Shape::Mesh(Arc::new(sdf)),
             Pose {
                 translation: r.vec3(scale),
                 rotation: Quat::from_rotation_y(r.f32(3.0)),
@@ -226,10 +227,10 @@ pub fn fuzz_one(bytes: &[u8]) -> FuzzOutcome {
         };
         let report = sim.step_in(dt, &env, &Serial);
         recoveries += u32::from(report.recovered);
-        sim.update_shading();
+        let shading = MeshShading::of_particles(sim.topology(), &sim.state().positions);
         if sim.state().non_finite_count() > 0
-            || sim.normals().iter().any(|n| !n.is_finite())
-            || sim.tangents().iter().any(|t| !t.is_finite())
+            || shading.normals().iter().any(|n| !n.is_finite())
+            || shading.tangents().iter().any(|t| !t.is_finite())
         {
             return FuzzOutcome::NonFinite { step };
         }

@@ -3,15 +3,46 @@
 //! The solver's validation ([`SolverParams::validate`](super::SolverParams::validate),
 //! [`Features::validate`](super::Features::validate), [`WindParams::validate`](super::WindParams::validate),
 //! [`Collider::validate`](super::Collider::validate), ...) and the plugin's checks of
-//! [`Cloth`](crate::cloth::Cloth) and the colliders test values against these [`Limit`]s, and
-//! the editor's sliders span exactly them: a value a slider can reach is never refused.
+//! the Bevy components (a cloth's mass, a collider's size) test values against these
+//! [`Limit`]s, and the editor's sliders span exactly them: a value a slider can reach is never
+//! refused. A value outside its range is a [`ParamError`], defined here beside [`Limit`].
 //!
 //! Every range is closed (`min ≤ v ≤ max`, NaN refused). Where a setting has to be positive,
 //! `min` is a small positive number rather than an open bound, so that the bottom of a slider
 //! is a value the solver takes.
 
-use super::params::ParamError;
-use super::topology::MAX_COORDINATE;
+use glam::Vec3;
+
+/// A solver parameter that is out of its range.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamError {
+    /// The parameter's name, e.g. `"substeps"`.
+    pub name: &'static str,
+    /// Why it is rejected.
+    pub reason: String,
+}
+
+impl core::fmt::Display for ParamError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "invalid solver parameter `{}`: {}",
+            self.name, self.reason
+        )
+    }
+}
+
+impl std::error::Error for ParamError {}
+
+/// Largest accepted vertex coordinate magnitude, in metres (10 000 km). At this distance an
+/// `f32` resolves 1 m; keep cloth within a few km of the origin for millimetre precision.
+pub const MAX_COORDINATE: f32 = 1.0e7;
+
+/// Finite and within [`MAX_COORDINATE`] of the origin along every axis.
+#[inline]
+pub(crate) fn within_range(p: Vec3) -> bool {
+    p.is_finite() && p.abs().max_element() <= MAX_COORDINATE
+}
 
 /// How a slider should spread a [`Limit`]'s range.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -2,7 +2,7 @@
 
 use glam::{Vec4, Vec4Swizzles};
 
-use super::topology::Edge;
+use crate::solver::mesh::Edge;
 
 /// Edge strain `|length − rest|/rest` over a set of edges.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

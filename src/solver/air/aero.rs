@@ -3,8 +3,7 @@
 
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
-use super::limits;
-use super::params::ParamError;
+use crate::solver::limits::{self, ParamError};
 
 /// How a cloth meets the air: `½·ρ·C` coefficients in kg/m³.
 ///

@@ -11,7 +11,7 @@ use core::time::Duration;
 use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::time::Instant;
 
-use super::parallel::Parallel;
+use super::Parallel;
 
 /// A small pool of worker threads that wait for work by spinning briefly, for the short
 /// parallel regions of a step (about one per substep, tens of microseconds each), where a
@@ -244,7 +244,7 @@ fn wait_until(ready: impl Fn() -> bool) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solver::Serial;
+    use crate::solver::parallel::Serial;
 
     #[test]
     fn every_item_runs_once_call_after_call() {

@@ -2,8 +2,12 @@
 //!
 //! The solver never starts threads on its own. It hands a slice of independent items (one per
 //! vertex range, or one per cloth) to a [`Parallel`] implementation: [`Workers`] (a pool you
-//! create, in [`workers`](super::workers), made for the solver's short parallel regions; the Bevy plugin keeps one), Bevy's
+//! create, made for the solver's short parallel regions; the Bevy plugin keeps one), Bevy's
 //! task pool through `TaskPoolParallel`, or [`Serial`].
+
+mod workers;
+
+pub use workers::Workers;
 
 /// Runs a function over independent items, possibly on several threads.
 pub trait Parallel: Sync {

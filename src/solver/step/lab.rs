@@ -8,9 +8,9 @@
 
 use glam::{Vec3, Vec4Swizzles};
 
-use super::params::LAB_WEIGHT;
 use super::state::ClothState;
-use super::topology::Edge;
+use crate::solver::constraints::LAB_WEIGHT;
+use crate::solver::mesh::Edge;
 
 /// Scratch arrays reused across steps.
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -8,7 +8,7 @@
 
 use glam::{Vec4, Vec4Swizzles};
 
-use super::topology::Edge;
+use crate::solver::mesh::Edge;
 
 /// Edges (vertex pairs) longer than `threshold` times their rest length. A threshold that is
 /// not finite or not above 1 tears nothing.
@@ -32,7 +32,7 @@ pub fn overstretched_edges(positions: &[Vec4], edges: &[Edge], threshold: f32) -
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solver::{Grid, Topology, TopologyOptions};
+    use crate::solver::mesh::{Grid, Topology, TopologyOptions};
     use std::collections::HashSet;
 
     fn check_consistent(t: &Topology) {

@@ -101,47 +101,10 @@ pub(crate) fn bend_correction<T: Real>(
     )
 }
 
-/// Calibration of [`dihedral_weight`] against the continuum `½ B ∫ κ² dA` (cylinders rolled
-/// from regular grids, as for the isometric model, measured 2.86 × before this factor at 9²,
-/// 17² and 33²; see the tests).
-pub(crate) const DIHEDRAL_SCALE: f32 = 1.0 / 2.85;
-
-/// Geometric weight of a hinge for the dihedral model: the hinge's energy is
-/// `½ B · weight · (ψ − ψ0)²`, with `weight = DIHEDRAL_SCALE · 3|e|²/(A1 + A2)` (the discrete
-/// shells weight, Grinspun et al. 2003); 0 for a degenerate hinge.
-#[must_use]
-pub fn dihedral_weight(x: [glam::Vec3; 4]) -> f32 {
-    let e = x[1] - x[0];
-    let a = 0.5 * (e.cross(x[2] - x[0]).length() + e.cross(x[3] - x[0]).length());
-    let w = DIHEDRAL_SCALE * 3.0 * e.length_squared() / a;
-    if a > 1e-12 && w.is_finite() { w } else { 0.0 }
-}
-
-/// Signed bend angle `ψ` of the pair `(x1, x2, x3)`, `(x1, x2, x4)` in `(−π, π]`: 0 when flat,
-/// its sign telling which way the pair folds (`sign((n1×n2)·(x2 − x1))`).
-#[must_use]
-pub fn bend_angle(x: [glam::Vec3; 4]) -> f32 {
-    let (p2, p3, p4) = (x[1] - x[0], x[2] - x[0], x[3] - x[0]);
-    let n1 = p2.cross(p3).normalize_or_zero();
-    let n2 = p2.cross(p4).normalize_or_zero();
-    let n12 = n1.cross(n2);
-    let sigma = if n12.dot(p2) > 0.0 { 1.0 } else { -1.0 };
-    sigma * n12.length().atan2(-n1.dot(n2))
-}
-
-/// Unsigned dihedral angle `arccos(n1·n2)` in `[0, π]` of the pair `(x1, x2, x3)`,
-/// `(x1, x2, x4)`; π when flat. Zero-area triangles give π/2 (their normal is zero).
-#[must_use]
-pub fn dihedral_angle(x: [glam::Vec3; 4]) -> f32 {
-    let (p2, p3, p4) = (x[1] - x[0], x[2] - x[0], x[3] - x[0]);
-    let n1 = p2.cross(p3).normalize_or_zero();
-    let n2 = p2.cross(p4).normalize_or_zero();
-    n1.cross(n2).length().atan2(n1.dot(n2))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::solver::mesh::hinge::*;
     use glam::Vec3;
 
     fn l(v: Vec3) -> V3<f32> {
@@ -276,7 +239,7 @@ mod tests {
 
     #[test]
     fn hinge_weights_match_the_continuum_at_any_resolution() {
-        use crate::solver::topology::{Grid, TopologyOptions};
+        use crate::solver::mesh::{Grid, TopologyOptions};
         for n in [9u32, 17, 33] {
             let g = Grid::new(n, n, 1.0, 1.0);
             let t = g.topology(TopologyOptions::default()).unwrap();

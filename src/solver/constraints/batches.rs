@@ -23,7 +23,7 @@
 //! step at 256²): a set's vertex indices are private to this module, checked against the
 //! set's vertex count when it is built and never changed after, and each projection first
 //! checks that the positions it is given are at least that long. This and
-//! [`workers`](super::workers) are the only modules with `unsafe` code.
+//! `parallel/workers.rs` are the only modules with `unsafe` code.
 
 // See the last paragraph above.
 #![allow(unsafe_code)]
@@ -33,14 +33,14 @@ use core::ops::Range;
 use bytemuck::cast;
 use glam::Vec4;
 
-use super::bending::bend_correction;
+use super::dihedral::bend_correction;
 use super::distance::distance_correction;
 use super::isometric::iso_correction;
 use wide::f32x4;
 
 use super::lanes::{Real, V3, add1, idx, lanes, load1};
-use super::params::{Solver, SolverParams};
-use super::topology::{BendingModel, EdgeKind, Topology};
+use super::solver::Solver;
+use crate::solver::mesh::{BendingModel, EdgeKind, Topology};
 
 /// Largest `α̃` used: keeps `α̃·λ` finite for absurd compliances.
 const MAX_ALPHA_TILDE: f32 = 1e30;
@@ -609,7 +609,7 @@ pub fn default_part_count(n: usize) -> usize {
 /// All constraints of a cloth, partitioned and coloured for projection.
 ///
 /// Build it with [`ConstraintBatches::new`] and keep it beside the
-/// [`ClothState`](crate::solver::ClothState); call [`ConstraintBatches::set_params`] when the material
+/// [`ClothState`](crate::solver::ClothState); call [`ConstraintBatches::set_solver`] when the material
 /// changes.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ConstraintBatches {
@@ -624,9 +624,9 @@ pub struct ConstraintBatches {
 
 impl ConstraintBatches {
     /// Partitions `topology` into `parts` vertex ranges (see [`default_part_count`]),
-    /// colours each, and loads the material of `params`.
+    /// colours each, and loads the material of `solver`.
     #[must_use]
-    pub fn new(topology: &Topology, params: &SolverParams, parts: usize) -> Self {
+    pub fn new(topology: &Topology, solver: Solver, parts: usize) -> Self {
         let n = topology.vertex_count();
         let k = parts.clamp(1, n.max(1));
         let ranges: Vec<Range<usize>> = (0..k).map(|p| p * n / k..(p + 1) * n / k).collect();
@@ -684,14 +684,14 @@ impl ConstraintBatches {
             bending: false,
             mode_is_xpbd: false,
         };
-        batches.set_params(topology, params);
+        batches.set_solver(topology, solver);
         batches
     }
 
-    /// Loads the material of `params` (stiffness or compliance per constraint). Cheap: no
+    /// Loads the material of `solver` (stiffness or compliance per constraint). Cheap: no
     /// rebuild, no allocation.
-    pub fn set_params(&mut self, topology: &Topology, params: &SolverParams) {
-        let (stretch, shear, bending) = match params.solver {
+    pub fn set_solver(&mut self, topology: &Topology, solver: Solver) {
+        let (stretch, shear, bending) = match solver {
             Solver::Lab { .. } => (1.0, 1.0, 0.0),
             Solver::Pbd {
                 stretch,
@@ -704,8 +704,8 @@ impl ConstraintBatches {
                 bending,
             } => (stretch, shear, bending),
         };
-        self.bending = params.solver.bending_enabled();
-        self.mode_is_xpbd = matches!(params.solver, Solver::Xpbd { .. });
+        self.bending = solver.bending_enabled();
+        self.mode_is_xpbd = matches!(solver, Solver::Xpbd { .. });
         let [even, odd] = &mut self.seams;
         for part in self
             .parts
@@ -795,14 +795,14 @@ impl ConstraintBatches {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solver::topology::{Grid, TopologyOptions};
+    use crate::solver::mesh::{Grid, TopologyOptions};
     use std::collections::HashSet;
 
     fn batches(n: u32, parts: usize) -> (Topology, ConstraintBatches) {
         let t = Grid::new(n, n, 1.0, 1.0)
             .topology(TopologyOptions::default())
             .unwrap();
-        let b = ConstraintBatches::new(&t, &SolverParams::default(), parts);
+        let b = ConstraintBatches::new(&t, Solver::default(), parts);
         (t, b)
     }
 
@@ -895,7 +895,7 @@ mod tests {
         }
         let idx: Vec<u32> = g.indices().into_iter().map(map).collect();
         let t = Topology::from_triangles(&pos, None, &idx, TopologyOptions::default()).unwrap();
-        let b = ConstraintBatches::new(&t, &SolverParams::default(), 4);
+        let b = ConstraintBatches::new(&t, Solver::default(), 4);
         assert!(!b.boundary.distance.a.is_empty() && !b.boundary.bending.bend.is_empty());
         let edges: usize = b.all_parts().map(|p| p.distance.a.len()).sum();
         let bends: usize = b.all_parts().map(|p| p.bending.bend.len()).sum();
@@ -927,7 +927,7 @@ mod tests {
             idx.extend_from_slice(&[0, 1 + i, 1 + (i + 1) % 200]);
         }
         let t = Topology::from_triangles(&pos, None, &idx, TopologyOptions::default()).unwrap();
-        let b = ConstraintBatches::new(&t, &SolverParams::default(), 1);
+        let b = ConstraintBatches::new(&t, Solver::default(), 1);
         assert_eq!(b.parts[0].distance.colours.sequential.len(), 72);
     }
 }

@@ -8,8 +8,8 @@
 
 use glam::{Vec2, Vec3};
 
-use super::bending::{bend_angle, dihedral_weight};
-use super::isometric::hinge_coefficients;
+use super::hinge::{bend_angle, dihedral_weight, hinge_coefficients};
+use crate::solver::limits::MAX_COORDINATE;
 
 /// What a distance edge resists.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -109,10 +109,6 @@ impl TopologyOptions {
         }
     }
 }
-
-/// Largest accepted vertex coordinate magnitude, in metres (10 000 km). At this distance an
-/// `f32` resolves 1 m; keep cloth within a few km of the origin for millimetre precision.
-pub const MAX_COORDINATE: f32 = 1.0e7;
 
 /// Why a mesh cannot be simulated.
 #[derive(Clone, Debug, PartialEq)]
@@ -549,138 +545,10 @@ impl Topology {
     }
 }
 
-/// A rectangular grid of `columns × rows` vertices in the XZ plane, centred on the origin,
-/// front face towards +Y.
-///
-/// Vertex `j·columns + i` sits at column `i` (x grows with `i`) and row `j` (z shrinks with
-/// `j`), with UV `(i/(columns−1), j/(rows−1))`. Each quad `a = j·columns + i` is split into the
-/// triangles `(a, a+1, a+columns+1)` and `(a, a+columns+1, a+columns)`, the pattern of seed 000
-/// and of the report (six edges per interior vertex).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Grid {
-    /// Vertices along x (at least 2).
-    pub columns: u32,
-    /// Vertices along z (at least 2).
-    pub rows: u32,
-    /// Extent along x in metres.
-    pub width: f32,
-    /// Extent along z in metres.
-    pub height: f32,
-}
-
-impl Grid {
-    /// A `columns × rows` grid of `width × height` metres.
-    #[must_use]
-    pub fn new(columns: u32, rows: u32, width: f32, height: f32) -> Self {
-        Self {
-            columns,
-            rows,
-            width,
-            height,
-        }
-    }
-
-    /// Checks the grid is at least 2×2 with a positive, finite size and under 2³² vertices.
-    ///
-    /// # Errors
-    /// [`TopologyError::BadGrid`] saying what is wrong.
-    pub fn validate(&self) -> Result<(), TopologyError> {
-        if self.columns < 2 || self.rows < 2 {
-            return Err(TopologyError::BadGrid {
-                reason: format!(
-                    "{}×{} vertices; at least 2×2 are needed",
-                    self.columns, self.rows
-                ),
-            });
-        }
-        if u64::from(self.columns) * u64::from(self.rows) > u64::from(u32::MAX) {
-            return Err(TopologyError::BadGrid {
-                reason: "more than 2³² vertices".into(),
-            });
-        }
-        for (name, v) in [("width", self.width), ("height", self.height)] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(TopologyError::BadGrid {
-                    reason: format!("{name} {v} must be finite and positive"),
-                });
-            }
-        }
-        Ok(())
-    }
-
-    /// Vertex index of column `i`, row `j`.
-    #[must_use]
-    pub fn index(&self, i: u32, j: u32) -> u32 {
-        j * self.columns + i
-    }
-
-    /// Number of vertices.
-    #[must_use]
-    pub fn vertex_count(&self) -> usize {
-        self.columns as usize * self.rows as usize
-    }
-
-    /// Vertex positions.
-    #[must_use]
-    pub fn positions(&self) -> Vec<Vec3> {
-        let (c, r) = (self.columns.max(2), self.rows.max(2));
-        let mut out = Vec::with_capacity(self.vertex_count());
-        for j in 0..self.rows {
-            for i in 0..self.columns {
-                let x = self.width * (i as f32 / (c - 1) as f32 - 0.5);
-                let z = self.height * (0.5 - j as f32 / (r - 1) as f32);
-                out.push(Vec3::new(x, 0.0, z));
-            }
-        }
-        out
-    }
-
-    /// Texture coordinates.
-    #[must_use]
-    pub fn uvs(&self) -> Vec<Vec2> {
-        let (c, r) = (self.columns.max(2), self.rows.max(2));
-        let mut out = Vec::with_capacity(self.vertex_count());
-        for j in 0..self.rows {
-            for i in 0..self.columns {
-                out.push(Vec2::new(
-                    i as f32 / (c - 1) as f32,
-                    j as f32 / (r - 1) as f32,
-                ));
-            }
-        }
-        out
-    }
-
-    /// Triangle indices.
-    #[must_use]
-    pub fn indices(&self) -> Vec<u32> {
-        let c = self.columns;
-        let mut out = Vec::with_capacity(
-            6 * (self.columns.max(1) - 1) as usize * (self.rows.max(1) - 1) as usize,
-        );
-        for j in 0..self.rows.saturating_sub(1) {
-            for i in 0..c.saturating_sub(1) {
-                let a = j * c + i;
-                out.extend_from_slice(&[a, a + 1, a + c + 1, a, a + c + 1, a + c]);
-            }
-        }
-        out
-    }
-
-    /// The grid's topology.
-    ///
-    /// # Errors
-    /// [`TopologyError::BadGrid`] if [`Self::validate`] fails.
-    pub fn topology(&self, options: TopologyOptions) -> Result<Topology, TopologyError> {
-        self.validate()?;
-        let uvs = self.uvs();
-        Topology::from_triangles(&self.positions(), Some(&uvs), &self.indices(), options)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::solver::mesh::Grid;
 
     #[test]
     fn grid_has_six_edges_per_interior_vertex() {

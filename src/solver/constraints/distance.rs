@@ -44,7 +44,7 @@ pub(crate) fn distance_correction<T: Real>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solver::lanes::V3;
+    use crate::solver::constraints::lanes::V3;
 
     fn v(x: f32, y: f32, z: f32) -> V3<f32> {
         V3 { x, y, z }

@@ -26,8 +26,8 @@
 
 use glam::{Vec4, Vec4Swizzles};
 
-use super::params::BendingSolve;
-use super::topology::Topology;
+use super::solver::BendingSolve;
+use crate::solver::mesh::Topology;
 
 /// Saturation `R` above which [`BendingSolve::Auto`] solves bending implicitly. Measured on
 /// the cantilever (`tests/stiffness.rs`): below it the projected droop is within a few per
@@ -39,7 +39,7 @@ pub const IMPLICIT_BENDING_SATURATION: f32 = 0.5;
 /// projected bending is used (softer than set; [`Simulation::bending_saturation`] says by how
 /// much).
 ///
-/// [`Simulation::bending_saturation`]: super::Simulation::bending_saturation
+/// [`Simulation::bending_saturation`]: crate::solver::Simulation::bending_saturation
 pub const IMPLICIT_BENDING_AUTO_WORK: usize = 600_000;
 
 /// Largest `n · b` [`BendingSolve::Implicit`] takes (64 MB of factor, a 160 × 160 grid).
@@ -485,7 +485,7 @@ fn reverse_cuthill_mckee<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solver::topology::{Grid, TopologyOptions};
+    use crate::solver::mesh::{Grid, TopologyOptions};
     use glam::Vec3;
 
     fn sheet(cols: u32, rows: u32) -> (Topology, Vec<Vec4>) {

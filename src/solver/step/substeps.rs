@@ -31,20 +31,17 @@
 
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
-use super::air::{Aerodynamics, air_velocity_change, vertex_area_vectors};
-use super::batches::{ConstraintBatches, Mode, Part};
-use super::collide::{Collider, ContactImpulse, SubstepPose, collide_vertex, substep_poses};
-use super::implicit::ImplicitBending;
 use super::lab::{LabScratch, lab_step};
-use super::parallel::Parallel;
-use super::params::{Solver, SolverParams};
-use super::self_collision::{
-    SelfCollision, SelfCollisionScratch, find_self_collision_candidates, self_collide,
-    self_collide_parallel,
-};
+use super::params::SolverParams;
 use super::state::ClothState;
-use super::tether::Tethers;
-use super::topology::{BendingModel, Topology};
+use crate::solver::air::{Aerodynamics, air_velocity_change, vertex_area_vectors};
+use crate::solver::collision::{
+    Collider, ContactImpulse, SelfCollision, SelfCollisionScratch, SubstepPose, collide_vertex,
+    find_self_collision_candidates, self_collide, self_collide_parallel, substep_poses,
+};
+use crate::solver::constraints::{ConstraintBatches, ImplicitBending, Mode, Part, Solver, Tethers};
+use crate::solver::mesh::{BendingModel, Topology};
+use crate::solver::parallel::Parallel;
 
 /// What a step includes besides the cloth's own constraints. `StepInput::default()` is a
 /// cloth alone in the world.

@@ -25,9 +25,9 @@ use std::sync::Arc;
 
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
-use super::collide::{Collider, Pose, Shape};
 use super::state::Pin;
-use super::wind::WindField;
+use crate::solver::air::WindField;
+use crate::solver::collision::{Collider, Pose, Shape};
 
 /// A pin target or a collider moving more than this (metres) wakes a sleeping cloth.
 pub const WAKE_DISTANCE: f32 = 1e-4;
@@ -92,7 +92,7 @@ fn pose_moved(a: &Pose, b: &Pose) -> bool {
 
 fn same_collider(a: &Collider, b: &Collider) -> bool {
     let shape = match (&a.shape, &b.shape) {
-        (Shape::Sdf(x), Shape::Sdf(y)) => Arc::ptr_eq(x, y),
+        (Shape::Mesh(x), Shape::Mesh(y)) => Arc::ptr_eq(x, y),
         (x, y) => x == y,
     };
     shape
@@ -289,7 +289,7 @@ mod tests {
     }
 
     /// Tethers hold the span below the pins, which a fine cloth stretches at rest: such
-    /// hard limits made the hierarchical and chain solvers cycle forever (README, "Tried for
+    /// hard limits made the hierarchical and chain solvers cycle forever (`docs/experiments.md`, "Tried for
     /// stretch"); a tethered cloth must still come to rest. At 128² it does where the plain
     /// solver keeps moving (it hangs stretched many times over, and slides).
     #[test]

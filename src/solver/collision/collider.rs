@@ -12,156 +12,10 @@
 //! `v` is caught as long as `v·h < r + thickness`, with `h` the substep length. At 60 Hz and 10
 //! substeps (`h` ≈ 1.7 ms) a 0.2 m ball survives speeds up to about 120 m/s.
 
-use super::limits;
-use super::state::within_range;
-use super::topology::MAX_COORDINATE;
-use std::sync::Arc;
+use glam::{Vec3, Vec4, Vec4Swizzles};
 
-use glam::{Quat, Vec3, Vec4, Vec4Swizzles};
-
-use super::sdf::SdfGrid;
-
-/// A rigid shape in its local frame.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Shape {
-    /// A ball of this radius, centred on the origin.
-    Sphere {
-        /// Radius in metres.
-        radius: f32,
-    },
-    /// An axis-aligned box centred on the origin.
-    Cuboid {
-        /// Half size along x, y, z in metres.
-        half_extents: Vec3,
-    },
-    /// A capsule along the local y axis: a segment from `−half_height` to `+half_height`,
-    /// swept by a ball of `radius`.
-    Capsule {
-        /// Half the length of the inner segment.
-        half_height: f32,
-        /// Radius in metres.
-        radius: f32,
-    },
-    /// The half-space below the local xz plane (surface normal +y).
-    Plane,
-    /// A triangle mesh baked into a signed distance field.
-    Sdf(Arc<SdfGrid>),
-}
-
-impl Shape {
-    /// Signed distance from `p` (local frame) to the surface, negative inside, with the unit
-    /// outward normal of the closest surface point.
-    #[must_use]
-    pub fn distance(&self, p: Vec3) -> (f32, Vec3) {
-        match self {
-            Shape::Sphere { radius } => {
-                let len = p.length();
-                (len - radius, p.try_normalize().unwrap_or(Vec3::Y))
-            }
-            Shape::Cuboid { half_extents } => cuboid_distance(p, *half_extents),
-            Shape::Capsule {
-                half_height,
-                radius,
-            } => {
-                let c = Vec3::new(0.0, p.y.clamp(-half_height, *half_height), 0.0);
-                let d = p - c;
-                (d.length() - radius, d.try_normalize().unwrap_or(Vec3::X))
-            }
-            Shape::Plane => (p.y, Vec3::Y),
-            Shape::Sdf(grid) => grid.sample(p),
-        }
-    }
-
-    /// Radius of a ball around the local origin that contains the shape (infinite for a plane).
-    #[must_use]
-    pub fn bounding_radius(&self) -> f32 {
-        match self {
-            Shape::Sphere { radius } => *radius,
-            Shape::Cuboid { half_extents } => half_extents.length(),
-            Shape::Capsule {
-                half_height,
-                radius,
-            } => half_height + radius,
-            Shape::Plane => f32::INFINITY,
-            Shape::Sdf(grid) => grid.bounding_radius(),
-        }
-    }
-}
-
-fn cuboid_distance(p: Vec3, e: Vec3) -> (f32, Vec3) {
-    let q = p.abs() - e;
-    let outside = q.max(Vec3::ZERO);
-    if outside.length_squared() > 0.0 {
-        let n = (outside * p.signum()).normalize();
-        (outside.length(), n)
-    } else {
-        // Inside: leave through the nearest face.
-        let axis = if q.x >= q.y && q.x >= q.z {
-            Vec3::X
-        } else if q.y >= q.z {
-            Vec3::Y
-        } else {
-            Vec3::Z
-        };
-        (q.max_element(), axis * p.signum())
-    }
-}
-
-/// Position, orientation and uniform scale of a collider.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Pose {
-    /// World position of the local origin.
-    pub translation: Vec3,
-    /// World orientation.
-    pub rotation: Quat,
-    /// Uniform scale (the shape's sizes are multiplied by it).
-    pub scale: f32,
-}
-
-impl Default for Pose {
-    fn default() -> Self {
-        Self {
-            translation: Vec3::ZERO,
-            rotation: Quat::IDENTITY,
-            scale: 1.0,
-        }
-    }
-}
-
-impl Pose {
-    /// A pose at `translation` with no rotation.
-    #[must_use]
-    pub fn at(translation: Vec3) -> Self {
-        Self {
-            translation,
-            ..Default::default()
-        }
-    }
-
-    /// World point of a local point.
-    #[inline]
-    #[must_use]
-    pub fn apply(&self, p: Vec3) -> Vec3 {
-        self.translation + self.rotation * (p * self.scale)
-    }
-
-    /// Local point of a world point.
-    #[inline]
-    #[must_use]
-    pub fn inverse_apply(&self, p: Vec3) -> Vec3 {
-        (self.rotation.inverse() * (p - self.translation)) / self.scale
-    }
-
-    /// The pose a fraction `t` of the way to `other`.
-    #[must_use]
-    pub fn lerp(&self, other: &Pose, t: f32) -> Pose {
-        Pose {
-            translation: self.translation.lerp(other.translation, t),
-            rotation: self.rotation.slerp(other.rotation, t),
-            scale: self.scale + (other.scale - self.scale) * t,
-        }
-    }
-}
+use super::shape::{Pose, Shape};
+use crate::solver::limits::{self, MAX_COORDINATE, within_range};
 
 /// A shape that cloth collides with.
 #[derive(Clone, Debug, PartialEq)]
@@ -192,7 +46,7 @@ impl Collider {
     }
 
     /// Checks that the collider can be collided with: thickness, friction and sizes within
-    /// their [`limits`](super::limits), poses finite and within range, scale positive.
+    /// their [`limits`](crate::solver::limits), poses finite and within range, scale positive.
     ///
     /// # Errors
     /// What is wrong, in words (the step itself drops any push that lands out of range, so an
@@ -209,10 +63,10 @@ impl Collider {
             Shape::Sphere { radius } => ok(*radius),
             Shape::Cuboid { half_extents } => half_extents.to_array().into_iter().all(ok),
             Shape::Capsule {
-                half_height,
+                half_length,
                 radius,
-            } => ok(*half_height) && ok(*radius),
-            Shape::Plane | Shape::Sdf(_) => true,
+            } => ok(*half_length) && ok(*radius),
+            Shape::Plane | Shape::Mesh(_) => true,
         };
         if !sizes_ok {
             return Err(format!(
@@ -328,6 +182,7 @@ pub(crate) fn collide_vertex(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Quat;
 
     #[test]
     fn analytic_distances() {
@@ -343,7 +198,7 @@ mod tests {
         let (d, _) = b.distance(Vec3::new(2.0, 3.0, 0.0));
         assert!((d - 2f32.sqrt()).abs() < 1e-6);
         let c = Shape::Capsule {
-            half_height: 1.0,
+            half_length: 1.0,
             radius: 0.5,
         };
         assert_eq!(c.distance(Vec3::new(1.0, 0.3, 0.0)), (0.5, Vec3::X));

@@ -26,50 +26,7 @@
 //! the stiffness a material constant, the same at any mesh resolution (where one projection per
 //! substep cannot carry it, the step solves the same energy implicitly: see `implicit.rs`).
 
-use glam::Vec3;
-
 use super::lanes::{Real, V3};
-
-/// Calibration of the hinge energy against the continuum `½ B ∫ κ² dA` for cylindrical
-/// bending: measured on regular grids (one diagonal per quad) rolled into cylinders, the
-/// uncalibrated sum is 2.4–3.3 × the continuum depending on the roll's direction against the
-/// diagonals (2.85 on average, the same at 9², 17² and 33²); see the tests.
-pub(crate) const KAPPA_SCALE: f32 = 1.0 / 2.85;
-
-/// Triangle areas below this: the hinge has no shape and gets no bending.
-const MIN_AREA: f32 = 1e-12;
-
-/// `a_i` of the hinge `(x0, x1, x2, x3)` (shared edge `x0–x1`) in its rest shape; zero for a
-/// hinge with a degenerate triangle.
-#[must_use]
-pub fn hinge_coefficients(x: [Vec3; 4]) -> [f32; 4] {
-    let cot = |o: Vec3, a: Vec3, b: Vec3| -> Option<f32> {
-        let (u, v) = (a - o, b - o);
-        let s = u.cross(v).length();
-        (s > MIN_AREA).then(|| u.dot(v) / s)
-    };
-    let area0 = 0.5 * (x[1] - x[0]).cross(x[2] - x[0]).length();
-    let area1 = 0.5 * (x[1] - x[0]).cross(x[3] - x[0]).length();
-    let (Some(c01), Some(c02), Some(c03), Some(c04)) = (
-        cot(x[0], x[1], x[2]),
-        cot(x[0], x[1], x[3]),
-        cot(x[1], x[0], x[2]),
-        cot(x[1], x[0], x[3]),
-    ) else {
-        return [0.0; 4];
-    };
-    if area0 <= MIN_AREA || area1 <= MIN_AREA {
-        return [0.0; 4];
-    }
-    let s = (3.0 * KAPPA_SCALE / (area0 + area1)).sqrt();
-    let k = [c03 + c04, c01 + c02, -c01 - c03, -c02 - c04];
-    let out = k.map(|k| k * s);
-    if out.iter().all(|v| v.is_finite()) {
-        out
-    } else {
-        [0.0; 4]
-    }
-}
 
 /// Correction of one isometric bending constraint: `(Δx0..Δx3, Δλ)`.
 ///
@@ -101,16 +58,12 @@ pub(crate) fn iso_correction<T: Real>(
     )
 }
 
-/// The hinge's curvature vector `C = Σ a_i x_i` (zero when flat), for measuring.
-#[must_use]
-pub fn hinge_curvature(x: [Vec3; 4], a: [f32; 4]) -> Vec3 {
-    x[0] * a[0] + x[1] * a[1] + x[2] * a[2] + x[3] * a[3]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solver::topology::{Grid, TopologyOptions};
+    use crate::solver::mesh::hinge::*;
+    use crate::solver::mesh::{Grid, TopologyOptions};
+    use glam::Vec3;
 
     fn l(v: Vec3) -> V3<f32> {
         v.into()

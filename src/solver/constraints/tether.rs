@@ -21,7 +21,7 @@ use bytemuck::cast;
 use glam::{Vec3, Vec4, Vec4Swizzles};
 use wide::{CmpGt, f32x4};
 
-use super::topology::Topology;
+use crate::solver::mesh::Topology;
 
 /// Tether settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -313,7 +313,7 @@ impl Ord for Ordered {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solver::{Grid, TopologyOptions};
+    use crate::solver::mesh::{Grid, TopologyOptions};
 
     #[test]
     fn tethers_use_path_length_to_the_nearest_pin() {

@@ -1,13 +1,7 @@
-//! Solver settings: which solver, how many substeps and iterations, and the material.
-//!
-//! These are plain data. The Bevy component [`ClothConfig`](crate::cloth::ClothConfig)
-//! mirrors them and converts with `into()`; tests and headless tools use them directly.
+//! Which constraint solver projects a cloth ([`Solver`]: the lab's Jacobi rule, PBD or XPBD,
+//! with their material) and how XPBD solves isometric bending ([`BendingSolve`]).
 
-use glam::Vec3;
-
-use super::air::Aerodynamics;
-use super::limits;
-use super::sleep::Sleep;
+use crate::solver::limits::{self, ParamError};
 
 /// Relaxation weight of the lab rule (seed 000): `x ← (0.2·x + Σx)/(0.2 + n)`.
 pub const LAB_WEIGHT: f32 = 0.2;
@@ -24,7 +18,7 @@ pub enum Solver {
     ///
     /// Every triangle edge is a rigid distance constraint; there is no bending. Velocities are
     /// multiplied by `velocity_keep` once per step, before gravity (the lab uses 0.99).
-    /// [`SolverParams::damping`] is not used by this solver.
+    /// [`SolverParams::damping`](crate::solver::SolverParams::damping) is not used by this solver.
     Lab {
         /// Fraction of the velocity kept at the start of each step (seed 000: 0.99).
         velocity_keep: f32,
@@ -44,7 +38,7 @@ pub enum Solver {
     /// units. At the default 10 substeps × 1 iteration, stretch and shear are enforced only
     /// as far as one Gauss–Seidel sweep per substep carries them (a fine mesh stretches);
     /// isometric bending is enforced at any resolution and substep count within ±9 %
-    /// (implicitly where a projection could not, see [`BendingSolve`] and the README's
+    /// (implicitly where a projection could not, see [`BendingSolve`] and `docs/experiments.md`'s
     /// "Stiffness" section for what was measured).
     Xpbd {
         /// Compliance of stretch edges in m/N; `0` is inextensible.
@@ -99,7 +93,7 @@ impl Default for Solver {
     }
 }
 
-/// How XPBD solves isometric bending (see the README's "Stiffness" section).
+/// How XPBD solves isometric bending (see "Stiffness" in `docs/experiments.md`).
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum BendingSolve {
@@ -119,105 +113,6 @@ pub enum BendingSolve {
     ///
     /// [`IMPLICIT_BENDING_MAX_WORK`]: super::IMPLICIT_BENDING_MAX_WORK
     Implicit,
-}
-
-/// Everything a step needs to know about how to solve, apart from the cloth itself.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SolverParams {
-    /// The solver and its material.
-    pub solver: Solver,
-    /// Substeps per step: each integrates and projects once per iteration. For PBD and XPBD,
-    /// prefer substeps over iterations (Macklin et al., "Small Steps in Physics Simulation").
-    pub substeps: u32,
-    /// Projection iterations per substep.
-    pub iterations: u32,
-    /// Gravity acceleration in m/s².
-    pub gravity: Vec3,
-    /// Linear velocity damping in 1/s (PBD and XPBD): `v ← v / (1 + damping·h)` each substep.
-    pub damping: f32,
-    /// Speed limit for free vertices in m/s (default 100): a vertex's velocity is clamped to
-    /// it at the end of each substep, so the kinetic energy of a cloth of mass `M` never
-    /// exceeds `½·M·max_speed²`, whatever a hitch, a collider or the wind does to it. Pins are
-    /// kinematic and not limited.
-    pub max_speed: f32,
-    /// How the cloth meets the air it moves through, with or without wind (PBD and XPBD; the
-    /// lab solver has no air). [`Aerodynamics::NONE`] simulates a vacuum.
-    pub air: Aerodynamics,
-    /// How XPBD solves isometric bending: projected or implicit (PBD, the lab solver and
-    /// dihedral bending always project).
-    pub bending_solve: BendingSolve,
-    /// When the cloth at rest stops being stepped ([`Sleep::NEVER`] keeps it always awake).
-    pub sleep: Sleep,
-}
-
-impl Default for SolverParams {
-    fn default() -> Self {
-        Self {
-            solver: Solver::default(),
-            substeps: 10,
-            iterations: 1,
-            gravity: Vec3::new(0.0, -9.81, 0.0),
-            damping: 0.1,
-            max_speed: 100.0,
-            air: Aerodynamics::default(),
-            bending_solve: BendingSolve::Auto,
-            sleep: Sleep::default(),
-        }
-    }
-}
-
-/// A solver parameter that is out of its range.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ParamError {
-    /// The parameter's name, e.g. `"substeps"`.
-    pub name: &'static str,
-    /// Why it is rejected.
-    pub reason: String,
-}
-
-impl core::fmt::Display for ParamError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        write!(
-            f,
-            "invalid solver parameter `{}`: {}",
-            self.name, self.reason
-        )
-    }
-}
-
-impl std::error::Error for ParamError {}
-
-impl SolverParams {
-    /// Largest accepted substep and iteration counts: enough for any converged reference.
-    pub const MAX_COUNT: u32 = limits::SUBSTEPS.max as u32;
-    /// Largest accepted gravity, m/s² (about 10 000 g).
-    pub const MAX_GRAVITY: f32 = limits::GRAVITY.max;
-    /// Largest accepted speed limit, m/s (ten times the speed of sound in air: nothing a cloth
-    /// survives).
-    pub const MAX_SPEED: f32 = limits::MAX_SPEED.max;
-    /// Largest accepted [`Sleep::energy`], J/kg (an rms speed of about 1.4 m/s: a cloth
-    /// moving that fast is not at rest).
-    pub const MAX_SLEEP_ENERGY: f32 = limits::SLEEP_ENERGY.max;
-
-    /// Checks every parameter against its [`limits`] entry and says which one is wrong.
-    ///
-    /// # Errors
-    /// A [`ParamError`] naming the first parameter out of range: substeps or iterations
-    /// outside [`limits::SUBSTEPS`], gravity not finite or longer than
-    /// [`limits::GRAVITY`], damping, speed limit, air coefficients, sleep energy or steps, or
-    /// a solver's stiffness or compliance outside its limit (infinite bending compliance is
-    /// allowed: it means no bending).
-    pub fn validate(&self) -> Result<(), ParamError> {
-        limits::SUBSTEPS.check_count(self.substeps)?;
-        limits::ITERATIONS.check_count(self.iterations)?;
-        limits::GRAVITY.check_length(self.gravity)?;
-        limits::DAMPING.check(self.damping)?;
-        limits::MAX_SPEED.check(self.max_speed)?;
-        self.air.validate()?;
-        limits::SLEEP_ENERGY.check(self.sleep.energy)?;
-        limits::SLEEP_STEPS.check_count(self.sleep.steps)?;
-        self.solver.validate()
-    }
 }
 
 impl Solver {

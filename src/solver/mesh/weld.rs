@@ -21,9 +21,9 @@
 
 use std::collections::HashMap;
 
-use glam::{IVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
+use glam::{IVec3, Vec2, Vec3, Vec4};
 
-use super::shading::{finish_tangent, triangle_tangent};
+use super::shading::MeshShading;
 use super::topology::{Topology, TopologyError, TopologyOptions};
 
 /// Copies whose source normals have a cosine at least this large share a normal (about 8°).
@@ -252,186 +252,6 @@ fn normal_groups(
     (group, count as usize)
 }
 
-/// Per-mesh-vertex normals and tangents from the simulated particles.
-///
-/// Built once per cloth from its [`Weld`], its mesh triangles and UVs (or, for a mesh with
-/// tangents but no UVs, its rest shape and source tangents); [`Self::update`] then fills
-/// [`Self::normals`] and [`Self::tangents`] for the mesh triangles still drawn.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct MeshShading {
-    /// UVs of each mesh triangle's corners (real or made from the source tangents).
-    corner_uvs: Option<Vec<[Vec2; 3]>>,
-    /// Handedness to use per mesh vertex when the UVs were made from source tangents.
-    handedness: Option<Vec<f32>>,
-    group_sum: Vec<Vec3>,
-    tan: Vec<Vec3>,
-    bit: Vec<Vec3>,
-    normals: Vec<Vec3>,
-    /// Last update's normals, the fallback for vertices left in no triangle.
-    old_normals: Vec<Vec3>,
-    tangents: Vec<Vec4>,
-}
-
-impl MeshShading {
-    /// Shading for a mesh with these triangles (mesh indices) and, for tangents, `uvs` per
-    /// mesh vertex; or, without UVs, `source_tangents` (xyz + handedness) with the mesh-space
-    /// `rest` positions: tangents then follow the cloth's deformation from the source frame.
-    /// Neither: no tangents.
-    #[must_use]
-    pub fn new(
-        triangles: &[[u32; 3]],
-        uvs: Option<&[Vec2]>,
-        rest: &[Vec3],
-        source_tangents: Option<&[Vec4]>,
-    ) -> Self {
-        let n = rest.len();
-        let valid = |t: &[u32; 3]| t.iter().all(|&v| (v as usize) < n);
-        let (corner_uvs, handedness) = match (uvs, source_tangents) {
-            (Some(uv), _) if uv.len() == n => (
-                Some(
-                    triangles
-                        .iter()
-                        .map(|t| {
-                            if valid(t) {
-                                t.map(|v| uv[v as usize])
-                            } else {
-                                [Vec2::ZERO; 3]
-                            }
-                        })
-                        .collect(),
-                ),
-                None,
-            ),
-            (_, Some(tg)) if tg.len() == n => (
-                Some(
-                    triangles
-                        .iter()
-                        .map(|t| {
-                            if valid(t) {
-                                frame_uvs(t.map(|v| rest[v as usize]), t.map(|v| tg[v as usize]))
-                            } else {
-                                [Vec2::ZERO; 3]
-                            }
-                        })
-                        .collect(),
-                ),
-                Some(
-                    tg.iter()
-                        .map(|t| if t.w < 0.0 { -1.0 } else { 1.0 })
-                        .collect(),
-                ),
-            ),
-            _ => (None, None),
-        };
-        Self {
-            corner_uvs,
-            handedness,
-            ..Default::default()
-        }
-    }
-
-    /// Whether tangents are produced.
-    #[must_use]
-    pub fn has_tangents(&self) -> bool {
-        self.corner_uvs.is_some()
-    }
-
-    /// The UVs of each mesh triangle's corners that tangents come from (real ones, or made
-    /// from the source tangents); `None` without tangents.
-    #[must_use]
-    pub fn corner_uvs(&self) -> Option<&[[Vec2; 3]]> {
-        self.corner_uvs.as_deref()
-    }
-
-    /// The handedness each mesh vertex's tangent keeps (from the source tangents), when the
-    /// corner UVs were made from them; `None`: handedness follows the UVs.
-    #[must_use]
-    pub fn handedness(&self) -> Option<&[f32]> {
-        self.handedness.as_deref()
-    }
-
-    /// Recomputes normals (and tangents) for every mesh vertex from `particles`, over the mesh
-    /// triangles `drawn` (indices into the triangle list given to [`Self::new`]).
-    pub fn update(
-        &mut self,
-        weld: &Weld,
-        particles: &[Vec4],
-        triangles: &[[u32; 3]],
-        drawn: &[u32],
-    ) {
-        let n = weld.vertex_count();
-        let (group, groups) = weld.normal_groups();
-        let at = |v: u32| particles[weld.particle(v) as usize].xyz();
-        // Keep last frame's normal where no triangle is left (a torn-off vertex).
-        let fallback = |i: usize, old: &[Vec3]| {
-            old.get(i)
-                .copied()
-                .filter(|v| v.is_finite() && *v != Vec3::ZERO)
-                .unwrap_or(Vec3::Y)
-        };
-        self.group_sum.clear();
-        self.group_sum.resize(groups, Vec3::ZERO);
-        for &t in drawn {
-            let tri = triangles[t as usize];
-            let [a, b, c] = tri.map(at);
-            let face = (b - a).cross(c - a);
-            if face.is_finite() {
-                for v in tri {
-                    self.group_sum[group[v as usize] as usize] += face;
-                }
-            }
-        }
-        // Last frame's normals move to the scratch buffer (no allocation per frame).
-        core::mem::swap(&mut self.normals, &mut self.old_normals);
-        self.normals.clear();
-        self.normals.extend((0..n).map(|i| {
-            self.group_sum[group[i] as usize]
-                .try_normalize()
-                .unwrap_or_else(|| fallback(i, &self.old_normals))
-        }));
-        let Some(corner_uvs) = &self.corner_uvs else {
-            self.tangents.clear();
-            return;
-        };
-        self.tan.clear();
-        self.tan.resize(n, Vec3::ZERO);
-        self.bit.clear();
-        self.bit.resize(n, Vec3::ZERO);
-        for &t in drawn {
-            let tri = triangles[t as usize];
-            if let Some((tp, bp)) = triangle_tangent(tri.map(at), corner_uvs[t as usize]) {
-                for v in tri {
-                    self.tan[v as usize] += tp;
-                    self.bit[v as usize] += bp;
-                }
-            }
-        }
-        self.tangents.clear();
-        for i in 0..n {
-            let handedness = self.handedness.as_ref().map(|h| h[i]);
-            self.tangents.push(finish_tangent(
-                self.normals[i],
-                self.tan[i],
-                self.bit[i],
-                handedness,
-            ));
-        }
-    }
-
-    /// Unit normal of every mesh vertex (world space) as of the last [`Self::update`].
-    #[must_use]
-    pub fn normals(&self) -> &[Vec3] {
-        &self.normals
-    }
-
-    /// Unit tangent with handedness of every mesh vertex as of the last [`Self::update`];
-    /// empty when the mesh has neither UVs nor tangents.
-    #[must_use]
-    pub fn tangents(&self) -> &[Vec4] {
-        &self.tangents
-    }
-}
-
 /// How a user's mesh is simulated: its [`Weld`], its triangles (mesh indices), which of them
 /// are still drawn after tearing, and its [`MeshShading`].
 ///
@@ -627,22 +447,10 @@ impl MeshBinding {
     }
 }
 
-/// Texture-like coordinates of a rest triangle in the frame of its source tangents: `u` along
-/// their mean (projected into the triangle's plane), `v` along `n × u`. The tangent-from-UV
-/// formula on the deformed triangle then gives the deformed image of that tangent.
-fn frame_uvs(p: [Vec3; 3], tangents: [Vec4; 3]) -> [Vec2; 3] {
-    let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
-    let mean: Vec3 = tangents.iter().map(|t| t.xyz()).sum();
-    let u = (mean - n * n.dot(mean))
-        .try_normalize()
-        .unwrap_or_else(|| (p[1] - p[0]).normalize_or_zero());
-    let v = n.cross(u);
-    p.map(|q| Vec2::new((q - p[0]).dot(u), (q - p[0]).dot(v)))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec4Swizzles;
 
     /// Two quads side by side sharing the middle column, split there as an exporter would
     /// (UV seam: vertices 2 and 3 repeat 4 and 5 in position).

@@ -30,9 +30,8 @@ use core::f64::consts::TAU;
 use glam::{Quat, Vec3, Vec4, Vec4Swizzles};
 use noise::{NoiseFn, Perlin};
 
-use super::collide::Pose;
-use super::limits;
-use super::params::ParamError;
+use crate::solver::collision::Pose;
+use crate::solver::limits::{self, ParamError};
 
 /// A wind: base velocity, gusts and turbulence.
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -58,7 +57,7 @@ impl WindParams {
 
     /// Checks that the wind can be sampled: a finite velocity no faster than
     /// [`Self::MAX_SPEED`], gust amplitude, frequency, turbulence and eddy size within their
-    /// [`limits`](super::limits).
+    /// [`limits`](crate::solver::limits).
     ///
     /// # Errors
     /// A [`ParamError`] naming the first field out of range.

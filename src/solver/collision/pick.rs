@@ -3,7 +3,7 @@
 
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
-use super::collide::{Pose, Shape};
+use super::shape::{Pose, Shape};
 
 /// Where a ray meets a cloth.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -88,7 +88,7 @@ pub fn ray_hit(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solver::Grid;
+    use crate::solver::mesh::Grid;
 
     #[test]
     fn rays_through_vertices_and_edges_do_not_slip_between_triangles() {
@@ -266,7 +266,7 @@ mod shape_tests {
         assert!((t - 1.75).abs() < 1e-3, "{t}");
         // Capsule along y: top of its cap at 1 + 2·(0.2 + 0.1).
         let cap = Shape::Capsule {
-            half_height: 0.2,
+            half_length: 0.2,
             radius: 0.1,
         };
         let t = ray_shape(&cap, &pose, above, down).unwrap();

@@ -5,7 +5,7 @@
 //! aligned vector per vertex. Positions carry the vertex's *active* inverse mass in `w`
 //! (0 for pinned vertices), so a constraint kernel gets both in one load.
 
-use super::topology::MAX_COORDINATE;
+use crate::solver::limits::{MAX_COORDINATE, within_range};
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
 /// Positions, velocities and pins of one cloth.
@@ -107,12 +107,6 @@ impl core::fmt::Display for StateError {
 }
 
 impl std::error::Error for StateError {}
-
-/// Finite and within [`MAX_COORDINATE`] of the origin along every axis.
-#[inline]
-pub(crate) fn within_range(p: Vec3) -> bool {
-    p.is_finite() && p.abs().max_element() <= MAX_COORDINATE
-}
 
 impl ClothState {
     /// A cloth at rest at `positions` with per-vertex `masses` in kilograms, no pins.

@@ -1,0 +1,156 @@
+//! Reading a Bevy [`Mesh`] into solver input ([`read_mesh`], for cloths and mesh colliders),
+//! and building a mesh for a [`Grid`].
+
+use bevy::asset::RenderAssetUsages;
+use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
+use bevy::prelude::*;
+
+use crate::solver::{Grid, MeshAttributes};
+
+/// Why a mesh cannot be read.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum MeshError {
+    /// The mesh is not a triangle list (the topology found is given).
+    NotTriangleList(String),
+    /// The mesh has no `POSITION` attribute.
+    NoPositions,
+    /// The positions are not `Float32x3` (the format found is given).
+    PositionFormat(String),
+    /// The mesh has no index buffer.
+    NoIndices,
+    /// The mesh's vertex data lives only in the render world (`RenderAssetUsages::RENDER_WORLD`):
+    /// the CPU cannot read it.
+    NotInMainWorld,
+}
+
+impl core::fmt::Display for MeshError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            MeshError::NotTriangleList(t) => write!(f, "mesh topology is {t}, not a triangle list"),
+            MeshError::NoPositions => write!(f, "mesh has no POSITION attribute"),
+            MeshError::PositionFormat(t) => write!(f, "mesh positions are {t}, not Float32x3"),
+            MeshError::NoIndices => write!(f, "mesh has no indices"),
+            MeshError::NotInMainWorld => write!(
+                f,
+                "mesh data is only in the render world; create it with RenderAssetUsages::MAIN_WORLD"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for MeshError {}
+
+/// What the cloth needs from a mesh: positions, indices and the optional attributes that
+/// shape welding and shading.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeshData {
+    /// Vertex positions in mesh space.
+    pub positions: Vec<Vec3>,
+    /// `UV_0`, if present as `Float32x2`.
+    pub uvs: Option<Vec<Vec2>>,
+    /// `NORMAL`, if present as `Float32x3` (tells hard edges from UV seams when welding).
+    pub normals: Option<Vec<Vec3>>,
+    /// `TANGENT`, if present as `Float32x4`.
+    pub tangents: Option<Vec<Vec4>>,
+    /// Triangle-list indices.
+    pub indices: Vec<u32>,
+    /// Whether the mesh stores its indices as `u16` (rewritten in the same format).
+    pub u16_indices: bool,
+}
+
+impl MeshData {
+    /// The optional attributes, as the solver's welding takes them.
+    #[must_use]
+    pub fn attributes(&self) -> MeshAttributes<'_> {
+        MeshAttributes {
+            normals: self.normals.as_deref(),
+            uvs: self.uvs.as_deref(),
+            tangents: self.tangents.as_deref(),
+        }
+    }
+}
+
+/// Reads what the solver needs from `mesh`.
+///
+/// # Errors
+/// [`MeshError`] if the mesh is not a triangle list, its data has been moved to the render
+/// world, or it lacks `Float32x3` positions or indices.
+pub fn read_mesh(mesh: &Mesh) -> Result<MeshData, MeshError> {
+    if mesh.primitive_topology() != PrimitiveTopology::TriangleList {
+        return Err(MeshError::NotTriangleList(format!(
+            "{:?}",
+            mesh.primitive_topology()
+        )));
+    }
+    let positions: Vec<Vec3> = match mesh.try_attribute_option(Mesh::ATTRIBUTE_POSITION) {
+        Err(_) => return Err(MeshError::NotInMainWorld),
+        Ok(None) => return Err(MeshError::NoPositions),
+        Ok(Some(VertexAttributeValues::Float32x3(p))) => p.iter().map(|&v| Vec3::from(v)).collect(),
+        Ok(Some(other)) => {
+            let format = bevy::mesh::VertexFormat::from(other);
+            return Err(MeshError::PositionFormat(format!("{format:?}")));
+        }
+    };
+    let uvs = match mesh.try_attribute_option(Mesh::ATTRIBUTE_UV_0) {
+        Ok(Some(VertexAttributeValues::Float32x2(uv))) => {
+            Some(uv.iter().map(|&v| Vec2::from(v)).collect())
+        }
+        _ => None,
+    };
+    let normals = match mesh.try_attribute_option(Mesh::ATTRIBUTE_NORMAL) {
+        Ok(Some(VertexAttributeValues::Float32x3(n))) if n.len() == positions.len() => {
+            Some(n.iter().map(|&v| Vec3::from(v)).collect())
+        }
+        _ => None,
+    };
+    let tangents = match mesh.try_attribute_option(Mesh::ATTRIBUTE_TANGENT) {
+        Ok(Some(VertexAttributeValues::Float32x4(t))) if t.len() == positions.len() => {
+            Some(t.iter().map(|&v| Vec4::from(v)).collect())
+        }
+        _ => None,
+    };
+    let (indices, u16_indices) = match mesh.try_indices_option() {
+        Err(_) => return Err(MeshError::NotInMainWorld),
+        Ok(None) => return Err(MeshError::NoIndices),
+        Ok(Some(Indices::U16(i))) => (i.iter().map(|&v| u32::from(v)).collect(), true),
+        Ok(Some(Indices::U32(i))) => (i.clone(), false),
+    };
+    Ok(MeshData {
+        positions,
+        uvs,
+        normals,
+        tangents,
+        indices,
+        u16_indices,
+    })
+}
+
+/// A mesh for `grid`: positions, +Y normals, UVs, +X tangents, `u32` indices; kept in the main
+/// world so the cloth plugin can read and rewrite it.
+///
+/// The grid lies in the entity's XZ plane, centred on its origin, front face +Y: vertex
+/// [`grid.index(i, j)`](Grid::index) is column `i` (x grows with `i`) of row `j`, and row 0
+/// is the edge at `z = +height/2`. Turned by −90° about X
+/// (`Transform::from_rotation(Quat::from_rotation_x(-FRAC_PI_2))`) the grid stands up like a
+/// curtain with row 0 at the top and its front face towards −Z: pin `grid.index(i, 0)` to
+/// hang it.
+#[must_use]
+pub fn grid_mesh(grid: &Grid) -> Mesh {
+    let positions: Vec<[f32; 3]> = grid.positions().iter().map(|p| p.to_array()).collect();
+    let n = positions.len();
+    Mesh::new(
+        PrimitiveTopology::TriangleList,
+        RenderAssetUsages::default(),
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0f32, 1.0, 0.0]; n])
+    .with_inserted_attribute(
+        Mesh::ATTRIBUTE_UV_0,
+        grid.uvs()
+            .iter()
+            .map(|uv| uv.to_array())
+            .collect::<Vec<_>>(),
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_TANGENT, vec![[1.0f32, 0.0, 0.0, 1.0]; n])
+    .with_inserted_indices(Indices::U32(grid.indices()))
+}

@@ -1,0 +1,21 @@
+//! Collision: the shapes cloth meets ([`Shape`] in a [`Pose`]), colliders moving through a
+//! step and the impulses they receive ([`Collider`], [`ContactImpulse`]), signed distance
+//! fields baked from meshes ([`SdfGrid`]), self-collision, and ray queries for picking.
+
+mod collider;
+mod pick;
+mod sdf;
+mod self_collision;
+mod shape;
+
+pub use collider::{Collider, ContactImpulse};
+pub(crate) use collider::{SubstepPose, collide_vertex, substep_poses};
+pub use pick::{RayHit, ray_hit, ray_shape};
+pub use sdf::{SdfError, SdfGrid, point_triangle_distance};
+pub use self_collision::{
+    MAX_SELF_NEIGHBOURS, SelfCollision, SelfCollisionScratch, count_self_crossings,
+};
+pub(crate) use self_collision::{
+    find_self_collision_candidates, self_collide, self_collide_parallel,
+};
+pub use shape::{Pose, Shape};

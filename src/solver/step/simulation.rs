@@ -1,0 +1,543 @@
+//! [`Simulation`]: one cloth ready to step — its topology, state, constraint batches,
+//! parameters and optional features — and what a step reports.
+
+use glam::{Vec3, Vec4};
+
+use super::params::{Features, SolverParams};
+use super::sleep::SleepState;
+use super::state::{ClothState, StateError};
+use super::substeps::{StepInput, StepScratch, step};
+use super::tear::overstretched_edges;
+use crate::solver::air::{AirGrid, WindField};
+use crate::solver::collision::{Collider, ContactImpulse};
+use crate::solver::constraints::{
+    ConstraintBatches, ImplicitBending, Solver, Tethers, default_part_count,
+};
+use crate::solver::limits::ParamError;
+use crate::solver::mesh::{BendingModel, Edge, Topology, TopologyError};
+use crate::solver::metrics::{StrainStats, edge_strain};
+use crate::solver::parallel::Parallel;
+
+/// Anything that stops a cloth from being simulated.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SolverError {
+    /// The mesh cannot be turned into constraints.
+    Topology(TopologyError),
+    /// Masses, positions or pins are invalid.
+    State(StateError),
+    /// A solver parameter is out of range.
+    Params(ParamError),
+}
+
+impl core::fmt::Display for SolverError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            SolverError::Topology(e) => e.fmt(f),
+            SolverError::State(e) => e.fmt(f),
+            SolverError::Params(e) => e.fmt(f),
+        }
+    }
+}
+
+impl std::error::Error for SolverError {}
+
+impl From<TopologyError> for SolverError {
+    fn from(e: TopologyError) -> Self {
+        SolverError::Topology(e)
+    }
+}
+
+impl From<StateError> for SolverError {
+    fn from(e: StateError) -> Self {
+        SolverError::State(e)
+    }
+}
+
+impl From<ParamError> for SolverError {
+    fn from(e: ParamError) -> Self {
+        SolverError::Params(e)
+    }
+}
+
+/// A topology, its state, its constraint batches and parameters: one cloth, ready to step.
+#[derive(Clone, Debug)]
+pub struct Simulation {
+    topology: Topology,
+    state: ClothState,
+    batches: ConstraintBatches,
+    params: SolverParams,
+    features: Features,
+    tethers: Option<(Vec<u32>, Tethers)>,
+    scratch: StepScratch,
+    /// Steps left in which a settings change settles (see [`Simulation::set_params`]).
+    settling: u32,
+    /// Speed of every vertex when the settings changed.
+    settle_speed: Vec<f32>,
+    /// Largest strain after the last settling step.
+    settle_strain: f32,
+    air_grid: AirGrid,
+    air_velocities: Vec<Vec4>,
+    sleep: SleepState,
+}
+
+/// Steps over which a change of solver settings settles at least (see
+/// [`Simulation::set_params`]); it goes on while the stretch keeps shrinking by more than 1 %
+/// per step, up to [`MAX_SETTLE_STEPS`].
+pub const SETTLE_STEPS: u32 = 8;
+
+/// Most steps a change of solver settings settles over.
+pub const MAX_SETTLE_STEPS: u32 = 60;
+
+/// Speed (m/s) a vertex may have in a settling step beyond its speed when the settings changed.
+pub const SETTLE_SPEED: f32 = 0.25;
+
+/// The world a step happens in.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Environment<'a> {
+    /// Shapes the cloth collides with.
+    pub colliders: &'a [Collider],
+    /// Wind, if any.
+    pub wind: Option<&'a WindField>,
+    /// Time in seconds at the start of the step (drives gusts and turbulence); `f64` so that
+    /// hours of play keep full precision.
+    pub time: f64,
+}
+
+/// What a step did that the caller may want to act on.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StepReport {
+    /// Edges (vertex pairs) that left the cloth during the step: those stretched past the
+    /// tear threshold and those that lost every triangle with them.
+    pub torn: Vec<[u32; 2]>,
+    /// The state went bad (a NaN or infinite position or velocity, e.g. from a collider or
+    /// wind with non-finite input) and was reset to the rest pose, at rest, pins on their
+    /// targets. The caller should warn; nothing non-finite is left in the state.
+    pub recovered: bool,
+    /// The cloth slept through the step: nothing moved (see [`Sleep`](crate::solver::Sleep)).
+    pub asleep: bool,
+}
+
+impl Simulation {
+    /// A cloth at its rest positions with the given per-vertex masses.
+    ///
+    /// # Errors
+    /// [`SolverError`] if the masses or parameters are invalid.
+    pub fn new(
+        topology: Topology,
+        masses: &[f32],
+        params: SolverParams,
+    ) -> Result<Self, SolverError> {
+        let positions = topology.rest_positions().to_vec();
+        Self::with_positions(topology, &positions, masses, params)
+    }
+
+    /// A cloth starting at `positions` (e.g. the rest shape moved into world space).
+    ///
+    /// # Errors
+    /// [`SolverError`] if the positions, masses or parameters are invalid or their lengths do
+    /// not match the topology.
+    pub fn with_positions(
+        topology: Topology,
+        positions: &[Vec3],
+        masses: &[f32],
+        params: SolverParams,
+    ) -> Result<Self, SolverError> {
+        params.validate()?;
+        if positions.len() != topology.vertex_count() {
+            return Err(SolverError::State(StateError::LengthMismatch {
+                positions: positions.len(),
+                masses: topology.vertex_count(),
+            }));
+        }
+        let state = ClothState::new(positions, masses)?;
+        let batches = ConstraintBatches::new(
+            &topology,
+            params.solver,
+            default_part_count(topology.vertex_count()),
+        );
+        Ok(Self {
+            topology,
+            state,
+            batches,
+            params,
+            features: Features::default(),
+            tethers: None,
+            scratch: StepScratch::default(),
+            settling: 0,
+            settle_speed: Vec::new(),
+            settle_strain: f32::INFINITY,
+            air_grid: AirGrid::default(),
+            air_velocities: Vec::new(),
+            sleep: SleepState::default(),
+        })
+    }
+
+    /// Rebuilds the batches with `parts` vertex ranges (see [`default_part_count`]).
+    pub fn set_part_count(&mut self, parts: usize) {
+        self.sleep.wake();
+        self.batches = ConstraintBatches::new(&self.topology, self.params.solver, parts);
+    }
+
+    /// Advances by `dt` seconds, alone in the world (no colliders, no wind).
+    pub fn step(&mut self, dt: f32, par: &impl Parallel) -> StepReport {
+        self.step_in(dt, &Environment::default(), par)
+    }
+
+    /// Advances by `dt` seconds among `env`'s colliders and wind, with this cloth's
+    /// [`Features`]; tears edges afterwards if tearing is on.
+    pub fn step_in(&mut self, dt: f32, env: &Environment<'_>, par: &impl Parallel) -> StepReport {
+        let felt_wind = env
+            .wind
+            .filter(|w| !w.is_empty() && !self.params.air.is_none());
+        if self.sleep.asleep {
+            let t = env.time + 0.5 * f64::from(dt);
+            if !self
+                .sleep
+                .should_wake(&self.state.pins, env.colliders, felt_wind, t)
+            {
+                return StepReport {
+                    asleep: true,
+                    ..Default::default()
+                };
+            }
+            self.sleep.wake();
+        }
+        // Tethers follow the pins: rebuild when the pinned vertices changed.
+        match self.features.tethers {
+            Some(params) => {
+                let pins: Vec<u32> = self.state.pins().iter().map(|p| p.vertex).collect();
+                if self.tethers.as_ref().is_none_or(|(p, _)| *p != pins) {
+                    let t = Tethers::build(&self.topology, &pins, params);
+                    self.tethers = Some((pins, t));
+                }
+            }
+            None => self.tethers = None,
+        }
+        if self.settling == MAX_SETTLE_STEPS {
+            // The speeds the cloth had when the settings changed.
+            self.settle_speed.clear();
+            self.settle_speed
+                .extend(self.state.velocities.iter().map(|v| v.length()));
+        }
+        let wind = env.wind.filter(|w| !w.is_empty());
+        if let Some(field) = wind {
+            // The air around the cloth at the middle of the step, on a coarse grid.
+            self.air_grid.air_velocities(
+                field,
+                &self.state.positions,
+                env.time + 0.5 * f64::from(dt),
+                &mut self.air_velocities,
+            );
+        }
+        step(
+            &mut self.state,
+            &self.topology,
+            &mut self.batches,
+            &self.params,
+            dt,
+            StepInput {
+                colliders: env.colliders,
+                air_velocities: if wind.is_some() {
+                    &self.air_velocities
+                } else {
+                    &[]
+                },
+                self_collision: self.features.self_collision,
+                parallel_self_collision: false,
+                tethers: self.tethers.as_ref().map(|(_, t)| t),
+            },
+            &mut self.scratch,
+            par,
+        );
+        if self.settling > 0 {
+            // Settle at least SETTLE_STEPS steps, then as long as the stretch still shrinks.
+            let strain = self.strain().max;
+            self.settling = if self.settling > MAX_SETTLE_STEPS - SETTLE_STEPS + 1 {
+                self.settling - 1
+            } else if strain < self.settle_strain - 0.01 {
+                self.settling.saturating_sub(1).max(1)
+            } else {
+                0
+            };
+            self.settle_strain = strain;
+            // The settling cloth keeps the speeds it had, and a little: it is not flung by the
+            // stretch the old settings let it have.
+            let slack = SETTLE_SPEED;
+            let free = self.state.positions.iter().map(|p| p.w > 0.0);
+            for ((v, before), free) in self
+                .state
+                .velocities
+                .iter_mut()
+                .zip(&self.settle_speed)
+                .zip(free)
+            {
+                if !free {
+                    continue;
+                }
+                let limit = before + slack;
+                let speed = v.length();
+                if speed > limit {
+                    *v *= limit / speed;
+                }
+            }
+        }
+        let mut report = StepReport {
+            torn: self.tear(),
+            ..Default::default()
+        };
+        if !self.state.is_finite() {
+            self.reset_to_rest();
+            report.recovered = true;
+        }
+        self.count_quiet_step(env, felt_wind, dt);
+        report
+    }
+
+    /// Tears every edge stretched past [`Features::tear_threshold`] now: the topology loses
+    /// them (and the triangles and hinges they were part of) and the constraints are rebuilt.
+    /// Returns every edge that left, not only those past the threshold (an edge whose
+    /// triangles all went with their torn neighbours no longer holds anything). The step does
+    /// this at its end; the GPU backend calls it on the state it reads back.
+    pub fn tear(&mut self) -> Vec<[u32; 2]> {
+        let Some(threshold) = self.features.tear_threshold else {
+            return Vec::new();
+        };
+        let over = overstretched_edges(&self.state.positions, self.topology.edges(), threshold);
+        if over.is_empty() {
+            return over;
+        }
+        let torn = self.topology.without_edges(&over);
+        let gone = vanished_edges(self.topology.edges(), torn.edges());
+        self.topology = torn;
+        self.scratch.implicit.invalidate();
+        self.batches = ConstraintBatches::new(
+            &self.topology,
+            self.params.solver,
+            self.batches.part_count(),
+        );
+        self.tethers = None;
+        gone
+    }
+
+    /// After a step: counts it as quiet or not and puts the cloth to sleep after enough quiet
+    /// steps in a row.
+    fn count_quiet_step(&mut self, env: &Environment<'_>, wind: Option<&WindField>, dt: f32) {
+        let sleep = self.params.sleep;
+        if !sleep.enabled() || self.settling > 0 {
+            self.sleep.quiet = 0;
+            return;
+        }
+        let energy = self.state.kinetic_energy_per_kg();
+        if energy >= sleep.energy {
+            self.sleep.quiet = 0;
+            return;
+        }
+        self.sleep.quiet += 1;
+        if self.sleep.quiet >= sleep.steps {
+            for (v, x) in self.state.velocities.iter_mut().zip(&self.state.positions) {
+                if x.w > 0.0 {
+                    *v = Vec4::ZERO;
+                }
+            }
+            // The air sampled as `should_wake` samples it: at the middle of a step.
+            let t = env.time + 0.5 * f64::from(dt);
+            self.sleep.fall_asleep(
+                &self.state.positions,
+                &self.state.pins,
+                env.colliders,
+                wind,
+                t,
+            );
+        }
+    }
+
+    /// The air's velocity at each vertex at time `t` (seconds), sampled from `field` around
+    /// the positions the cloth has now (the GPU backend's air input).
+    pub(crate) fn sample_air(&mut self, field: &WindField, t: f64, out: &mut Vec<Vec4>) {
+        self.air_grid
+            .air_velocities(field, &self.state.positions, t, out);
+    }
+
+    /// Whether the cloth is asleep: at rest, and skipped by [`Self::step_in`] until something
+    /// that could move it changes (see [`Sleep`](crate::solver::Sleep)).
+    #[must_use]
+    pub fn is_sleeping(&self) -> bool {
+        self.sleep.asleep
+    }
+
+    /// Wakes the cloth: the next step runs, and it needs [`Sleep::steps`](crate::solver::Sleep::steps) quiet steps again
+    /// before it can sleep.
+    pub fn wake(&mut self) {
+        self.sleep.wake();
+    }
+
+    /// Puts every vertex back at its rest position with zero velocity, pins on their targets,
+    /// and forgets accumulated multipliers: a clean start.
+    pub fn reset_to_rest(&mut self) {
+        let rest = self.topology.rest_positions().to_vec();
+        self.reset_to(&rest);
+    }
+
+    /// Like [`Self::reset_to_rest`] at the given positions (e.g. the rest shape placed where
+    /// the cloth's entity is now). Non-finite entries fall back to the rest position.
+    ///
+    /// # Panics
+    /// If `positions` has a different length from the cloth.
+    pub fn reset_to(&mut self, positions: &[Vec3]) {
+        self.sleep.wake();
+        let rest = self.topology.rest_positions();
+        let clean: Vec<Vec3> = positions
+            .iter()
+            .zip(rest)
+            .map(|(p, r)| if p.is_finite() { *p } else { *r })
+            .collect();
+        self.state.reset(&clean);
+        self.state.snap_pins();
+    }
+
+    /// Sets the optional capabilities (cheap; tethers are rebuilt on the next step).
+    ///
+    /// # Errors
+    /// [`ParamError`] if a thickness, friction, slack or tear threshold is out of range.
+    pub fn set_features(&mut self, features: Features) -> Result<(), ParamError> {
+        features.validate()?;
+        if features != self.features {
+            self.sleep.wake();
+        }
+        if features.tethers != self.features.tethers {
+            self.tethers = None;
+        }
+        self.features = features;
+        Ok(())
+    }
+
+    /// The optional capabilities in use.
+    #[must_use]
+    pub fn features(&self) -> &Features {
+        &self.features
+    }
+
+    /// Impulse the cloth gave each collider of the last [`Self::step_in`], in N·s.
+    #[must_use]
+    pub fn impulses(&self) -> &[ContactImpulse] {
+        self.scratch.impulses()
+    }
+
+    /// Changes the solver parameters (cheap: no rebuild).
+    ///
+    /// A change of solver, material, substeps or iterations *settles* over the next
+    /// [`SETTLE_STEPS`] steps or more (while the stretch keeps shrinking): constraint
+    /// corrections still move the cloth to its new shape, but no free vertex gets faster than
+    /// it was when the settings changed (plus [`SETTLE_SPEED`]). Without that, stretch that the
+    /// old settings tolerated (a cloth at 2 substeps hangs 500 % longer than at 20) springs
+    /// back as a burst of speed (measured: 100 m/s on a 24² cloth; settled: no faster than
+    /// before the change).
+    ///
+    /// # Errors
+    /// [`ParamError`] if a parameter is out of range; the old parameters are kept.
+    pub fn set_params(&mut self, params: SolverParams) -> Result<(), ParamError> {
+        params.validate()?;
+        if params != self.params {
+            self.sleep.wake();
+        }
+        if (params.solver, params.substeps, params.iterations)
+            != (
+                self.params.solver,
+                self.params.substeps,
+                self.params.iterations,
+            )
+        {
+            self.settling = MAX_SETTLE_STEPS;
+            self.settle_strain = f32::INFINITY;
+        }
+        self.params = params;
+        self.batches.set_solver(&self.topology, params.solver);
+        Ok(())
+    }
+
+    /// The solver parameters.
+    #[must_use]
+    pub fn params(&self) -> &SolverParams {
+        &self.params
+    }
+
+    /// How far the last step's bending was beyond what one projection per substep carries:
+    /// the largest `B h² Σ w_i a_i²` over the hinges (see [`BendingSolve`](crate::solver::BendingSolve)). Below about 0.5
+    /// projected bending is the bending that was set; above it, unless the step solved it
+    /// implicitly ([`Self::implicit_bending`]), the cloth is softer than set. Zero without
+    /// XPBD isometric bending.
+    #[must_use]
+    pub fn bending_saturation(&self) -> f32 {
+        self.scratch.implicit.saturation()
+    }
+
+    /// Whether steps of `dt` seconds would want bending solved implicitly (see
+    /// [`BendingSolve`](crate::solver::BendingSolve)): isometric XPBD bending too stiff to project per substep.
+    #[must_use]
+    pub fn wants_implicit_bending(&self, dt: f32) -> bool {
+        let Solver::Xpbd { bending, .. } = self.params.solver else {
+            return false;
+        };
+        let h = dt / self.params.substeps.max(1) as f32;
+        self.batches.bending
+            && self.topology.options().effective_bending() == BendingModel::Isometric
+            && ImplicitBending::wanted(
+                &self.topology,
+                &self.state.positions,
+                1.0 / bending,
+                h,
+                self.params.bending_solve,
+            )
+    }
+
+    /// Whether the last step solved bending implicitly (see [`BendingSolve`](crate::solver::BendingSolve)).
+    #[must_use]
+    pub fn implicit_bending(&self) -> bool {
+        self.scratch.implicit.active()
+    }
+
+    /// The topology.
+    #[must_use]
+    pub fn topology(&self) -> &Topology {
+        &self.topology
+    }
+
+    /// The constraint batches.
+    #[must_use]
+    pub fn batches(&self) -> &ConstraintBatches {
+        &self.batches
+    }
+
+    /// The state.
+    #[must_use]
+    pub fn state(&self) -> &ClothState {
+        &self.state
+    }
+
+    /// The state, to move pins or vertices.
+    pub fn state_mut(&mut self) -> &mut ClothState {
+        &mut self.state
+    }
+
+    /// Strain over every edge now.
+    #[must_use]
+    pub fn strain(&self) -> StrainStats {
+        edge_strain(&self.state.positions, self.topology.edges())
+    }
+}
+
+/// Edges of `before` that are not in `after` (both sorted by vertex pair, as topologies keep
+/// them).
+fn vanished_edges(before: &[Edge], after: &[Edge]) -> Vec<[u32; 2]> {
+    let mut out = Vec::new();
+    let mut j = 0;
+    for e in before {
+        while j < after.len() && after[j].v < e.v {
+            j += 1;
+        }
+        if after.get(j).is_none_or(|a| a.v != e.v) {
+            out.push(e.v);
+        }
+    }
+    out
+}
