@@ -36,7 +36,7 @@ fn setup(
             speed: 1.6,
         },
         Transform::from_xyz(3.0, 0.85, 0.0),
-        ClothCollider::capsule(0.55, 0.28).with_thickness(0.02),
+        ClothCollider::capsule(0.28, 1.1).with_thickness(0.02),
         Mesh3d(meshes.add(Capsule3d::new(0.28, 1.1).mesh().build())),
     ));
     if let Some(m) = materials.as_deref_mut() {

@@ -48,7 +48,7 @@ fn setup(
             Vec3::new(-1.0, 0.3, 0.0),
         ),
         (
-            ClothCollider::capsule(0.35, 0.25),
+            ClothCollider::capsule(0.25, 0.7),
             Capsule3d::new(0.25, 0.7).mesh().build(),
             Vec3::new(1.0, 0.5, 0.0),
         ),

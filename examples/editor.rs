@@ -30,7 +30,7 @@ fn setup(
     // The pole: a thin capsule collider. The flag's hoist is pinned to it, so dragging the
     // pole's arrows carries the flag.
     let pole_at = Vec3::new(-1.6, 2.0, 0.0);
-    let pole_shape = ClothCollider::capsule(2.0, 0.04);
+    let pole_shape = ClothCollider::capsule(0.04, 4.0);
     let mut pole = commands.spawn((
         Name::new("Pole"),
         pole_shape,

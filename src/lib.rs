@@ -1,7 +1,10 @@
-//! Cloth simulation for Bevy: Position Based Dynamics on the CPU, as a plugin.
+//! Cloth simulation for Bevy: Position Based Dynamics on the CPU, or on the GPU as compute
+//! passes in Bevy's render graph, as a group of plugins.
 //!
-//! Add [`ClothPlugins`](cloth::ClothPlugins), put a [`Cloth`](cloth::Cloth) on an entity with a
-//! [`Mesh3d`](bevy::prelude::Mesh3d), pin a few vertices, and the mesh hangs, swings and folds.
+//! Add [`ClothPlugins`], put a [`Cloth`](cloth::Cloth) on an entity with a
+//! [`Mesh3d`], pin a few vertices, and the mesh hangs, swings and folds:
+//! flags, capes, curtains and banners, with colliders (shapes, meshes, rapier bodies, the cloth
+//! itself), wind, tearing and a two-sided velvet material.
 //!
 //! ```no_run
 //! use bevy::prelude::*;
@@ -24,42 +27,108 @@
 //! }
 //! ```
 //!
-//! # Modules
+//! # Modules, bottom to top
+//! Each imports only from those listed before it (`tests/layers.rs` checks it).
 //! - [`solver`]: the pure solver (no Bevy): topology, constraints, collisions, wind, tearing,
 //!   the step, shading data.
-//! - [`cloth`]: components, plugin and systems.
+//! - [`foundation`]: what every plugin shares: the schedule and [`ClothSystems`](foundation::ClothSystems)
+//!   phases, poses at the fixed step, mesh reading.
 //! - [`collider`]: shapes cloth collides with; with the `rapier` feature, the bevy_rapier3d
-//!   bridge and two-way coupling.
-//! - [`wind`]: global and local wind.
+//!   bridge and two-way coupling. [`wind`]: global and local wind. [`render`]: the velvet
+//!   material (two-sided) and its CPU reference BRDF.
+//! - [`cloth`]: components, the CPU plugin and its systems, mesh write-back.
 //! - [`gpu`]: the GPU backend: the step as WGSL compute kernels in the render graph.
-//! - [`render`]: the velvet material (two-sided, report §3.4) and its CPU reference BRDF.
+//! - [`editor`]: the fly camera, and with the `editor` feature the in-app editor.
+//! - [`ClothPlugins`], here, puts the plugins together.
 //!
 //! # Headless
-//! A [`MinimalPlugins`](bevy::prelude::MinimalPlugins) app simulates cloth with no window and
+//! A [`MinimalPlugins`] app simulates cloth with no window and
 //! no GPU; add `TransformPlugin`, `AssetPlugin` and `MeshPlugin` for transforms and meshes.
 //! See the README and `tests/headless.rs`.
 
 pub mod cloth;
 pub mod collider;
 pub mod editor;
+pub mod foundation;
 pub mod gpu;
 pub mod render;
 pub mod solver;
 pub mod wind;
 
+use bevy::app::PluginGroupBuilder;
+use bevy::ecs::schedule::{InternedScheduleLabel, ScheduleLabel};
+use bevy::prelude::*;
+
+use cloth::ClothPlugin;
+use collider::ClothColliderPlugin;
+use foundation::ClothFoundationPlugin;
+use gpu::ClothGpuPlugin;
+use wind::ClothWindPlugin;
+
+/// All cloth plugins, simulating in one schedule.
+///
+/// | plugin | what it does |
+/// |---|---|
+/// | [`ClothFoundationPlugin`] | the schedule ([`ClothSchedule`](foundation::ClothSchedule)) and the order of the [`ClothSystems`](foundation::ClothSystems) phases |
+/// | [`ClothColliderPlugin`] | [`ClothCollider`](collider::ClothCollider)s: shapes, mesh SDFs, contact impulses |
+/// | [`ClothWindPlugin`] | the [`Wind`](wind::Wind) resource and [`WindZone`](wind::WindZone)s |
+/// | [`ClothPlugin`] | creates, steps and writes back every [`Cloth`](cloth::Cloth) on the CPU |
+/// | [`ClothGpuPlugin`] | cloths that ask for it ([`ClothBackend`](gpu::ClothBackend)) stepped by GPU kernels in the render graph |
+///
+/// The rapier bridge (`ClothRapierPlugin`, cargo feature `rapier`) is not in the group: add it
+/// to opt in; it runs in the group's schedule.
+///
+/// Replace a part with `ClothPlugins::default().build().disable::<X>().add(Custom)`; simulate
+/// in another schedule with [`ClothPlugins::new`].
+#[derive(Clone, Copy, Debug)]
+pub struct ClothPlugins {
+    schedule: InternedScheduleLabel,
+}
+
+impl ClothPlugins {
+    /// Cloth plugins simulating in `schedule` (a fixed-timestep schedule keeps results
+    /// frame-rate independent).
+    pub fn new(schedule: impl ScheduleLabel) -> Self {
+        Self {
+            schedule: schedule.intern(),
+        }
+    }
+}
+
+impl Default for ClothPlugins {
+    fn default() -> Self {
+        Self::new(FixedPostUpdate)
+    }
+}
+
+impl PluginGroup for ClothPlugins {
+    fn build(self) -> PluginGroupBuilder {
+        PluginGroupBuilder::start::<Self>()
+            .add(ClothFoundationPlugin {
+                schedule: self.schedule,
+            })
+            .add(ClothColliderPlugin)
+            .add(ClothWindPlugin)
+            .add(ClothPlugin)
+            .add(ClothGpuPlugin::default())
+    }
+}
+
 /// The types most apps need.
 pub mod prelude {
+    pub use crate::ClothPlugins;
     pub use crate::cloth::{
         Cloth, ClothConfig, ClothError, ClothFailed, ClothInvalid, ClothPick, ClothPin, ClothPins,
-        ClothPlugin, ClothPlugins, ClothSelfCollision, ClothSim, ClothSystems, ClothTearing,
-        ClothTethers, ClothTorn, PinAnchor, grid_mesh,
+        ClothPlugin, ClothSelfCollision, ClothSim, ClothTearing, ClothTethers, ClothTorn,
+        PinAnchor,
     };
     #[cfg(feature = "rapier")]
     pub use crate::collider::rapier::ClothRapierPlugin;
-    pub use crate::collider::{ClothCollider, ClothContactImpulse, ColliderShape};
+    pub use crate::collider::{ClothCollider, ClothContactImpulse, ColliderMesh, ColliderShape};
     #[cfg(feature = "editor")]
     pub use crate::editor::ClothEditorPlugin;
     pub use crate::editor::{ClothCameraPlugin, ClothFlyCamera};
+    pub use crate::foundation::{ClothSystems, grid_mesh};
     pub use crate::gpu::{ClothBackend, ClothBackendInUse, ClothGpuPlugin, ClothReadback};
     pub use crate::render::{
         VelvetExtension, VelvetMaterial, VelvetPlugin, lined_velvet, velvet_material,
@@ -67,7 +136,7 @@ pub mod prelude {
     };
     pub use crate::solver::{
         Aerodynamics, BendRest, BendingModel, BendingSolve, Grid, MassDistribution, Sleep, Solver,
-        WindParams,
+        SolverParams, WindParams,
     };
     pub use crate::wind::{Wind, WindZone};
 }

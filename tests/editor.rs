@@ -290,7 +290,7 @@ fn every_slider_end_is_taken_by_the_plugin() {
     let shapes = [
         ClothCollider::sphere(0.2),
         ClothCollider::cuboid(Vec3::splat(0.2)),
-        ClothCollider::capsule(0.2, 0.1),
+        ClothCollider::capsule(0.1, 0.4),
         ClothCollider::plane(),
         ClothCollider::mesh(16),
     ];

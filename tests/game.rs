@@ -7,8 +7,9 @@ use std::time::Duration;
 use bevy::asset::{AssetEvent, AssetEventSystems, RenderAssetUsages};
 use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
 use bevy::prelude::*;
-use bevy_cloth::cloth::{ClothSource, DEFAULT_TELEPORT_DISTANCE};
+use bevy_cloth::cloth::ClothSource;
 use bevy_cloth::prelude::*;
+use bevy_cloth::solver::DEFAULT_TELEPORT_DISTANCE;
 
 mod common;
 use common::{app, app_with_frame, run};
@@ -1038,4 +1039,122 @@ fn a_ray_picks_the_vertex_under_it_and_pinning_it_holds_it() {
         other.y < at.y - 0.3,
         "the free corner did not fall: {other}"
     );
+}
+
+/// A character that turns as it walks, moved in `FixedUpdate`.
+#[derive(Component)]
+struct Turner;
+
+fn walk_and_turn(time: Res<Time>, mut turners: Query<&mut Transform, With<Turner>>) {
+    for mut t in &mut turners {
+        t.translation.x += 1.5 * time.delta_secs();
+        t.rotate_y(0.8 * time.delta_secs());
+    }
+}
+
+/// `ClothPins::attached` on a character that already stands turned, scaled and away from the
+/// origin: the top row stays exactly where the cape was spawned (no jump at the first step),
+/// then follows the character through its walk and turn at the offsets it had at the start.
+#[test]
+fn attached_pins_hold_a_cape_where_it_was_spawned_on_a_turned_character() {
+    let mut app = app();
+    app.add_systems(FixedUpdate, walk_and_turn);
+    let body = Transform::from_xyz(3.0, 0.0, -2.0)
+        .with_rotation(Quat::from_rotation_y(2.1))
+        .with_scale(Vec3::splat(1.3));
+    let character = app.world_mut().spawn((Turner, body)).id();
+    let grid = Grid::new(10, 14, 0.8, 1.1);
+    let mesh = add_mesh(&mut app, grid_mesh(&grid));
+    // The cape hangs behind the character, upright, in the character's frame.
+    let cape = body
+        * Transform::from_xyz(0.0, 1.0, 0.3)
+            .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
+    let top: Vec<u32> = (0..10).map(|i| grid.index(i, 0)).collect();
+    let spawned: Vec<Vec3> = top
+        .iter()
+        .map(|&v| cape.transform_point(grid.positions()[v as usize]))
+        .collect();
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            cape,
+            Cloth::default(),
+            ClothPins::attached(top.iter().copied(), character),
+        ))
+        .id();
+    // The first update starts the clock; the second runs a fixed step: the character takes a
+    // step, then the cloth is built and its pins attached where its vertices are.
+    app.update();
+    app.update();
+    let character_now = |app: &App| {
+        app.world()
+            .get::<Transform>(character)
+            .unwrap()
+            .compute_affine()
+    };
+    let at_attach = character_now(&app);
+    assert_ne!(
+        at_attach,
+        body.compute_affine(),
+        "the character did not move"
+    );
+    let offsets: Vec<Vec3> = spawned
+        .iter()
+        .map(|p| at_attach.inverse().transform_point3(*p))
+        .collect();
+    for (k, &v) in top.iter().enumerate() {
+        // No jump: the pinned vertices are where the cape was spawned.
+        assert!(sim(&app, e).position(v).distance(spawned[k]) < 1e-5);
+        let offset = sim(&app, e)
+            .attached_offset(v, character)
+            .expect("attached");
+        assert!(
+            offset.distance(offsets[k]) < 1e-5,
+            "vertex {v}: attached at {offset}, expected {}",
+            offsets[k]
+        );
+    }
+    let mut worst = 0.0f32;
+    for _ in 0..90 {
+        app.update();
+        let at = character_now(&app);
+        for (k, &v) in top.iter().enumerate() {
+            worst = worst.max(
+                sim(&app, e)
+                    .position(v)
+                    .distance(at.transform_point3(offsets[k])),
+            );
+        }
+    }
+    // The character walked 2.3 m and turned 70°; the pins stayed on it to rounding.
+    assert!(worst < 1e-4, "pins drifted {worst} m from the character");
+    assert!(character_now(&app).translation.x > 5.0);
+    // The cape hangs: stretched, but no more than a cape at 10 substeps is.
+    let strain = sim(&app, e).max_strain();
+    assert_eq!(strain, sim(&app, e).simulation().strain().max);
+    assert!(strain > 0.0 && strain < 1.0, "max strain {strain}");
+}
+
+/// `ClothCollider::capsule(radius, length)` is Bevy's `Capsule3d::new(radius, length)`: the
+/// same surface (a point on the tip of the Bevy capsule is on the collider's surface).
+#[test]
+fn a_capsule_collider_takes_the_arguments_of_capsule3d() {
+    let (radius, length) = (0.2, 1.0);
+    let bevy = Capsule3d::new(radius, length);
+    let collider = ClothCollider::capsule(radius, length);
+    let ColliderShape::Capsule {
+        radius: r,
+        half_length,
+    } = collider.shape
+    else {
+        panic!("not a capsule: {:?}", collider.shape);
+    };
+    assert_eq!((r, half_length), (bevy.radius, bevy.half_length));
+    let tip = Vec3::Y * (bevy.half_length + bevy.radius);
+    let solver_shape = bevy_cloth::solver::Shape::Capsule {
+        radius: r,
+        half_length,
+    };
+    assert!(solver_shape.distance(tip).0.abs() < 1e-6);
 }

@@ -4,6 +4,7 @@ use std::time::Duration;
 
 use bevy::mesh::VertexAttributeValues;
 use bevy::prelude::*;
+use bevy_cloth::foundation::MeshError;
 use bevy_cloth::prelude::*;
 
 mod common;
@@ -168,7 +169,7 @@ fn bad_cloths_are_reported_and_others_keep_running() {
     let err = |e| app.world().get::<ClothInvalid>(e).map(|i| i.0.clone());
     assert!(matches!(
         err(not_triangles),
-        Some(ClothError::NotTriangleList(_))
+        Some(ClothError::Mesh(MeshError::NotTriangleList(_)))
     ));
     assert!(matches!(err(bad_mass), Some(ClothError::BadMass(m)) if m.is_nan()));
     assert!(

@@ -265,4 +265,58 @@ mod rapier {
             "Δp {dp} vs impulse {total}"
         );
     }
+
+    /// `ClothPlugins::new(schedule)` reaches the rapier bridge whichever was added first: here
+    /// the bridge comes first and cloth runs in `FixedLast`, finished as `App::run` does.
+    #[test]
+    fn the_bridge_runs_in_the_schedule_the_cloth_plugins_were_given() {
+        let mut app = App::new();
+        app.add_plugins((
+            MinimalPlugins,
+            TransformPlugin,
+            AssetPlugin::default(),
+            bevy::mesh::MeshPlugin,
+            RapierPhysicsPlugin::<NoUserData>::default(),
+            ClothRapierPlugin::default(),
+            ClothPlugins::new(FixedLast),
+        ))
+        .insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
+            std::time::Duration::from_secs_f64(1.0 / 60.0),
+        ))
+        .insert_resource(Time::<Fixed>::from_hz(60.0));
+        app.finish();
+        app.cleanup();
+        let grid = Grid::new(20, 20, 2.0, 2.0);
+        let upright = Transform::from_xyz(0.0, 1.0, 0.0)
+            .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
+        spawn_sheet(
+            &mut app,
+            20,
+            upright,
+            ClothPins::rest((0..20).map(|i| grid.index(i, 0))),
+        );
+        let ball = app
+            .world_mut()
+            .spawn((
+                RigidBody::Dynamic,
+                Collider::ball(0.2),
+                ColliderMassProperties::Mass(0.5),
+                GravityScale(0.0),
+                Velocity::linear(Vec3::new(0.0, 0.0, -5.0)),
+                Transform::from_xyz(0.0, 1.0, 1.0),
+            ))
+            .id();
+        let mut total = Vec3::ZERO;
+        for _ in 0..60 {
+            app.update();
+            if let Some(i) = app.world().get::<ClothContactImpulse>(ball) {
+                total += i.linear;
+            }
+        }
+        // Mirrored, touched, and pushed back.
+        assert!(app.world().get::<ClothCollider>(ball).is_some());
+        assert!(total.z > 0.0, "the cloth gave the ball no impulse: {total}");
+        let v = app.world().get::<Velocity>(ball).unwrap().linear;
+        assert!(v.z > -5.0 * 0.95, "ball not slowed: {v}");
+    }
 }

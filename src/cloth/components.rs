@@ -1,11 +1,12 @@
 //! The components a user puts on a cloth entity.
 
+use bevy::ecs::component::{Component, Mutable, StorageType};
 use bevy::prelude::*;
 use bevy::reflect::impl_reflect_opaque;
 
 use crate::solver::{
-    Aerodynamics, BendRest, BendingModel, BendingSolve, MassDistribution, Sleep, Solver,
-    SolverParams,
+    Aerodynamics, BendRest, BendingModel, BendingSolve, DEFAULT_TELEPORT_DISTANCE,
+    MassDistribution, Sleep, Solver, SolverParams,
 };
 
 impl_reflect_opaque!((in bevy_cloth::solver) Solver(Debug, Clone, PartialEq));
@@ -15,6 +16,7 @@ impl_reflect_opaque!((in bevy_cloth::solver) Aerodynamics(Debug, Clone, PartialE
 impl_reflect_opaque!((in bevy_cloth::solver) BendingSolve(Debug, Clone, PartialEq, Default));
 impl_reflect_opaque!((in bevy_cloth::solver) MassDistribution(Debug, Clone, PartialEq, Default));
 impl_reflect_opaque!((in bevy_cloth::solver) Sleep(Debug, Clone, PartialEq, Default));
+impl_reflect_opaque!((in bevy_cloth::solver) SolverParams(Debug, Clone, PartialEq, Default, Component));
 
 /// Marks an entity with a [`Mesh3d`] as cloth: the plugin simulates its vertices.
 ///
@@ -66,8 +68,7 @@ pub struct Cloth {
     pub bending_model: BendingModel,
     /// When a pin's anchor jumps farther than this in one step (metres), the whole cloth is
     /// moved with it instead of being dragged (a teleported character keeps its cape). The
-    /// same rule, with the same default, applies to colliders
-    /// ([`ClothCollider::teleport_distance`](crate::collider::ClothCollider::teleport_distance)).
+    /// same rule, with the same default ([`DEFAULT_TELEPORT_DISTANCE`]), applies to colliders.
     pub teleport_distance: f32,
     /// Mesh vertices closer than this fraction of the mesh's bounding-box diagonal are one
     /// particle (finite, ≥ 0; 0 welds exact duplicates only). Exporters split vertices along
@@ -76,11 +77,6 @@ pub struct Cloth {
     /// where they differ (a hard edge) each keeps its own side's normal.
     pub weld_tolerance: f32,
 }
-
-/// Default for [`Cloth::teleport_distance`] and
-/// [`ClothCollider::teleport_distance`](crate::collider::ClothCollider::teleport_distance):
-/// a jump of more than 2 m in one fixed step is a teleport, not a motion.
-pub const DEFAULT_TELEPORT_DISTANCE: f32 = 2.0;
 
 impl Default for Cloth {
     /// 0.2 kg (a 1 m² cotton sheet), area-weighted, flat at rest, teleport beyond 2 m, welding
@@ -164,78 +160,36 @@ pub struct ClothTorn {
     pub edges: Vec<[u32; 2]>,
 }
 
-/// How a cloth is solved: solver and material, substeps, iterations, gravity, damping.
+/// How a cloth is solved: solver and material, substeps, iterations, gravity, damping, air,
+/// sleep: the solver's own [`SolverParams`], used as a component.
+///
+/// ```
+/// use bevy::prelude::*;
+/// use bevy_cloth::prelude::*;
+///
+/// let config = ClothConfig { substeps: 15, damping: 0.3, ..default() };
+/// ```
 ///
 /// Changing it at runtime takes effect on the next step without a rebuild. An invalid value
 /// (say substeps 0 while a slider passes through it) is reported once (an error log and a
 /// [`ClothFailed`](crate::cloth::ClothFailed) message); the cloth keeps running with its last
 /// valid settings ([`ClothSim::rejected`](crate::cloth::ClothSim::rejected) says why) and
 /// takes the new ones as soon as they are valid.
-#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
-#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
-#[reflect(Component, Default, Clone, PartialEq)]
-pub struct ClothConfig {
-    /// Solver and its stiffnesses or compliances.
-    pub solver: Solver,
-    /// Substeps per fixed step.
-    pub substeps: u32,
-    /// Constraint iterations per substep.
-    pub iterations: u32,
-    /// Gravity in m/s².
-    pub gravity: Vec3,
-    /// Linear velocity damping in 1/s (not used by the lab solver).
-    pub damping: f32,
-    /// Speed limit for free vertices in m/s; bounds the kinetic energy (see
-    /// [`SolverParams::max_speed`]).
-    pub max_speed: f32,
-    /// How the cloth meets the air: drag, lift and skin friction, felt with or without wind
-    /// (see [`Aerodynamics`]; [`Aerodynamics::NONE`] for a vacuum).
-    pub air: Aerodynamics,
-    /// How XPBD solves isometric bending (see [`BendingSolve`]).
-    pub bending_solve: BendingSolve,
-    /// When the cloth at rest stops being stepped (see [`Sleep`]; [`Sleep::NEVER`] keeps it
-    /// awake). [`ClothSim::is_sleeping`](crate::cloth::ClothSim::is_sleeping) says whether it
-    /// sleeps.
-    pub sleep: Sleep,
+pub type ClothConfig = SolverParams;
+
+impl Component for SolverParams {
+    const STORAGE_TYPE: StorageType = StorageType::Table;
+    type Mutability = Mutable;
 }
 
-impl Default for ClothConfig {
-    fn default() -> Self {
-        SolverParams::default().into()
-    }
-}
-
-impl From<SolverParams> for ClothConfig {
-    fn from(p: SolverParams) -> Self {
-        Self {
-            solver: p.solver,
-            substeps: p.substeps,
-            iterations: p.iterations,
-            gravity: p.gravity,
-            damping: p.damping,
-            max_speed: p.max_speed,
-            air: p.air,
-            bending_solve: p.bending_solve,
-            sleep: p.sleep,
-        }
-    }
-}
-
-impl From<ClothConfig> for SolverParams {
-    fn from(c: ClothConfig) -> Self {
-        Self {
-            solver: c.solver,
-            substeps: c.substeps,
-            iterations: c.iterations,
-            gravity: c.gravity,
-            damping: c.damping,
-            max_speed: c.max_speed,
-            air: c.air,
-            bending_solve: c.bending_solve,
-            sleep: c.sleep,
-        }
-    }
-}
+/// Marks a cloth that something other than the CPU plugin steps (the GPU backend, or a
+/// backend of your own): the plugin still builds its [`ClothSim`](crate::cloth::ClothSim),
+/// applies its settings and moves its pins every step, but neither steps it nor writes its
+/// mesh. Whoever steps it hands results back through `ClothSim`'s methods
+/// ([`receive_state`](crate::cloth::ClothSim::receive_state),
+/// [`count_external_steps`](crate::cloth::ClothSim::count_external_steps), ...).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ClothSteppedElsewhere;
 
 /// Where a pinned vertex is held.
 #[derive(Reflect, Clone, Copy, Debug, PartialEq)]
@@ -254,6 +208,11 @@ pub enum PinAnchor {
         /// Position in that entity's local space.
         offset: Vec3,
     },
+    /// Where the vertex is when the pin is applied, carried from then on by another entity:
+    /// the vertex keeps the offset it had from the entity at that moment, whichever way the
+    /// entity was turned or scaled. The easy way to hang a cape on a character that already
+    /// stands somewhere, rotated: spawn the cloth around it and attach its top row.
+    Attached(Entity),
 }
 
 /// One pinned vertex.
@@ -288,6 +247,20 @@ impl ClothPins {
                 .map(|vertex| ClothPin {
                     vertex,
                     anchor: PinAnchor::Rest,
+                })
+                .collect(),
+        )
+    }
+
+    /// Pins these vertices to `entity` where they are when the pins are applied
+    /// ([`PinAnchor::Attached`]).
+    pub fn attached(vertices: impl IntoIterator<Item = u32>, entity: Entity) -> Self {
+        Self(
+            vertices
+                .into_iter()
+                .map(|vertex| ClothPin {
+                    vertex,
+                    anchor: PinAnchor::Attached(entity),
                 })
                 .collect(),
         )

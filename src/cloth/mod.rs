@@ -1,28 +1,32 @@
-//! The Bevy side of a cloth: components, plugin, systems, mesh write-back.
+//! The Bevy side of a cloth: components, the CPU plugin, its systems, mesh write-back.
 //!
 //! Data flow: a [`Cloth`] entity's [`Mesh3d`](bevy::prelude::Mesh3d) is read once, its
 //! vertices welded into particles ([`MeshBinding`](crate::solver::MeshBinding)), into a solver
 //! [`Simulation`](crate::solver::Simulation), stored in a [`ClothSim`] component. Each fixed
-//! step ([`ClothSystems::Prepare`], [`ClothSystems::Simulate`]) applies config and pin changes,
-//! moves pins to their anchors (poses as of this step, [`FixedPoses`]) and steps the solver;
-//! each frame [`ClothSystems::Writeback`] copies positions, normals and tangents into every
-//! vertex of the cloth's own mesh asset.
+//! step ([`ClothSystems::Prepare`](crate::foundation::ClothSystems),
+//! [`ClothSystems::Simulate`](crate::foundation::ClothSystems)) applies config and pin changes,
+//! moves pins to their anchors (poses as of this step,
+//! [`FixedPoses`](crate::foundation::FixedPoses)), gathers the colliders and wind below it and
+//! steps the solver; each frame `ClothSystems::Writeback` copies positions, normals and tangents
+//! into every vertex of the cloth's own mesh asset. A cloth marked [`ClothSteppedElsewhere`]
+//! (the GPU backend marks its cloths) is built and kept in sync but not stepped or written here.
 
+mod build;
 mod components;
+mod error;
 mod mesh;
+mod pins;
 mod plugin;
-mod pose;
-pub(crate) mod sim;
-pub(crate) mod writeback;
+mod sim;
+mod systems;
+mod workers;
+mod writeback;
 
 pub use components::{
-    Cloth, ClothConfig, ClothPin, ClothPins, ClothSelfCollision, ClothTearing, ClothTethers,
-    ClothTorn, DEFAULT_TELEPORT_DISTANCE, PinAnchor,
+    Cloth, ClothConfig, ClothPin, ClothPins, ClothSelfCollision, ClothSteppedElsewhere,
+    ClothTearing, ClothTethers, ClothTorn, PinAnchor,
 };
-pub use mesh::{MeshData, grid_mesh, read_mesh};
-pub use plugin::{ClothPlugin, ClothPlugins, ClothSystems};
-pub use pose::FixedPoses;
-pub use sim::{
-    ClothError, ClothFailed, ClothInvalid, ClothPick, ClothSim, ClothSource, ClothWorkers,
-    TaskPoolParallel,
-};
+pub use error::{ClothError, ClothFailed, ClothInvalid};
+pub use plugin::ClothPlugin;
+pub use sim::{ClothPick, ClothSim, ClothSource};
+pub use workers::{ClothWorkers, TaskPoolParallel};

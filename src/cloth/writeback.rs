@@ -10,33 +10,17 @@
 //! A mirrored entity (negative determinant) turns the triangles' winding around in world
 //! space, so normals computed there point out of the back face: they are flipped back.
 
-use bevy::mesh::{Indices, VertexAttributeValues};
+use bevy::mesh::VertexAttributeValues;
 use bevy::prelude::*;
 
-use super::ClothSim;
+use super::{ClothSim, ClothSteppedElsewhere};
 
-/// Cloths whose mesh the CPU writes: not on the GPU, nor waiting for their last GPU state.
-type CpuWritten = (
-    Without<crate::gpu::ClothOnGpu>,
-    Without<crate::gpu::ClothLeavingGpu>,
-);
-
-/// Torn triangles leave the index buffer (if any tore since the last write), kept in the
-/// mesh's own index format; the vertex buffer keeps its size.
-pub(crate) fn write_indices(mesh: &mut Mesh, cloth: &mut ClothSim) {
-    if core::mem::take(&mut cloth.indices_dirty) {
-        let indices = cloth.binding.drawn_indices();
-        mesh.insert_indices(if cloth.u16_indices {
-            Indices::U16(indices.map(|i| i as u16).collect())
-        } else {
-            Indices::U32(indices.collect())
-        });
-    }
-}
-
-pub(crate) fn write_back(
+/// Copies the moved cloths' state into their meshes (torn triangles leave the index buffer,
+/// kept in the mesh's own index format; the vertex buffer keeps its size). Cloths stepped
+/// elsewhere write their own mesh.
+pub(super) fn write_back(
     mut meshes: Option<ResMut<Assets<Mesh>>>,
-    mut cloths: Query<(&mut ClothSim, &GlobalTransform), CpuWritten>,
+    mut cloths: Query<(&mut ClothSim, &GlobalTransform), Without<ClothSteppedElsewhere>>,
 ) {
     let Some(meshes) = meshes.as_deref_mut() else {
         return;
@@ -51,7 +35,7 @@ pub(crate) fn write_back(
         let Some(mut mesh) = meshes.get_mut(&cloth.mesh) else {
             continue;
         };
-        write_indices(&mut mesh, cloth);
+        cloth.write_indices(&mut mesh);
         let binding = &cloth.binding;
         let affine = gt.affine();
         let to_local = affine.inverse();

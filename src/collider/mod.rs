@@ -1,7 +1,7 @@
 //! Colliders: shapes placed by an entity's transform that every cloth collides with.
 //!
 //! Data flow: each fixed step, [`ClothColliderPlugin`]'s systems (in
-//! [`ClothSystems::Prepare`](crate::cloth::ClothSystems)) bake mesh colliders into signed
+//! [`ClothSystems::Prepare`]) bake mesh colliders into signed
 //! distance fields once, then gather every [`ClothCollider`] with its pose at the start and end
 //! of the step into [`ClothColliders`]. The cloth step collides against them and leaves the
 //! impulse each collider received in its [`ClothContactImpulse`], which gameplay (or the
@@ -23,51 +23,37 @@ pub mod rapier;
 use std::sync::Arc;
 
 use bevy::prelude::*;
+use bevy::reflect::{TypePath, impl_reflect_opaque};
 
-use crate::cloth::{ClothSystems, DEFAULT_TELEPORT_DISTANCE, FixedPoses, read_mesh};
-use crate::solver::{Collider, ContactImpulse, Pose, SdfGrid, Shape, limits};
+use crate::foundation::{ClothSchedule, ClothSystems, EntityName, FixedPoses, read_mesh};
+use crate::solver::{
+    Collider, ContactImpulse, DEFAULT_TELEPORT_DISTANCE, Pose, SdfGrid, Shape, is_teleport, limits,
+};
 
-/// A baked signed distance field, shared between colliders.
-#[derive(Reflect, Clone, Debug, PartialEq)]
-#[reflect(opaque)]
-#[reflect(Debug, Clone, PartialEq)]
-pub struct BakedSdf(pub Arc<SdfGrid>);
-
-/// The shape of a [`ClothCollider`], in the entity's local frame (scaled by its transform).
-#[derive(Reflect, Clone, Debug, PartialEq)]
-#[reflect(Clone, PartialEq)]
-pub enum ColliderShape {
-    /// A ball centred on the entity.
-    Sphere {
-        /// Radius in metres (times the largest scale axis).
-        radius: f32,
-    },
-    /// A box centred on the entity.
-    Cuboid {
-        /// Half size along the local axes (times the scale).
-        half_extents: Vec3,
-    },
-    /// A capsule along the local y axis.
-    Capsule {
-        /// Half length of the inner segment.
-        half_height: f32,
-        /// Radius in metres.
-        radius: f32,
-    },
-    /// The half-space below the entity's local xz plane (normal +y): a floor.
-    Plane,
-    /// A triangle mesh, baked once into a signed distance field: the entity's own [`Mesh3d`]
-    /// when `mesh` is `None`. `resolution` is the number of cells along the mesh's longest
-    /// side (48 is a good start). The mesh should be closed.
-    Mesh {
+/// What a mesh collider is made from.
+#[derive(TypePath, Clone, Debug, PartialEq)]
+pub enum ColliderMesh {
+    /// A triangle mesh asset, baked once into a signed distance field when it has loaded: the
+    /// entity's own [`Mesh3d`] when `mesh` is `None`. `resolution` is the number of cells along
+    /// the mesh's longest side (48 is a good start). The mesh should be closed.
+    Asset {
         /// The mesh to bake, or `None` for the entity's `Mesh3d`.
         mesh: Option<Handle<Mesh>>,
         /// Cells along the longest side.
         resolution: u32,
     },
-    /// An already baked field (e.g. from the rapier bridge or a shared bake).
-    Baked(BakedSdf),
+    /// An already baked field (from the rapier bridge, or one bake shared by many colliders).
+    Baked(Arc<SdfGrid>),
 }
+
+/// The shape of a [`ClothCollider`], in the entity's local frame (scaled by its transform):
+/// the solver's [`Shape`], with a mesh named by [`ColliderMesh`].
+///
+/// Spheres scale by the largest scale axis, boxes by each axis, capsules' lengths by y and
+/// their radius by the larger of x and z; a mesh scales uniformly by the largest axis.
+pub type ColliderShape = Shape<ColliderMesh>;
+
+impl_reflect_opaque!((in bevy_cloth::solver) Shape<M: Clone + core::fmt::Debug + PartialEq + Send + Sync + TypePath>(Clone, Debug, PartialEq));
 
 /// Makes an entity an obstacle for every cloth.
 ///
@@ -95,7 +81,7 @@ pub struct ClothCollider {
     pub friction: f32,
     /// A jump farther than this in one fixed step (metres) is a teleport: the collider appears
     /// at its new place instead of sweeping through the cloth on its way. The same rule as
-    /// [`Cloth::teleport_distance`](crate::cloth::Cloth::teleport_distance).
+    /// a cloth's pins ([`DEFAULT_TELEPORT_DISTANCE`] by default).
     pub teleport_distance: f32,
 }
 
@@ -123,12 +109,14 @@ impl ClothCollider {
         Self::new(ColliderShape::Cuboid { half_extents })
     }
 
-    /// A capsule along local y.
+    /// A capsule along local y, as Bevy's `Capsule3d::new(radius, length)`: `length` is the
+    /// straight part between the two hemispheres' centres (the capsule is
+    /// `length + 2·radius` tall).
     #[must_use]
-    pub fn capsule(half_height: f32, radius: f32) -> Self {
+    pub fn capsule(radius: f32, length: f32) -> Self {
         Self::new(ColliderShape::Capsule {
-            half_height,
             radius,
+            half_length: 0.5 * length,
         })
     }
 
@@ -141,10 +129,16 @@ impl ClothCollider {
     /// The entity's own `Mesh3d`, baked into a signed distance field of `resolution` cells.
     #[must_use]
     pub fn mesh(resolution: u32) -> Self {
-        Self::new(ColliderShape::Mesh {
+        Self::new(ColliderShape::Mesh(ColliderMesh::Asset {
             mesh: None,
             resolution,
-        })
+        }))
+    }
+
+    /// A mesh already baked into a signed distance field (shared, not copied).
+    #[must_use]
+    pub fn baked(field: Arc<SdfGrid>) -> Self {
+        Self::new(ColliderShape::Mesh(ColliderMesh::Baked(field)))
     }
 
     /// Sets the thickness.
@@ -194,17 +188,20 @@ pub struct ClothColliders {
 }
 
 /// Adds colliders: mesh baking, per-step gathering, contact impulses.
-pub struct ClothColliderPlugin {
-    pub(crate) schedule: bevy::ecs::schedule::InternedScheduleLabel,
-}
+///
+/// Part of `ClothPlugins`; its systems run in the group's [`ClothSchedule`], in
+/// [`ClothSystems::Prepare`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ClothColliderPlugin;
 
 impl Plugin for ClothColliderPlugin {
     fn build(&self, app: &mut App) {
+        let schedule = ClothSchedule::of(app);
         app.register_type::<ClothCollider>()
             .register_type::<ClothContactImpulse>()
             .init_resource::<ClothColliders>()
             .add_systems(
-                self.schedule,
+                schedule,
                 (bake_mesh_colliders, gather_colliders)
                     .chain()
                     .in_set(ClothSystems::Prepare),
@@ -222,7 +219,8 @@ fn on_collider_removed(removed: On<Remove, ClothCollider>, mut commands: Command
 }
 
 /// Pose of a transform for the solver: translation, rotation and the largest scale axis; the
-/// shape absorbs non-uniform scale where it can (boxes, capsules).
+/// shape absorbs non-uniform scale where it can (boxes, capsules). `None` for a mesh not baked
+/// yet.
 fn pose_and_shape(
     gt: &GlobalTransform,
     shape: &ColliderShape,
@@ -236,53 +234,60 @@ fn pose_and_shape(
         rotation,
         scale: 1.0,
     };
+    let shape = shape.clone().try_map_mesh(|m| match m {
+        ColliderMesh::Asset { .. } => baked.cloned(),
+        ColliderMesh::Baked(field) => Some(field),
+    })?;
     Some(match shape {
-        ColliderShape::Sphere { radius } => (
+        Shape::Sphere { radius } => (
             unit,
             Shape::Sphere {
                 radius: radius * max,
             },
         ),
-        ColliderShape::Cuboid { half_extents } => (
+        Shape::Cuboid { half_extents } => (
             unit,
             Shape::Cuboid {
-                half_extents: *half_extents * s,
+                half_extents: half_extents * s,
             },
         ),
-        ColliderShape::Capsule {
-            half_height,
+        Shape::Capsule {
             radius,
+            half_length,
         } => (
             unit,
             Shape::Capsule {
-                half_height: half_height * s.y,
                 radius: radius * s.x.max(s.z),
+                half_length: half_length * s.y,
             },
         ),
-        ColliderShape::Plane => (unit, Shape::Plane),
-        ColliderShape::Mesh { .. } => (Pose { scale: max, ..unit }, Shape::Sdf(baked?.clone())),
-        ColliderShape::Baked(b) => (Pose { scale: max, ..unit }, Shape::Sdf(b.0.clone())),
+        Shape::Plane => (unit, Shape::Plane),
+        Shape::Mesh(field) => (Pose { scale: max, ..unit }, Shape::Mesh(field)),
     })
 }
+
+/// What [`bake_mesh_colliders`] reads of each collider entity.
+type BakeQueryData = (
+    (Entity, Option<&'static Name>),
+    &'static ClothCollider,
+    Option<&'static Mesh3d>,
+    Option<&'static mut ColliderRuntime>,
+);
 
 /// Bakes mesh colliders once their mesh is loaded.
 fn bake_mesh_colliders(
     mut commands: Commands,
     meshes: Option<Res<Assets<Mesh>>>,
-    mut colliders: Query<(
-        Entity,
-        &ClothCollider,
-        Option<&Mesh3d>,
-        Option<&mut ColliderRuntime>,
-    )>,
+    mut colliders: Query<BakeQueryData>,
 ) {
-    for (entity, collider, mesh3d, runtime) in &mut colliders {
-        let ColliderShape::Mesh { mesh, resolution } = &collider.shape else {
+    for ((entity, name), collider, mesh3d, runtime) in &mut colliders {
+        let who = EntityName::new(entity, name);
+        let ColliderShape::Mesh(ColliderMesh::Asset { mesh, resolution }) = &collider.shape else {
             continue;
         };
         let Some(handle) = mesh.as_ref().or(mesh3d.map(|m| &m.0)) else {
             if !runtime.as_ref().is_some_and(|r| r.failed) {
-                error!("cloth collider {entity}: a Mesh shape needs a mesh handle or a Mesh3d");
+                error!("cloth collider {who}: a Mesh shape needs a mesh handle or a Mesh3d");
                 commands.entity(entity).insert(ColliderRuntime {
                     failed: true,
                     ..default()
@@ -316,11 +321,11 @@ fn bake_mesh_colliders(
         };
         match baked {
             Ok(grid) => {
-                debug!("cloth collider {entity}: baked a {} SDF", grid.dims());
+                debug!("cloth collider {who}: baked a {} SDF", grid.dims());
                 rt.baked = Some(Arc::new(grid));
             }
             Err(e) => {
-                error!("cloth collider {entity}: cannot bake its mesh: {e}");
+                error!("cloth collider {who}: cannot bake its mesh: {e}");
                 rt.failed = true;
             }
         }
@@ -343,6 +348,7 @@ type ColliderQueryData = (
     &'static ClothCollider,
     Option<&'static mut ColliderRuntime>,
     Option<&'static mut ClothContactImpulse>,
+    Option<&'static Name>,
 );
 
 /// Collects every collider's shape and its poses at the start and end of this step.
@@ -355,7 +361,7 @@ fn gather_colliders(
 ) {
     out.colliders.clear();
     out.entities.clear();
-    for (entity, collider, runtime, impulse) in &mut colliders {
+    for (entity, collider, runtime, impulse, name) in &mut colliders {
         let Some(gt) = poses.get(entity) else {
             continue;
         };
@@ -373,7 +379,11 @@ fn gather_colliders(
         };
         let last = runtime.as_ref().and_then(|r| r.last);
         let start = match last {
-            Some(l) if l.translation.distance(pose.translation) <= collider.teleport_distance => l,
+            Some(l)
+                if !is_teleport(l.translation, pose.translation, collider.teleport_distance) =>
+            {
+                l
+            }
             _ => pose,
         };
         let c = Collider {
@@ -390,7 +400,8 @@ fn gather_colliders(
             .and_then(|()| c.validate());
         if let Err(problem) = valid {
             if reported.insert(entity) {
-                error!("cloth collider {entity}: {problem}; it is ignored");
+                let who = EntityName::new(entity, name);
+                error!("cloth collider {who}: {problem}; it is ignored");
             }
             continue;
         }

@@ -16,8 +16,8 @@ use bevy::prelude::*;
 use bevy_rapier3d::geometry::ColliderView;
 use bevy_rapier3d::prelude::{Collider, ExternalImpulse, RigidBody};
 
-use super::{BakedSdf, ClothCollider, ClothContactImpulse, ColliderShape};
-use crate::cloth::ClothSystems;
+use super::{ClothCollider, ClothContactImpulse, ColliderMesh, ColliderShape};
+use crate::foundation::{ClothSchedule, ClothSystems};
 use crate::solver::SdfGrid;
 
 /// Mirrors rapier colliders into cloth colliders and couples cloth to rapier bodies.
@@ -56,21 +56,43 @@ pub struct NoClothCollision;
 #[derive(Component, Clone, Copy, Debug, Default)]
 pub struct FromRapierCollider;
 
+/// Present once the bridge's systems are in the cloth schedule.
+#[derive(Resource)]
+struct BridgeScheduled;
+
 impl Plugin for ClothRapierPlugin {
+    /// The bridge runs in the cloth plugins' schedule ([`ClothSchedule`]): added after
+    /// `ClothPlugins`, its systems go in here; added before, in [`Plugin::finish`], once
+    /// every plugin is built.
     fn build(&self, app: &mut App) {
-        app.insert_resource(Settings(*self))
-            .add_systems(
-                FixedPostUpdate,
-                mirror_colliders.in_set(ClothSystems::Prepare),
-            )
-            .add_systems(FixedPostUpdate, push_bodies.after(ClothSystems::Simulate));
+        app.insert_resource(Settings(*self));
+        if app.world().contains_resource::<ClothSchedule>() {
+            schedule_bridge(app);
+        }
     }
+
+    fn finish(&self, app: &mut App) {
+        if !app.world().contains_resource::<BridgeScheduled>() {
+            schedule_bridge(app);
+        }
+    }
+}
+
+fn schedule_bridge(app: &mut App) {
+    let schedule = ClothSchedule::of(app);
+    app.insert_resource(BridgeScheduled).add_systems(
+        schedule,
+        (
+            mirror_colliders.in_set(ClothSystems::Prepare),
+            push_bodies.after(ClothSystems::Simulate),
+        ),
+    );
 }
 
 fn bake(vertices: &[Vec3], indices: &[[u32; 3]], resolution: u32) -> Option<ColliderShape> {
     let flat: Vec<u32> = indices.iter().flatten().copied().collect();
     match SdfGrid::from_mesh(vertices, &flat, resolution) {
-        Ok(grid) => Some(ColliderShape::Baked(BakedSdf(Arc::new(grid)))),
+        Ok(grid) => Some(ColliderShape::Mesh(ColliderMesh::Baked(Arc::new(grid)))),
         Err(e) => {
             warn!("rapier collider: cannot bake its triangles into an SDF: {e}");
             None
@@ -89,8 +111,8 @@ fn shape_of(collider: &Collider, resolution: u32) -> Option<ColliderShape> {
             let (a, b) = (c.segment().a(), c.segment().b());
             if a.x == 0.0 && a.z == 0.0 && b.x == 0.0 && b.z == 0.0 && (a.y + b.y).abs() < 1e-6 {
                 ColliderShape::Capsule {
-                    half_height: c.half_height(),
                     radius: c.radius(),
+                    half_length: c.half_height(),
                 }
             } else {
                 let (v, i) = c.raw.to_trimesh(16, 8);

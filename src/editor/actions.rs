@@ -14,11 +14,10 @@ use std::collections::BTreeSet;
 use bevy::math::Ray3d;
 use bevy::prelude::*;
 
-use super::plugin::{
-    ClothEditor, EditorGrid, EditorShape, NewCloth, NewShape, PinDraft, PinPreset,
-};
-use crate::cloth::{Cloth, ClothPin, ClothPins, ClothSim, PinAnchor, grid_mesh};
+use super::state::{ClothEditor, EditorGrid, EditorShape, NewCloth, NewShape, PinDraft, PinPreset};
+use crate::cloth::{Cloth, ClothPin, ClothPins, ClothSim, PinAnchor};
 use crate::collider::{ClothCollider, ClothColliders, ColliderShape};
+use crate::foundation::grid_mesh;
 use crate::render::{VelvetMaterial, lined_velvet};
 use crate::solver::{Shape, Topology, WindParams, ray_shape};
 use crate::wind::{Wind, WindZone};
@@ -138,13 +137,13 @@ pub fn shape_mesh(shape: &ColliderShape) -> Option<Mesh> {
             Cuboid::new(s.x, s.y, s.z).mesh().build()
         }
         ColliderShape::Capsule {
-            half_height,
             radius,
-        } => Capsule3d::new(at_least(*radius), 2.0 * half_height.max(0.0))
+            half_length,
+        } => Capsule3d::new(at_least(*radius), 2.0 * half_length.max(0.0))
             .mesh()
             .build(),
         ColliderShape::Plane => Plane3d::default().mesh().size(30.0, 30.0).build(),
-        ColliderShape::Mesh { .. } | ColliderShape::Baked(_) => return None,
+        ColliderShape::Mesh(_) => return None,
     })
 }
 
@@ -165,7 +164,7 @@ pub fn add_collider(world: &mut World, shape: NewShape) -> Entity {
             Vec3::new(0.8, 0.3, 0.6),
         ),
         NewShape::Capsule => (
-            ClothCollider::capsule(0.3, 0.15),
+            ClothCollider::capsule(0.15, 0.6),
             "Capsule",
             Vec3::new(-0.8, 0.5, 0.6),
         ),
@@ -196,10 +195,7 @@ pub(crate) fn spawn_collider(
         None => shape_mesh(&collider.shape)
             .and_then(|m| Some(world.get_resource_mut::<Assets<Mesh>>()?.add(m))),
     };
-    let drawn_from_shape = !matches!(
-        collider.shape,
-        ColliderShape::Mesh { .. } | ColliderShape::Baked(_)
-    );
+    let drawn_from_shape = !matches!(collider.shape, ColliderShape::Mesh(_));
     let look = material(world, COLLIDER_COLOUR, false);
     let mut e = world.spawn((Name::new(name), collider, transform));
     if let Some(h) = shown {
@@ -322,7 +318,7 @@ pub fn delete(world: &mut World, entity: Entity) -> bool {
             .iter()
             .copied()
             .filter(
-                |p| !matches!(p.anchor, PinAnchor::Entity { entity, .. } if gone.contains(&entity)),
+                |p| !matches!(p.anchor, PinAnchor::Entity { entity, .. } | PinAnchor::Attached(entity) if gone.contains(&entity)),
             )
             .collect();
         if keep.len() != before {
@@ -622,51 +618,4 @@ pub fn click(world: &mut World, ray: Ray3d) -> Option<Entity> {
     let hit = pick(world, ray).map(|(e, _)| e);
     world.get_resource_or_init::<ClothEditor>().selected = hit;
     hit
-}
-
-/// Colliders whose shape changed and whose mesh the editor draws.
-type ChangedShapes = (With<EditorShape>, Changed<ClothCollider>);
-
-/// Keeps the visible mesh of [`EditorShape`] colliders in step with their shape.
-pub(crate) fn sync_shape_meshes(
-    changed: Query<(&ClothCollider, &Mesh3d), ChangedShapes>,
-    meshes: Option<ResMut<Assets<Mesh>>>,
-) {
-    let Some(mut meshes) = meshes else {
-        return;
-    };
-    for (collider, mesh3d) in &changed {
-        if let Some(m) = shape_mesh(&collider.shape) {
-            // A mesh handle the editor made: replace its contents in place.
-            let _ = meshes.insert(mesh3d.id(), m);
-        }
-    }
-}
-
-/// Reports mesh collider files that failed to load, and removes their colliders.
-pub(crate) fn watch_mesh_loads(world: &mut World) {
-    let Some(loading) = world
-        .get_resource::<ClothEditor>()
-        .map(|e| e.loading.clone())
-        .filter(|l| !l.is_empty())
-    else {
-        return;
-    };
-    let Some(server) = world.get_resource::<AssetServer>().cloned() else {
-        return;
-    };
-    let mut still = Vec::new();
-    for (entity, handle, path) in loading {
-        match server.load_state(handle.id()) {
-            bevy::asset::LoadState::Failed(e) => {
-                if world.get_entity(entity).is_ok() {
-                    world.entity_mut(entity).despawn();
-                }
-                say(world, format!("could not load {path}: {e}"));
-            }
-            bevy::asset::LoadState::Loaded => say(world, format!("loaded {path}")),
-            _ => still.push((entity, handle, path)),
-        }
-    }
-    world.resource_mut::<ClothEditor>().loading = still;
 }

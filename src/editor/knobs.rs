@@ -5,7 +5,7 @@
 use bevy::prelude::*;
 
 use crate::cloth::{Cloth, ClothConfig, ClothSelfCollision, ClothTearing, ClothTethers};
-use crate::collider::{ClothCollider, ColliderShape};
+use crate::collider::{ClothCollider, ColliderMesh, ColliderShape};
 use crate::solver::limits::{self, Limit};
 use crate::solver::{Solver, WindParams};
 use crate::wind::WindZone;
@@ -323,14 +323,14 @@ pub const COLLIDER: &[Knob<ClothCollider>] = &[
     },
     Knob {
         label: "half height",
-        limit: limits::COLLIDER_SIZE.named("half_height"),
+        limit: limits::COLLIDER_SIZE.named("half_length"),
         get: |c| match c.shape {
-            ColliderShape::Capsule { half_height, .. } => Some(half_height),
+            ColliderShape::Capsule { half_length, .. } => Some(half_length),
             _ => None,
         },
         set: |c, v| {
-            if let ColliderShape::Capsule { half_height, .. } = &mut c.shape {
-                *half_height = v;
+            if let ColliderShape::Capsule { half_length, .. } = &mut c.shape {
+                *half_length = v;
             }
         },
     },
@@ -356,11 +356,11 @@ pub const COLLIDER: &[Knob<ClothCollider>] = &[
         label: "resolution",
         limit: limits::SDF_RESOLUTION,
         get: |c| match c.shape {
-            ColliderShape::Mesh { resolution, .. } => Some(resolution as f32),
+            ColliderShape::Mesh(ColliderMesh::Asset { resolution, .. }) => Some(resolution as f32),
             _ => None,
         },
         set: |c, v| {
-            if let ColliderShape::Mesh { resolution, .. } = &mut c.shape {
+            if let ColliderShape::Mesh(ColliderMesh::Asset { resolution, .. }) = &mut c.shape {
                 *resolution = v as u32;
             }
         },
@@ -487,7 +487,7 @@ mod tests {
                 for end in [knob.limit.min, knob.limit.max] {
                     knob.apply(&mut c, end);
                     assert_eq!((knob.get)(&c), Some(end), "{}", knob.label);
-                    let p: SolverParams = c.into();
+                    let p: SolverParams = c;
                     assert!(
                         p.validate().is_ok(),
                         "{} = {end}: {:?}",

@@ -3,7 +3,7 @@
 //! [`ClothCameraPlugin`] (a free-flying camera: right mouse to look, WASD/QE to move) needs
 //! nothing beyond Bevy's input and works in any app.
 //!
-//! With the cargo feature `editor`, [`ClothEditorPlugin`] adds a panel (bevy_egui) to the
+//! With the cargo feature `editor`, `ClothEditorPlugin` adds a panel (bevy_egui) to the
 //! running game that finds every [`Cloth`](crate::cloth::Cloth),
 //! [`ClothCollider`](crate::collider::ClothCollider), [`WindZone`](crate::wind::WindZone) and the
 //! [`Wind`](crate::wind::Wind) resource, whoever spawned them: a card per object with a slider
@@ -24,21 +24,24 @@ pub mod knobs;
 #[cfg(feature = "editor")]
 mod obj;
 #[cfg(feature = "editor")]
+mod overlay;
+#[cfg(feature = "editor")]
+mod panel;
+#[cfg(feature = "editor")]
 mod plugin;
 #[cfg(feature = "editor")]
 pub mod scene;
 #[cfg(feature = "editor")]
-pub mod stats;
+mod state;
 #[cfg(feature = "editor")]
-mod ui;
+pub mod stats;
 
 pub use camera::{ClothCameraBlock, ClothCameraPlugin, ClothFlyCamera};
 #[cfg(feature = "editor")]
 pub use obj::{ObjError, ObjMeshLoader};
 #[cfg(feature = "editor")]
-pub use plugin::{
-    ClothEditor, ClothEditorPlugin, EditorGrid, EditorShape, NewCloth, NewShape, PinDraft,
-    PinPreset,
-};
+pub use panel::panel_contents;
 #[cfg(feature = "editor")]
-pub use ui::panel_contents;
+pub use plugin::ClothEditorPlugin;
+#[cfg(feature = "editor")]
+pub use state::{ClothEditor, EditorGrid, EditorShape, NewCloth, NewShape, PinDraft, PinPreset};

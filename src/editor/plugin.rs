@@ -1,17 +1,20 @@
-//! [`ClothEditorPlugin`], the editor's state and the components it puts on what it spawns.
-
-use std::collections::BTreeSet;
+//! [`ClothEditorPlugin`] and the systems it adds: the panel's pass, the toggle key, GPU
+//! read-back while the panel is open, shape meshes kept in step, mesh files watched.
 
 use bevy::asset::AssetApp;
-use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
+use bevy_egui::egui;
+use bevy_egui::{EguiContext, PrimaryEguiContext};
 
+use super::actions::{say, shape_mesh};
 use super::camera::ClothCameraBlock;
-use super::gizmo::AxisDrag;
 use super::obj::ObjMeshLoader;
-use super::{actions, stats};
+use super::overlay::overlay_and_pointer;
+use super::panel::panel_contents;
+use super::state::{ClothEditor, EditorGrid, EditorShape};
+use super::stats;
+use crate::collider::ClothCollider;
 use crate::gpu::{ClothBackendInUse, ClothReadback};
-use crate::solver::Grid;
 
 /// The cloth editor: a panel beside the game with a card per cloth, collider and wind, pin
 /// editing, add/delete buttons, axis arrows to move the selected object, live step time and
@@ -36,7 +39,8 @@ use crate::solver::Grid;
 /// OBJ loader and the live numbers, so [`actions`] and
 /// [`scene`](super::scene) work the same way there.
 ///
-/// [`ClothPlugins`]: crate::cloth::ClothPlugins
+/// [`ClothPlugins`]: crate::ClothPlugins
+/// [`actions`]: super::actions
 #[derive(Clone, Copy, Debug)]
 pub struct ClothEditorPlugin {
     /// The key that shows and hides the panel (F2 by default).
@@ -70,8 +74,8 @@ impl Plugin for ClothEditorPlugin {
             (
                 toggle_panel,
                 read_back_gpu_cloths,
-                actions::sync_shape_meshes,
-                actions::watch_mesh_loads,
+                sync_shape_meshes,
+                watch_mesh_loads,
                 stats::record,
             ),
         );
@@ -86,7 +90,7 @@ impl Plugin for ClothEditorPlugin {
             if !app.is_plugin_added::<bevy_egui::EguiPlugin>() {
                 app.add_plugins(bevy_egui::EguiPlugin::default());
             }
-            app.add_systems(bevy_egui::EguiPrimaryContextPass, super::ui::editor_ui);
+            app.add_systems(bevy_egui::EguiPrimaryContextPass, editor_ui);
         } else {
             info!(
                 "ClothEditorPlugin: no renderer (none in this app, or the plugin was added \
@@ -134,151 +138,82 @@ fn toggle_panel(
     }
 }
 
-/// The editor's state: what is selected, the pin drafts, the add dialog's values, the file
-/// paths and the last message. Read and change it from game code or tests; the panel shows it.
-#[derive(Resource, Debug)]
-pub struct ClothEditor {
-    /// Whether the panel is shown.
-    pub open: bool,
-    /// The key that shows and hides the panel.
-    pub toggle: KeyCode,
-    /// The object whose axis arrows are shown (click it, or its card's "select").
-    pub selected: Option<Entity>,
-    /// The cloth whose pins a click toggles (its card's "edit pins"), if any.
-    pub pin_edit: Option<Entity>,
-    /// Pins being edited, per cloth: nothing changes on the cloth until
-    /// [`actions::update_pins`].
-    pub drafts: HashMap<Entity, PinDraft>,
-    /// Values of the "add cloth" dialog.
-    pub new_cloth: NewCloth,
-    /// Path typed for "add mesh collider" (relative to the asset folder).
-    pub mesh_path: String,
-    /// Path typed for "save" and "load" (a file path).
-    pub scene_path: String,
-    /// The last result of an action, for the status line (errors say what went wrong).
-    pub status: String,
-    /// An axis drag in progress.
-    pub(crate) drag: Option<AxisDrag>,
-    /// Mesh colliders whose file is still loading, with the path asked for.
-    pub(crate) loading: Vec<(Entity, Handle<Mesh>, String)>,
-    /// Names given so far, for "Cloth 3", "Sphere 2", ...
-    pub(crate) counter: u32,
-    /// The selected object whose card was last opened for it.
-    pub(crate) opened: Option<Entity>,
+/// The panel and everything drawn over the scene, once per frame (bevy_egui's pass).
+fn editor_ui(world: &mut World) {
+    let Some(ctx) = world
+        .query_filtered::<&mut EguiContext, With<PrimaryEguiContext>>()
+        .iter_mut(world)
+        .next()
+        .map(|mut c| c.get_mut().clone())
+    else {
+        return;
+    };
+    if !world.resource::<ClothEditor>().open {
+        *world.resource_mut::<ClothCameraBlock>() = ClothCameraBlock::default();
+        return;
+    }
+    let mut root = egui::Ui::new(
+        ctx.clone(),
+        "bevy_cloth_editor_root".into(),
+        egui::UiBuilder::new()
+            .layer_id(egui::LayerId::background())
+            .max_rect(ctx.viewport_rect()),
+    );
+    let panel = egui::Panel::left("bevy_cloth_editor")
+        .resizable(true)
+        .default_size(360.0)
+        .show(&mut root, |ui| {
+            egui::ScrollArea::vertical()
+                .auto_shrink([false; 2])
+                .show(ui, |ui| panel_contents(ui, world));
+        });
+    let panel_rect = panel.response.rect;
+    overlay_and_pointer(world, &ctx, panel_rect);
 }
 
-impl Default for ClothEditor {
-    fn default() -> Self {
-        Self {
-            open: true,
-            toggle: KeyCode::F2,
-            selected: None,
-            pin_edit: None,
-            drafts: HashMap::default(),
-            new_cloth: NewCloth::default(),
-            mesh_path: String::new(),
-            scene_path: "cloth_scene.ron".into(),
-            status: String::new(),
-            drag: None,
-            loading: Vec::new(),
-            counter: 0,
-            opened: None,
+/// Colliders whose shape changed and whose mesh the editor draws.
+type ChangedShapes = (With<EditorShape>, Changed<ClothCollider>);
+
+/// Keeps the visible mesh of [`EditorShape`] colliders in step with their shape.
+fn sync_shape_meshes(
+    changed: Query<(&ClothCollider, &Mesh3d), ChangedShapes>,
+    meshes: Option<ResMut<Assets<Mesh>>>,
+) {
+    let Some(mut meshes) = meshes else {
+        return;
+    };
+    for (collider, mesh3d) in &changed {
+        if let Some(m) = shape_mesh(&collider.shape) {
+            // A mesh handle the editor made: replace its contents in place.
+            let _ = meshes.insert(mesh3d.id(), m);
         }
     }
 }
 
-/// A pin set being edited: mesh vertex indices (the first copy of each welded vertex).
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct PinDraft {
-    /// The vertices that will be pinned when the draft is applied.
-    pub vertices: BTreeSet<u32>,
-}
-
-/// Ready-made pin sets.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PinPreset {
-    /// The boundary vertices highest in the cloth's rest shape as placed now (for a flat,
-    /// level cloth: its local +z edge, the first row of a [`Grid`]).
-    TopEdge,
-    /// The two ends of the top edge.
-    TwoCorners,
-    /// No pins: the cloth falls.
-    None,
-}
-
-/// What "add cloth" makes: a `columns × rows` grid of `width × height` metres, hanging from
-/// its two top corners.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NewCloth {
-    /// Width in metres.
-    pub width: f32,
-    /// Height in metres.
-    pub height: f32,
-    /// Vertices along the width.
-    pub columns: u32,
-    /// Vertices along the height.
-    pub rows: u32,
-    /// Total mass in kilograms.
-    pub mass: f32,
-}
-
-impl NewCloth {
-    /// Smallest and largest vertex count along a side the dialog offers.
-    pub const VERTICES: (u32, u32) = (2, 256);
-    /// Smallest and largest side the dialog offers, metres.
-    pub const SIZE: (f32, f32) = (0.05, 20.0);
-}
-
-impl Default for NewCloth {
-    fn default() -> Self {
-        Self {
-            width: 1.0,
-            height: 1.0,
-            columns: 24,
-            rows: 24,
-            mass: 0.2,
+/// Reports mesh collider files that failed to load, and removes their colliders.
+fn watch_mesh_loads(world: &mut World) {
+    let Some(loading) = world
+        .get_resource::<ClothEditor>()
+        .map(|e| e.loading.clone())
+        .filter(|l| !l.is_empty())
+    else {
+        return;
+    };
+    let Some(server) = world.get_resource::<AssetServer>().cloned() else {
+        return;
+    };
+    let mut still = Vec::new();
+    for (entity, handle, path) in loading {
+        match server.load_state(handle.id()) {
+            bevy::asset::LoadState::Failed(e) => {
+                if world.get_entity(entity).is_ok() {
+                    world.entity_mut(entity).despawn();
+                }
+                say(world, format!("could not load {path}: {e}"));
+            }
+            bevy::asset::LoadState::Loaded => say(world, format!("loaded {path}")),
+            _ => still.push((entity, handle, path)),
         }
     }
-}
-
-/// On a cloth the editor made: the grid its mesh was built from (saved as a grid, not as
-/// vertices).
-#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
-#[reflect(Component)]
-pub struct EditorGrid {
-    /// Vertices along the width.
-    pub columns: u32,
-    /// Vertices along the height.
-    pub rows: u32,
-    /// Width in metres.
-    pub width: f32,
-    /// Height in metres.
-    pub height: f32,
-}
-
-impl EditorGrid {
-    /// The solver grid.
-    #[must_use]
-    pub fn grid(&self) -> Grid {
-        Grid::new(self.columns, self.rows, self.width, self.height)
-    }
-}
-
-/// On a collider whose visible mesh the editor draws from its shape: a slider that changes
-/// the radius changes the mesh too. Add it to your own colliders to get the same.
-#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[reflect(Component)]
-pub struct EditorShape;
-
-/// The shapes "add collider" offers.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum NewShape {
-    /// A ball.
-    Sphere,
-    /// A box.
-    Box,
-    /// A capsule.
-    Capsule,
-    /// A floor.
-    Plane,
+    world.resource_mut::<ClothEditor>().loading = still;
 }

@@ -19,15 +19,16 @@ use bevy::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::actions::{dress_cloth, say, spawn_collider};
-use super::plugin::{ClothEditor, EditorGrid};
+use super::state::{ClothEditor, EditorGrid};
 use crate::cloth::{
-    Cloth, ClothConfig, ClothPin, ClothPins, ClothSelfCollision, ClothSource, ClothTearing,
-    ClothTethers, PinAnchor, grid_mesh,
+    Cloth, ClothConfig, ClothPin, ClothPins, ClothSelfCollision, ClothSim, ClothSource,
+    ClothTearing, ClothTethers, PinAnchor,
 };
-use crate::collider::{ClothCollider, ColliderShape};
+use crate::collider::{ClothCollider, ColliderMesh, ColliderShape};
+use crate::foundation::{EntityName, grid_mesh};
 use crate::gpu::ClothBackend;
 use crate::render::VelvetMaterial;
-use crate::solver::WindParams;
+use crate::solver::{Shape, WindParams};
 use crate::wind::{Wind, WindZone};
 
 /// A whole scene's cloth setup, as saved.
@@ -152,34 +153,16 @@ pub struct SavedCloth {
     pub backend: Option<ClothBackend>,
 }
 
-/// A collider shape in a file (a mesh shape's mesh is [`SavedCollider::mesh`]).
+/// How finely a mesh collider in a file is baked (its mesh is [`SavedCollider::mesh`]).
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
-pub enum SavedShape {
-    /// [`ColliderShape::Sphere`].
-    Sphere {
-        /// Radius.
-        radius: f32,
-    },
-    /// [`ColliderShape::Cuboid`].
-    Cuboid {
-        /// Half size.
-        half_extents: Vec3,
-    },
-    /// [`ColliderShape::Capsule`].
-    Capsule {
-        /// Half length of the segment.
-        half_height: f32,
-        /// Radius.
-        radius: f32,
-    },
-    /// [`ColliderShape::Plane`].
-    Plane,
-    /// [`ColliderShape::Mesh`], baked from [`SavedCollider::mesh`].
-    Mesh {
-        /// Cells along the longest side.
-        resolution: u32,
-    },
+pub struct SavedBake {
+    /// Cells along the mesh's longest side.
+    pub resolution: u32,
 }
+
+/// A collider shape in a file: the crate's one [`Shape`], whose mesh shape says how finely
+/// it is baked.
+pub type SavedShape = Shape<SavedBake>;
 
 /// A collider in a file.
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
@@ -209,6 +192,18 @@ pub struct SavedZone {
     pub transform: SavedTransform,
     /// The zone.
     pub zone: WindZone,
+}
+
+/// An attached pin as the entity pin it became when it was applied (the offset it has kept
+/// since); other pins as they are.
+fn attached_as_entity(world: &World, cloth: Entity, pin: ClothPin) -> PinAnchor {
+    match pin.anchor {
+        PinAnchor::Attached(entity) => world
+            .get::<ClothSim>(cloth)
+            .and_then(|s| s.attached_offset(pin.vertex, entity))
+            .map_or(pin.anchor, |offset| PinAnchor::Entity { entity, offset }),
+        other => other,
+    }
 }
 
 fn world_transform(world: &World, e: Entity) -> SavedTransform {
@@ -292,44 +287,35 @@ pub fn save_scene(world: &mut World) -> ClothScene {
     for &e in &collider_list {
         let c = world.get::<ClothCollider>(e).expect("queried");
         let (shape, mesh) = match &c.shape {
-            ColliderShape::Sphere { radius } => (SavedShape::Sphere { radius: *radius }, None),
-            ColliderShape::Cuboid { half_extents } => (
-                SavedShape::Cuboid {
-                    half_extents: *half_extents,
-                },
-                None,
-            ),
-            ColliderShape::Capsule {
-                half_height,
-                radius,
-            } => (
-                SavedShape::Capsule {
-                    half_height: *half_height,
-                    radius: *radius,
-                },
-                None,
-            ),
-            ColliderShape::Plane => (SavedShape::Plane, None),
-            ColliderShape::Mesh { mesh, resolution } => {
+            ColliderShape::Mesh(ColliderMesh::Asset { mesh, resolution }) => {
                 let handle = mesh
                     .clone()
                     .or_else(|| world.get::<Mesh3d>(e).map(|m| m.0.clone()));
                 let saved = handle.as_ref().and_then(|h| mesh_of(world, h));
                 if saved.is_none() {
-                    warn!("cloth editor: collider {e}'s mesh is not loaded; it is not saved");
+                    let who = EntityName::in_world(world, e);
+                    warn!("cloth editor: collider {who}'s mesh is not loaded; it is not saved");
                     continue;
                 }
                 (
-                    SavedShape::Mesh {
+                    Shape::Mesh(SavedBake {
                         resolution: *resolution,
-                    },
+                    }),
                     saved,
                 )
             }
-            ColliderShape::Baked(_) => {
-                warn!("cloth editor: collider {e} is an already baked field; it is not saved");
+            ColliderShape::Mesh(ColliderMesh::Baked(_)) => {
+                let who = EntityName::in_world(world, e);
+                warn!("cloth editor: collider {who} is an already baked field; it is not saved");
                 continue;
             }
+            analytic => (
+                analytic
+                    .clone()
+                    .try_map_mesh(|_| None)
+                    .expect("mesh shapes are matched above"),
+                None,
+            ),
         };
         scene.colliders.push(SavedCollider {
             name: name_of(world, e),
@@ -348,7 +334,7 @@ pub fn save_scene(world: &mut World) -> ClothScene {
         .filter(|&e| {
             !matches!(
                 world.get::<ClothCollider>(e).map(|c| &c.shape),
-                Some(ColliderShape::Baked(_))
+                Some(ColliderShape::Mesh(ColliderMesh::Baked(_)))
             )
         })
         .collect();
@@ -368,7 +354,8 @@ pub fn save_scene(world: &mut World) -> ClothScene {
             handle.and_then(|h| mesh_of(world, &h))
         };
         let Some(mesh) = mesh else {
-            warn!("cloth editor: cloth {e}'s mesh is not loaded; it is not saved");
+            let who = EntityName::in_world(world, e);
+            warn!("cloth editor: cloth {who}'s mesh is not loaded; it is not saved");
             continue;
         };
         let pins = world
@@ -378,7 +365,7 @@ pub fn save_scene(world: &mut World) -> ClothScene {
             .into_iter()
             .map(|p| SavedPin {
                 vertex: p.vertex,
-                anchor: match p.anchor {
+                anchor: match attached_as_entity(world, e, p) {
                     PinAnchor::Rest => SavedAnchor::Rest,
                     PinAnchor::World(w) => SavedAnchor::World(w),
                     PinAnchor::Entity { entity, offset } => {
@@ -396,6 +383,12 @@ pub fn save_scene(world: &mut World) -> ClothScene {
                             SavedAnchor::World(at)
                         }
                     }
+                    // Its entity has no pose yet: held where it is.
+                    PinAnchor::Attached(_) => SavedAnchor::World(
+                        world
+                            .get::<ClothSim>(e)
+                            .map_or(Vec3::ZERO, |s| s.position(p.vertex)),
+                    ),
                 },
             })
             .collect();
@@ -498,10 +491,10 @@ pub fn load_scene(world: &mut World, scene: &ClothScene) -> Result<(), String> {
     }
     for (k, c) in scene.colliders.iter().enumerate() {
         match (&c.shape, &c.mesh) {
-            (SavedShape::Mesh { .. }, Some(m)) => {
+            (Shape::Mesh(_), Some(m)) => {
                 check_mesh(world, m).map_err(|e| format!("collider {k}: {e}"))?;
             }
-            (SavedShape::Mesh { .. }, None) => {
+            (Shape::Mesh(_), None) => {
                 return Err(format!("collider {k}: a mesh collider without its mesh"));
             }
             _ => {}
@@ -533,31 +526,14 @@ pub fn load_scene(world: &mut World, scene: &ClothScene) -> Result<(), String> {
     // Colliders first: pins may name them.
     let mut colliders = Vec::with_capacity(scene.colliders.len());
     for c in &scene.colliders {
-        let (shape, mesh) = match c.shape {
-            SavedShape::Sphere { radius } => (ColliderShape::Sphere { radius }, None),
-            SavedShape::Cuboid { half_extents } => (ColliderShape::Cuboid { half_extents }, None),
-            SavedShape::Capsule {
-                half_height,
-                radius,
-            } => (
-                ColliderShape::Capsule {
-                    half_height,
-                    radius,
-                },
-                None,
-            ),
-            SavedShape::Plane => (ColliderShape::Plane, None),
-            SavedShape::Mesh { resolution } => {
-                let m = c.mesh.as_ref().expect("checked above");
-                (
-                    ColliderShape::Mesh {
-                        mesh: None,
-                        resolution,
-                    },
-                    Some(build_mesh(world, m)),
-                )
-            }
+        let mesh = match c.shape {
+            Shape::Mesh(_) => Some(build_mesh(world, c.mesh.as_ref().expect("checked above"))),
+            _ => None,
         };
+        let shape = c.shape.map_mesh(|bake| ColliderMesh::Asset {
+            mesh: None,
+            resolution: bake.resolution,
+        });
         let collider = ClothCollider {
             shape,
             thickness: c.thickness,

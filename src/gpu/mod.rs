@@ -13,7 +13,6 @@ pub use kernels::{GpuCloth, GpuKernels, GpuStage, GpuStepInput, GpuUnsupported, 
 pub use plugin::{
     ClothBackend, ClothBackendInUse, ClothGpuPlugin, ClothGpuSupport, ClothOnGpu, ClothReadback,
 };
-pub(crate) use plugin::{ClothLeavingGpu, forget_gpu_cloth};
 
 /// Appends per-owner lists to a `u32` table (how the kernels find a vertex's triangles, edges,
 /// tethers): `owners + 1` absolute offsets, then each owner's records of `K` words in the

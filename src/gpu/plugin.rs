@@ -32,8 +32,9 @@ use bevy::render::{Extract, ExtractSchedule, MainWorld, Render, RenderApp, Rende
 
 use super::kernels::{GpuCloth, GpuKernels, GpuStepInput, sum_impulses};
 use super::mesh::{MeshKernel, MeshWriter, TangentSource, VertexLayout};
-use crate::cloth::{ClothSim, ClothSystems};
-use crate::collider::ClothColliders;
+use crate::cloth::{Cloth, ClothSim, ClothSteppedElsewhere, ClothTorn};
+use crate::collider::{ClothColliders, ClothContactImpulse};
+use crate::foundation::{ClothSchedule, ClothSystems, EntityName};
 use crate::solver::{Collider, ContactImpulse, Simulation};
 use crate::wind::ClothWindField;
 
@@ -76,7 +77,7 @@ pub struct ClothGpuSupport {
 /// Runs cloths on the GPU: their steps go to the render world, run as compute passes in the
 /// `RenderGraph` schedule before the camera driver, and land in the mesh's vertex slab.
 ///
-/// Part of [`ClothPlugins`](crate::cloth::ClothPlugins) with `default_backend: Cpu`: nothing
+/// Part of [`ClothPlugins`](crate::ClothPlugins) with `default_backend: Cpu`: nothing
 /// changes until a cloth asks for [`ClothBackend::Gpu`] or [`ClothBackend::Auto`], or the
 /// default is set, e.g. `ClothPlugins::default().set(ClothGpuPlugin { default_backend:
 /// ClothBackend::Auto })`. In an app without a renderer (`MinimalPlugins`) every cloth runs on
@@ -146,11 +147,15 @@ pub(crate) struct ClothLeavingGpu {
 /// Frames a cloth leaving the GPU waits for its state before going on from the main world's.
 const LEAVE_TIMEOUT_FRAMES: u32 = 30;
 
-/// Removes a cloth's GPU components (the cloth itself was removed).
-pub(crate) fn forget_gpu_cloth(commands: &mut Commands, entity: Entity) {
-    commands
-        .entity(entity)
-        .try_remove::<(ClothOnGpu, ClothLeavingGpu, ClothBackendInUse)>();
+/// Removing [`Cloth`] removes its GPU components too.
+fn forget_gpu_cloth(removed: On<Remove, Cloth>, mut commands: Commands) {
+    commands.entity(removed.entity).try_remove::<(
+        ClothOnGpu,
+        ClothLeavingGpu,
+        ClothBackendInUse,
+        ClothSteppedElsewhere,
+        NoFrustumCulling,
+    )>();
 }
 
 /// What a GPU frame read back for one cloth.
@@ -208,19 +213,23 @@ impl ClothOnGpu {
 
 impl Plugin for ClothGpuPlugin {
     fn build(&self, app: &mut App) {
+        let schedule = ClothSchedule::of(app);
         app.register_type::<ClothBackend>()
             .register_type::<ClothReadback>()
             .insert_resource(DefaultBackend(self.default_backend))
             .init_resource::<GpuClothResults>()
             .init_resource::<GpuImpulses>()
+            .add_observer(forget_gpu_cloth)
             .add_systems(First, clear_queued_steps)
             .add_systems(PreUpdate, apply_gpu_results)
             .add_systems(
-                FixedPostUpdate,
+                schedule,
                 (
+                    // Between the phases: once every cloth is built and its settings and pins
+                    // are applied, before anything steps.
                     choose_backends
-                        .in_set(ClothSystems::Prepare)
-                        .after(crate::cloth::sim::sync_cloths),
+                        .after(ClothSystems::Prepare)
+                        .before(ClothSystems::Simulate),
                     (queue_gpu_steps, add_gpu_impulses).in_set(ClothSystems::Simulate),
                 ),
             );
@@ -347,12 +356,13 @@ fn choose_backends(
     default: Res<DefaultBackend>,
     meshes: Option<Res<Assets<Mesh>>>,
     mut cloths: Query<(
-        Entity,
+        (Entity, Option<&Name>),
         &ClothSim,
         Option<&ClothBackend>,
         Option<&mut ClothBackendInUse>,
         Option<&mut ClothOnGpu>,
         Has<ClothLeavingGpu>,
+        Has<ClothReadback>,
     )>,
     fixed: Res<Time<Fixed>>,
     mut generation: Local<u64>,
@@ -361,7 +371,8 @@ fn choose_backends(
 ) {
     let dt = fixed.timestep().as_secs_f32();
     let mut seen = std::collections::HashSet::new();
-    for (entity, cloth, backend, in_use, on_gpu, leaving) in &mut cloths {
+    for ((entity, name), cloth, backend, in_use, on_gpu, leaving, readback) in &mut cloths {
+        let who = EntityName::new(entity, name);
         seen.insert(entity);
         if leaving {
             // Waits for its last GPU state (`apply_gpu_results`).
@@ -400,25 +411,32 @@ fn choose_backends(
         match (layout, on_gpu) {
             (Ok(layout), Some(mut g)) => {
                 let key = settings_key(cloth.simulation());
-                let edited = cloth.edits != g.edits || g.restart;
+                let edited = cloth.edit_count() != g.edits || g.restart;
                 if key != g.key || edited {
                     // New settings go on from the GPU's state; an edit of the state wins.
                     *generation += 1;
                     g.generation = *generation;
                     g.upload = Arc::new(upload(cloth, layout, !edited));
                     g.key = key;
-                    g.edits = cloth.edits;
+                    g.edits = cloth.edit_count();
                     g.restart = false;
                 }
             }
             (Ok(layout), None) => {
                 *generation += 1;
-                info!("cloth {entity}: runs on the GPU");
+                if readback {
+                    info!("cloth {who}: runs on the GPU");
+                } else {
+                    info!(
+                        "cloth {who}: runs on the GPU; its ClothSim keeps the state it started \
+                         from (add ClothReadback to read the GPU's state back)"
+                    );
+                }
                 commands.entity(entity).insert((
                     ClothOnGpu {
                         generation: *generation,
                         upload: Arc::new(upload(cloth, layout, false)),
-                        edits: cloth.edits,
+                        edits: cloth.edit_count(),
                         restart: false,
                         key: settings_key(cloth.simulation()),
                         pending: Vec::new(),
@@ -429,6 +447,7 @@ fn choose_backends(
                         collider_entities: Vec::new(),
                         air: Vec::new(),
                     },
+                    ClothSteppedElsewhere,
                     // The mesh's bounds are those of the rest shape it was made with.
                     NoFrustumCulling,
                     ClothBackendInUse {
@@ -455,9 +474,9 @@ fn choose_backends(
                 if changed {
                     if let Some(why) = &reason {
                         if wanted == ClothBackend::Gpu {
-                            warn!("cloth {entity}: asked for the GPU, runs on the CPU: {why}");
+                            warn!("cloth {who}: asked for the GPU, runs on the CPU: {why}");
                         } else {
-                            info!("cloth {entity}: runs on the CPU: {why}");
+                            info!("cloth {who}: runs on the CPU: {why}");
                         }
                     }
                     let value = ClothBackendInUse { gpu: false, reason };
@@ -475,7 +494,7 @@ fn choose_backends(
 }
 
 fn upload(cloth: &ClothSim, layout: VertexLayout, carry: bool) -> GpuUpload {
-    let binding = &cloth.binding;
+    let binding = cloth.binding();
     let shading = binding.shading();
     let tangents = shading.corner_uvs().map(|uvs| TangentSource {
         corner_uvs: binding
@@ -506,10 +525,10 @@ fn apply_gpu_results(
     mut commands: Commands,
     mut results: ResMut<GpuClothResults>,
     mut meshes: Option<ResMut<Assets<Mesh>>>,
-    mut torn_messages: MessageWriter<crate::cloth::ClothTorn>,
+    mut torn_messages: MessageWriter<ClothTorn>,
     mut impulses: ResMut<GpuImpulses>,
     mut cloths: Query<(
-        Entity,
+        (Entity, Option<&Name>),
         &mut ClothSim,
         Option<&mut ClothOnGpu>,
         Option<&mut ClothLeavingGpu>,
@@ -527,7 +546,8 @@ fn apply_gpu_results(
             continue;
         }
         seen.push(r.entity);
-        let Ok((entity, mut cloth, on_gpu, leaving, transform)) = cloths.get_mut(r.entity) else {
+        let Ok(((entity, name), mut cloth, on_gpu, leaving, transform)) = cloths.get_mut(r.entity)
+        else {
             continue;
         };
         let current = on_gpu
@@ -538,7 +558,10 @@ fn apply_gpu_results(
             continue;
         }
         // An edit of the state since the upload wins over what the GPU computed before it.
-        if on_gpu.as_ref().is_some_and(|g| g.edits != cloth.edits) {
+        if on_gpu
+            .as_ref()
+            .is_some_and(|g| g.edits != cloth.edit_count())
+        {
             continue;
         }
         let cloth = &mut *cloth;
@@ -547,22 +570,23 @@ fn apply_gpu_results(
             continue;
         }
         if r.failed {
-            cloth.recover(entity, transform.copied());
+            cloth.recover(EntityName::new(entity, name), transform.copied());
         } else if let Some((positions, velocities)) = &r.state {
-            cloth.take_gpu_state(positions, velocities);
-            if r.torn {
-                // Tear on the CPU; the new topology goes to the GPU as a settings change
-                // (its state carried over), and the index buffer loses the torn triangles.
-                let torn = cloth.sim.tear();
-                cloth.note_torn(entity, &torn, &mut torn_messages);
-                if let Some(mesh) = meshes.as_deref_mut().and_then(|m| m.get_mut(&cloth.mesh)) {
-                    crate::cloth::writeback::write_indices(mesh.into_inner(), cloth);
-                }
+            cloth.receive_state(positions, velocities);
+            // Tear on the CPU; the new topology goes to the GPU as a settings change (its
+            // state carried over), and the index buffer loses the torn triangles.
+            if r.torn
+                && cloth.tear_now(entity, &mut torn_messages)
+                && let Some(mesh) = meshes.as_deref_mut().and_then(|m| m.get_mut(cloth.mesh()))
+            {
+                cloth.write_indices(mesh.into_inner());
             }
         }
         if leaving.is_some() && (r.failed || r.state.is_some()) {
-            cloth.dirty = true;
-            commands.entity(entity).remove::<ClothLeavingGpu>();
+            cloth.mark_changed();
+            commands
+                .entity(entity)
+                .remove::<(ClothLeavingGpu, ClothSteppedElsewhere)>();
         } else if r.failed
             && let Some(mut g) = on_gpu
         {
@@ -570,16 +594,19 @@ fn apply_gpu_results(
             g.restart = true;
         }
     }
-    for (entity, mut cloth, _, leaving, _) in &mut cloths {
+    for ((entity, name), mut cloth, _, leaving, _) in &mut cloths {
         if let Some(mut l) = leaving {
             l.frames += 1;
             if l.frames > LEAVE_TIMEOUT_FRAMES {
+                let who = EntityName::new(entity, name);
                 warn!(
-                    "cloth {entity}: its GPU state did not come back; the CPU goes on from the \
+                    "cloth {who}: its GPU state did not come back; the CPU goes on from the \
                      state it last had"
                 );
-                cloth.dirty = true;
-                commands.entity(entity).remove::<ClothLeavingGpu>();
+                cloth.mark_changed();
+                commands
+                    .entity(entity)
+                    .remove::<(ClothLeavingGpu, ClothSteppedElsewhere)>();
             }
         }
     }
@@ -608,13 +635,18 @@ fn queue_gpu_steps(
     let list: &[Collider] = colliders.as_deref().map_or(&[], |c| &c.colliders);
     for (mut cloth, mut g) in &mut cloths {
         let g = &mut *g;
-        let sim = &mut cloth.sim;
-        g.pending
-            .push(sim.state().pins().iter().map(|p| p.target).collect());
-        cloth.count_steps(1);
+        g.pending.push(
+            cloth
+                .simulation()
+                .state()
+                .pins()
+                .iter()
+                .map(|p| p.target)
+                .collect(),
+        );
+        cloth.count_external_steps(1);
         g.teleports
-            .push(cloth.teleport.take().unwrap_or(Vec3::ZERO));
-        let sim = &mut cloth.sim;
+            .push(cloth.take_teleport().unwrap_or(Vec3::ZERO));
         g.dt = dt;
         if g.colliders_first.is_empty() {
             g.colliders_first = list.to_vec();
@@ -624,8 +656,8 @@ fn queue_gpu_steps(
             .as_deref()
             .map_or_else(Vec::new, |c| c.entities.clone());
         match wind.as_deref() {
-            Some(w) if !w.field.is_empty() && !sim.params().air.is_none() => {
-                sim.sample_air(&w.field, w.time + 0.5 * f64::from(dt), &mut g.air);
+            Some(w) if !w.field.is_empty() && !cloth.simulation().params().air.is_none() => {
+                cloth.sample_air(&w.field, w.time + 0.5 * f64::from(dt), &mut g.air);
             }
             _ => g.air.clear(),
         }
@@ -1014,7 +1046,7 @@ fn send_gpu_results(
 /// cloths' impulses on colliders, a few frames after the GPU computed them.
 fn add_gpu_impulses(
     mut pending: ResMut<GpuImpulses>,
-    mut targets: Query<&mut crate::collider::ClothContactImpulse>,
+    mut targets: Query<&mut ClothContactImpulse>,
 ) {
     for (entity, imp) in pending.0.drain(..) {
         if let Ok(mut t) = targets.get_mut(entity) {

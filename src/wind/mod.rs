@@ -10,7 +10,7 @@
 use bevy::prelude::*;
 use bevy::reflect::impl_reflect_opaque;
 
-use crate::cloth::ClothSystems;
+use crate::foundation::{ClothSchedule, ClothSystems, EntityName};
 use crate::solver::{ParamError, Pose, WindField, WindParams, WindRegion, limits};
 
 impl_reflect_opaque!((in bevy_cloth::solver) WindParams(Debug, Clone, PartialEq, Default));
@@ -100,16 +100,19 @@ pub struct ClothWindField {
 }
 
 /// Adds [`Wind`] and [`WindZone`] support.
-pub struct ClothWindPlugin {
-    pub(crate) schedule: bevy::ecs::schedule::InternedScheduleLabel,
-}
+///
+/// Part of `ClothPlugins`; gathers the wind in the group's [`ClothSchedule`], in
+/// [`ClothSystems::Prepare`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ClothWindPlugin;
 
 impl Plugin for ClothWindPlugin {
     fn build(&self, app: &mut App) {
+        let schedule = ClothSchedule::of(app);
         app.register_type::<Wind>()
             .register_type::<WindZone>()
             .init_resource::<ClothWindField>()
-            .add_systems(self.schedule, gather_wind.in_set(ClothSystems::Prepare));
+            .add_systems(schedule, gather_wind.in_set(ClothSystems::Prepare));
     }
 }
 
@@ -117,6 +120,7 @@ fn gather_wind(
     time: Res<Time>,
     global: Option<Res<Wind>>,
     zones: Query<(Entity, &WindZone, &GlobalTransform)>,
+    names: Query<&Name>,
     mut out: ResMut<ClothWindField>,
     mut reported: Local<bevy::platform::collections::HashSet<Option<Entity>>>,
 ) {
@@ -130,7 +134,10 @@ fn gather_wind(
         Err(e) => {
             if reported.insert(source) {
                 match source {
-                    Some(entity) => error!("wind zone {entity}: {e}; it is ignored"),
+                    Some(entity) => {
+                        let who = EntityName::new(entity, names.get(entity).ok());
+                        error!("wind zone {who}: {e}; it is ignored");
+                    }
                     None => error!("Wind resource: {e}; it is ignored"),
                 }
             }

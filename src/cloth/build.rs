@@ -1,0 +1,153 @@
+//! Building a cloth's simulation from its components and mesh, and the solver features its
+//! opt-in components ask for.
+
+use bevy::prelude::*;
+
+use super::mesh::cloth_mesh;
+use super::pins::{attach, pin_list, repin};
+use super::{
+    Cloth, ClothConfig, ClothError, ClothPins, ClothSelfCollision, ClothSim, ClothTearing,
+    ClothTethers,
+};
+use crate::foundation::{FixedPoses, read_mesh};
+use crate::solver::{
+    Features, MeshBinding, SelfCollision, Simulation, SolverError, TetherParams, TopologyOptions,
+    limits,
+};
+
+/// A cloth built from its mesh, before its own mesh asset exists.
+pub(super) struct Built {
+    pub(super) sim: Simulation,
+    binding: MeshBinding,
+    rest_local: Vec<Vec3>,
+    attached: Vec<(u32, Entity, Vec3)>,
+    /// The cloth's own copy of the mesh.
+    pub(super) mesh: Mesh,
+    u16_indices: bool,
+}
+
+impl Built {
+    /// The cloth's [`ClothSim`], its own mesh added to `meshes`.
+    pub(super) fn into_sim(self, meshes: &mut Assets<Mesh>) -> ClothSim {
+        ClothSim {
+            sim: self.sim,
+            mesh: meshes.add(self.mesh),
+            binding: self.binding,
+            rest_local: self.rest_local,
+            u16_indices: self.u16_indices,
+            steps: 0,
+            dirty: true,
+            indices_dirty: false,
+            torn_edges: 0,
+            recoveries: 0,
+            step_seconds: 0.0,
+            edits: 0,
+            teleport: None,
+            attached: self.attached,
+            settings_error: None,
+            pins_error: None,
+        }
+    }
+}
+
+/// Builds the simulation of `cloth` from `mesh`, placed by `own` (its entity's pose now), its
+/// pins on their anchors.
+pub(super) fn build(
+    cloth: &Cloth,
+    config: &ClothConfig,
+    pins: &ClothPins,
+    mesh: &Mesh,
+    own: &GlobalTransform,
+    poses: &FixedPoses,
+) -> Result<Built, ClothError> {
+    if !limits::MASS.contains(cloth.mass) {
+        return Err(ClothError::BadMass(cloth.mass));
+    }
+    if !limits::TELEPORT_DISTANCE.contains(cloth.teleport_distance) {
+        return Err(ClothError::BadTeleportDistance(cloth.teleport_distance));
+    }
+    if !limits::WELD_TOLERANCE.contains(cloth.weld_tolerance) {
+        return Err(ClothError::BadWeldTolerance(cloth.weld_tolerance));
+    }
+    let data = read_mesh(mesh)?;
+    let (lo, hi) = data.positions.iter().filter(|p| p.is_finite()).fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    let size = if lo.cmple(hi).all() {
+        (hi - lo).length()
+    } else {
+        0.0
+    };
+    let binding = MeshBinding::new(
+        &data.positions,
+        data.attributes(),
+        &data.indices,
+        cloth.weld_tolerance * size,
+    )
+    .map_err(SolverError::from)?;
+    // The rest shape is the mesh placed by the entity's transform, so a scaled entity gets a
+    // scaled cloth (rest lengths in world units).
+    let world: Vec<Vec3> = data
+        .positions
+        .iter()
+        .map(|p| own.transform_point(*p))
+        .collect();
+    let topology = binding
+        .topology(
+            &world,
+            TopologyOptions {
+                bend_rest: cloth.bend_rest,
+                bending: cloth.bending_model,
+            },
+        )
+        .map_err(SolverError::from)?;
+    let masses = topology.masses(cloth.mass, cloth.mass_distribution);
+    let mut sim = Simulation::new(topology, &masses, *config)?;
+    let rest_local = binding.weld().gather(&data.positions);
+    let mut list = pin_list(pins, binding.weld())?;
+    let mut attached = Vec::new();
+    attach(&mut list, &mut attached, sim.state(), poses);
+    repin(
+        &mut sim,
+        &list,
+        &rest_local,
+        own,
+        poses,
+        cloth.teleport_distance,
+    )?;
+    sim.state_mut().snap_pins();
+    let mut binding = binding;
+    binding.update_shading(&sim.state().positions);
+    Ok(Built {
+        sim,
+        binding,
+        rest_local,
+        attached,
+        mesh: cloth_mesh(mesh, &data),
+        u16_indices: data.u16_indices,
+    })
+}
+
+/// The solver features a cloth's opt-in components ask for.
+pub(super) fn features(
+    sim: &Simulation,
+    self_collision: Option<&ClothSelfCollision>,
+    tethers: Option<&ClothTethers>,
+    tearing: Option<&ClothTearing>,
+) -> Features {
+    Features {
+        self_collision: self_collision.map(|sc| SelfCollision {
+            thickness: sc.thickness.unwrap_or_else(|| {
+                let e = sim.topology().edges();
+                e.iter().map(|e| e.rest).sum::<f32>() / e.len().max(1) as f32
+            }),
+            friction: sc.friction,
+        }),
+        tethers: tethers.map(|t| TetherParams {
+            slack: t.slack,
+            pins_per_vertex: t.pins_per_vertex,
+        }),
+        tear_threshold: tearing.map(|t| t.threshold),
+    }
+}

@@ -1,0 +1,368 @@
+//! The systems that create, configure and step cloths on the CPU.
+
+use std::time::Duration;
+
+use bevy::platform::collections::HashMap;
+use bevy::prelude::*;
+use bevy::tasks::ComputeTaskPool;
+
+use super::build::{build, features};
+use super::error::report;
+use super::pins::{attach, follow_anchors, pin_list, repin};
+use super::{
+    Cloth, ClothConfig, ClothError, ClothFailed, ClothInvalid, ClothPins, ClothSelfCollision,
+    ClothSim, ClothSource, ClothSteppedElsewhere, ClothTearing, ClothTethers, ClothTorn,
+    ClothWorkers, TaskPoolParallel,
+};
+use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
+use crate::foundation::{EntityName, FixedPoses};
+use crate::solver::{Environment, ManyItem, Serial, SolverError, StepReport, step_many};
+use crate::wind::ClothWindField;
+
+/// How long a cloth may wait for its mesh to load before it says so (once).
+const MESH_WAIT_WARNING: Duration = Duration::from_secs(5);
+
+/// Creates the simulation of cloths that have none yet (waiting while their mesh loads).
+#[expect(clippy::type_complexity, reason = "a query filter, read once")]
+pub(super) fn init_cloths(
+    mut commands: Commands,
+    mut meshes: Option<ResMut<Assets<Mesh>>>,
+    asset_server: Option<Res<AssetServer>>,
+    new: Query<
+        (
+            (Entity, Option<&Name>),
+            &Cloth,
+            &ClothConfig,
+            &ClothPins,
+            &Mesh3d,
+            Option<&ClothSource>,
+            FeatureQuery,
+        ),
+        (Without<ClothSim>, Without<ClothInvalid>),
+    >,
+    poses: FixedPoses,
+    time: Res<Time>,
+    // Cloths waiting for their mesh: since when, and whether they said so.
+    mut waiting: Local<HashMap<Entity, (Duration, bool)>>,
+) {
+    let Some(meshes) = meshes.as_deref_mut() else {
+        return;
+    };
+    let now = time.elapsed();
+    let mut still_waiting = HashMap::default();
+    for ((entity, name), cloth, config, pins, mesh3d, source, (sc, tethers, tearing)) in &new {
+        let who = EntityName::new(entity, name);
+        // Rebuilding (after a change to `Cloth` or a fix): start from the mesh the user gave,
+        // not from the cloth's own, deformed copy — unless the user has put another mesh in.
+        let source_handle = match source {
+            Some(s) if s.copy == mesh3d.0 => s.source.clone(),
+            _ => mesh3d.0.clone(),
+        };
+        let Some(mesh) = meshes.get(&source_handle) else {
+            // Not loaded yet: wait. Failed to load: say so once.
+            let failed = asset_server.as_ref().is_some_and(|s| {
+                matches!(
+                    s.get_load_state(&source_handle),
+                    Some(bevy::asset::LoadState::Failed(_))
+                )
+            });
+            if failed {
+                report(&mut commands, who, ClothError::MeshMissing);
+                continue;
+            }
+            // A handle that never loads (a typo in a path the server still tries, a handle
+            // made by hand) would leave the cloth silent forever: say so once, and wait on.
+            let (since, said) = waiting.get(&entity).copied().unwrap_or((now, false));
+            let said = said || {
+                let late = now.saturating_sub(since) >= MESH_WAIT_WARNING;
+                if late {
+                    warn!(
+                        "cloth {who}: its mesh {:?} has not loaded after {} s; it is not \
+                         simulated until it does",
+                        source_handle.id(),
+                        MESH_WAIT_WARNING.as_secs()
+                    );
+                }
+                late
+            };
+            still_waiting.insert(entity, (since, said));
+            continue;
+        };
+        // Where the entity is at this step, even if it was spawned in this fixed step and
+        // has no propagated GlobalTransform yet.
+        let own = poses.get(entity).unwrap_or_default();
+        let built = build(cloth, config, pins, mesh, &own, &poses).and_then(|mut b| {
+            // Features are checked before the cloth starts, so a bad one never runs a step.
+            let wanted = features(&b.sim, sc, tethers, tearing);
+            b.sim.set_features(wanted).map_err(SolverError::Params)?;
+            Ok(b)
+        });
+        match built {
+            Ok(b) => {
+                let sim = b.into_sim(meshes);
+                let handle = sim.mesh().clone();
+                commands.entity(entity).try_insert((
+                    Mesh3d(handle.clone()),
+                    ClothSource {
+                        source: source_handle,
+                        copy: handle,
+                    },
+                    sim,
+                ));
+            }
+            Err(e) => report(&mut commands, who, e),
+        }
+    }
+    *waiting = still_waiting;
+}
+
+/// Clears [`ClothInvalid`] when the user changes what made the cloth invalid, so it is tried
+/// again; drops the simulation (to rebuild it) when the entity's mesh is replaced by another
+/// one or its [`Cloth`] changes.
+#[expect(clippy::type_complexity, reason = "a query filter, read once")]
+pub(super) fn retry_cloths(
+    mut commands: Commands,
+    invalid: Query<
+        Entity,
+        (
+            With<ClothInvalid>,
+            Or<(
+                Changed<Cloth>,
+                Changed<ClothConfig>,
+                Changed<ClothPins>,
+                Changed<Mesh3d>,
+                Changed<ClothSelfCollision>,
+                Changed<ClothTethers>,
+                Changed<ClothTearing>,
+            )>,
+        ),
+    >,
+    swapped: Query<(Entity, &Mesh3d, &ClothSim), Changed<Mesh3d>>,
+    rebuilt: Query<Entity, (Changed<Cloth>, With<ClothSim>)>,
+) {
+    // Mass, mass distribution, bend rest and welding are baked into the simulation: rebuild
+    // it (the cloth starts again from its rest shape).
+    for entity in &rebuilt {
+        commands.entity(entity).remove::<ClothSim>();
+    }
+    for entity in &invalid {
+        commands.entity(entity).remove::<(ClothInvalid, ClothSim)>();
+    }
+    for (entity, mesh, sim) in &swapped {
+        if mesh.0 != sim.mesh {
+            commands.entity(entity).remove::<ClothSim>();
+        }
+    }
+}
+
+/// Removing [`Cloth`] stops the simulation and gives the entity its own mesh back; adding it
+/// again starts afresh.
+pub(super) fn on_cloth_removed(
+    removed: On<Remove, Cloth>,
+    mut commands: Commands,
+    cloths: Query<(Option<&ClothSource>, Option<&Mesh3d>)>,
+) {
+    let entity = removed.entity;
+    if let Ok((Some(source), Some(mesh))) = cloths.get(entity)
+        && mesh.0 == source.copy
+    {
+        commands
+            .entity(entity)
+            .try_insert(Mesh3d(source.source.clone()));
+    }
+    commands
+        .entity(entity)
+        .try_remove::<(ClothSim, ClothSource, ClothInvalid)>();
+}
+
+/// The optional components of a cloth entity.
+type FeatureQuery = (
+    Option<&'static ClothSelfCollision>,
+    Option<&'static ClothTethers>,
+    Option<&'static ClothTearing>,
+);
+
+/// Logs and sends a refused change once, when a cloth goes from fine to refused.
+fn note_rejection(
+    commands: &mut Commands,
+    who: EntityName<'_>,
+    slot: &mut Option<ClothError>,
+    result: Result<(), ClothError>,
+    what: &str,
+) {
+    match result {
+        Ok(()) => {
+            if slot.take().is_some() {
+                info!("cloth {who}: its {what} are valid again and in use");
+            }
+        }
+        Err(e) => {
+            if slot.is_none() {
+                error!("cloth {who}: {e}; it keeps its last valid {what}");
+                commands.write_message(ClothFailed {
+                    cloth: who.entity,
+                    error: e.clone(),
+                });
+            }
+            *slot = Some(e);
+        }
+    }
+}
+
+/// Applies changed configs, pins and features, and moves pin targets to their anchors
+/// (moving the whole cloth along when an anchor teleports).
+#[expect(clippy::type_complexity, reason = "a query, read once")]
+pub(super) fn sync_cloths(
+    mut commands: Commands,
+    mut cloths: Query<
+        (
+            (Entity, Option<&Name>),
+            &Cloth,
+            &mut ClothSim,
+            Ref<ClothConfig>,
+            Ref<ClothPins>,
+            FeatureQuery,
+        ),
+        Without<ClothInvalid>,
+    >,
+    poses: FixedPoses,
+) {
+    for ((entity, name), cloth, mut sim, config, pins, (sc, tethers, tearing)) in &mut cloths {
+        let who = EntityName::new(entity, name);
+        let cs = &mut *sim;
+        let own = poses.get(entity).unwrap_or_default();
+        // A changed (or still refused) config is applied with the features; otherwise only
+        // changed features are.
+        let config_due = config.is_changed() || cs.settings_error.is_some();
+        let wanted = features(&cs.sim, sc, tethers, tearing);
+        let params = *config;
+        let params_due = config_due && params != *cs.sim.params();
+        let features_due = wanted != *cs.sim.features();
+        if config_due || features_due {
+            let result = if params_due {
+                cs.sim.set_params(params)
+            } else {
+                Ok(())
+            }
+            .and_then(|()| {
+                if features_due {
+                    cs.sim.set_features(wanted)
+                } else {
+                    Ok(())
+                }
+            })
+            .map_err(|e| ClothError::Solver(SolverError::Params(e)));
+            note_rejection(
+                &mut commands,
+                who,
+                &mut cs.settings_error,
+                result,
+                "settings",
+            );
+        }
+        let list = pin_list(&pins, cs.binding.weld()).map(|mut list| {
+            attach(&mut list, &mut cs.attached, cs.sim.state(), &poses);
+            list
+        });
+        cs.teleport = None;
+        if pins.is_changed() || cs.pins_error.is_some() {
+            let result = list.and_then(|list| {
+                repin(
+                    &mut cs.sim,
+                    &list,
+                    &cs.rest_local,
+                    &own,
+                    &poses,
+                    cloth.teleport_distance,
+                )
+            });
+            if let Ok(offset) = &result {
+                cs.teleport = *offset;
+            }
+            note_rejection(
+                &mut commands,
+                who,
+                &mut cs.pins_error,
+                result.map(|_| ()),
+                "pins",
+            );
+            cs.dirty = true;
+            continue;
+        }
+        if let Ok(list) = list
+            && let Some(offset) = follow_anchors(
+                &mut cs.sim,
+                &list,
+                &cs.rest_local,
+                &own,
+                &poses,
+                cloth.teleport_distance,
+            )
+        {
+            cs.teleport = Some(offset);
+            cs.dirty = true;
+        }
+    }
+}
+
+/// Cloths the CPU steps: valid, and not stepped elsewhere.
+type CpuCloths = (Without<ClothInvalid>, Without<ClothSteppedElsewhere>);
+
+/// Advances every valid cloth by one fixed step among the colliders and the wind.
+pub(super) fn step_cloths(
+    (time, workers): (Res<Time>, Option<Res<ClothWorkers>>),
+    colliders: Option<Res<ClothColliders>>,
+    wind: Option<Res<ClothWindField>>,
+    mut cloths: Query<(Entity, Option<&Name>, &mut ClothSim), CpuCloths>,
+    mut impulses: Query<&mut ClothContactImpulse>,
+    mut torn: MessageWriter<ClothTorn>,
+    poses: FixedPoses,
+) {
+    let dt = time.delta_secs();
+    if dt <= 0.0 {
+        return;
+    }
+    let no_colliders = ClothColliders::default();
+    let colliders = colliders.as_deref().unwrap_or(&no_colliders);
+    let env = Environment {
+        colliders: &colliders.colliders,
+        wind: wind.as_deref().map(|w| &w.field),
+        time: wind.as_deref().map_or(0.0, |w| w.time),
+    };
+    // Big cloths one after another with their parts in parallel, then the small ones in
+    // parallel with each other (`step_many`).
+    let mut list: Vec<(Entity, Option<&Name>, Mut<ClothSim>)> = cloths.iter_mut().collect();
+    let reports: Vec<(StepReport, f32)> = {
+        let mut items: Vec<ManyItem<'_>> = list
+            .iter_mut()
+            .map(|(_, _, c)| ManyItem {
+                sim: &mut c.sim,
+                report: StepReport::default(),
+                seconds: 0.0,
+            })
+            .collect();
+        // The task pool only without `ClothWorkers` (then serial if there is none).
+        match workers.as_deref() {
+            Some(workers) => step_many(&mut items, dt, &env, &workers.0),
+            None => match ComputeTaskPool::try_get() {
+                Some(pool) => step_many(&mut items, dt, &env, &TaskPoolParallel(pool)),
+                None => step_many(&mut items, dt, &env, &Serial),
+            },
+        }
+        items.into_iter().map(|i| (i.report, i.seconds)).collect()
+    };
+    for ((entity, name, mut cloth), (report, seconds)) in list.into_iter().zip(reports) {
+        let cloth = &mut *cloth;
+        cloth.step_seconds = seconds;
+        if report.recovered {
+            // The solver already reset to its rest shape where the cloth was created; place
+            // the rest shape where the entity is now.
+            cloth.recover(EntityName::new(entity, name), poses.get(entity));
+        }
+        add_impulses(colliders, cloth.sim.impulses(), &mut impulses);
+        cloth.note_torn(entity, &report.torn, &mut torn);
+        cloth.steps += 1;
+        // A sleeping cloth did not move: its mesh stays as it is.
+        cloth.dirty |= !report.asleep;
+    }
+}

@@ -1,0 +1,46 @@
+//! The threads CPU cloths step on: [`ClothWorkers`] (the plugin's own pool) or Bevy's
+//! `ComputeTaskPool` through [`TaskPoolParallel`].
+
+use bevy::prelude::*;
+use bevy::tasks::TaskPool;
+
+use crate::solver::{Parallel, Workers};
+
+/// The worker threads the plugin steps CPU cloths on ([`Workers::per_core`]: one helper per
+/// core besides the thread running the system). They spin for a moment after each parallel
+/// region and then sleep, so an idle app pays nothing for them. Remove the resource to step
+/// on Bevy's `ComputeTaskPool` instead (slower for one cloth: waking its threads takes about
+/// as long as a substep's work at 64 × 64), or insert `ClothWorkers(Workers::new(0))` to step
+/// on the calling thread only.
+#[derive(Resource, Debug)]
+pub struct ClothWorkers(pub Workers);
+
+impl Default for ClothWorkers {
+    fn default() -> Self {
+        Self(Workers::per_core())
+    }
+}
+
+/// Runs solver work items on Bevy's [`ComputeTaskPool`](bevy::tasks::ComputeTaskPool).
+#[derive(Clone, Copy)]
+pub struct TaskPoolParallel<'a>(pub &'a TaskPool);
+
+impl Parallel for TaskPoolParallel<'_> {
+    fn for_each_mut<T: Send, F: Fn(&mut T) + Sync>(&self, items: &mut [T], f: F) {
+        if items.len() < 2 || self.0.thread_num() == 0 {
+            items.iter_mut().for_each(f);
+            return;
+        }
+        let f = &f;
+        self.0.scope(|s| {
+            for item in items.iter_mut() {
+                s.spawn(async move { f(item) });
+            }
+        });
+    }
+
+    fn threads(&self) -> usize {
+        // The pool's threads and the thread that waits on the scope, which works too.
+        self.0.thread_num() + 1
+    }
+}
