@@ -320,7 +320,8 @@ fn air_velocity_change(area: vec3<f32>, v_rel: vec3<f32>, inv_mass: f32, h: f32)
 }
 
 // The teleport rule, at the start of a step: the whole cloth moves by the pins' mean jump
-// (`ClothState::translate`).
+// (CPU twin: `ClothState::teleport` in solver/step/teleport.rs, which the plugin calls with
+// `teleport_offset`; its pin snap is `pins_begin` below).
 @compute @workgroup_size(64)
 fn teleport(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -432,7 +433,7 @@ fn project_distance(i: u32) {
     let d = pa.xyz - pb.xyz;
     let len = sqrt(dot(d, d));
     // One division: f = Δλ/len scales the unnormalised direction d (CPU twin:
-    // solver::distance::distance_correction).
+    // solver::constraints::distance::distance_correction).
     var f = ak.y * (-(len - c.rest) - ak.x * l) / ((wa + wb + ak.x) * len);
     if !(len > MIN_LENGTH) || !(wa + wb > 0.0) {
         f = 0.0;
