@@ -43,9 +43,11 @@
 //! `--backend gpu`: the standard scene (XPBD 10 × 1) at 64², 128², 256² and 512² (`--sizes`),
 //! without and with self-collision, on the CPU and on the GPU kernels (`src/gpu`) in the same
 //! run, on the first wgpu adapter: CPU ms per frame, GPU wall time per frame (submit to done),
-//! GPU time per stage from timestamp queries where the adapter has them, and the max strain
-//! of both. What the GPU cannot run (self-collision) says so. On llvmpipe (software Vulkan)
-//! the GPU figures check correctness, not speed.
+//! GPU time per stage from timestamp queries where the adapter has them, the dispatches a
+//! frame records (and its busiest substep), and the max strain of both. With `--many`:
+//! 64 cloths of 32² and 16 of 64² in one GPU world against `step_many` on the CPU. On
+//! llvmpipe (software Vulkan) the GPU figures check correctness and count dispatches, not
+//! speed.
 //!
 //! Other flags: `--frames N`, `--threads N` (default: all cores), `--repeat N` (runs per case, the
 //! fastest median counts; default 3), `--reference-substeps N`, `--markdown` (also print
@@ -56,7 +58,7 @@ mod support;
 
 use std::time::Instant;
 
-use bevy_cloth::gpu::{GpuCloth, GpuKernels, GpuStage, GpuStepInput};
+use bevy_cloth::gpu::{DispatchCount, GpuFrame, GpuKernels, GpuStage, GpuWorld};
 use bevy_cloth::solver::{
     Aerodynamics, BendingModel, Collider, DEFAULT_BENDING_COMPLIANCE, Environment, Features,
     HangingCloth, ManyItem, Pose, SelfCollision, Shape, Simulation, Sleep, Solver, SolverParams,
@@ -775,12 +777,12 @@ fn main() {
         sleep_cost(&args, &par, bending);
         return;
     }
-    if args.rest.contains_key("many") {
-        many(&args, &par, threads, bending);
-        return;
-    }
     if args.rest.get("backend").map(String::as_str) == Some("gpu") {
         gpu_table(&args, &par, bending);
+        return;
+    }
+    if args.rest.contains_key("many") {
+        many(&args, &par, threads, bending);
         return;
     }
     let mut rows: Vec<(String, u32, u32, u32, Outcome)> = Vec::new();
@@ -980,8 +982,10 @@ struct GpuOutcome {
     wall_ms: f64,
     /// Median per frame of each stage's timestamped time (ms), when timestamps exist.
     stages: Vec<(GpuStage, f64)>,
+    /// The largest max strain of any cloth.
     max_strain: f32,
     nan: usize,
+    dispatches: DispatchCount,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -989,16 +993,19 @@ fn median(mut v: Vec<f64>) -> f64 {
     v.get(v.len() / 2).copied().unwrap_or(0.0)
 }
 
-/// Runs `sim` for `frames` frames of one step on the GPU kernels.
+/// Runs `sims` (one world) for `frames` frames of one step on the GPU kernels.
 fn simulate_gpu(
     gpu: &(wgpu::Device, wgpu::Queue, GpuKernels, bool),
-    sim: &Simulation,
+    sims: &[Simulation],
     frames: usize,
 ) -> Result<GpuOutcome, String> {
     let (device, queue, kernels, timestamps) = gpu;
-    let mut cloth = GpuCloth::new(device, kernels, sim).map_err(|e| e.0)?;
-    cloth.upload_state(queue, sim);
-    let targets: Vec<Vec3> = sim.state().pins().iter().map(|p| p.target).collect();
+    let refs: Vec<&Simulation> = sims.iter().collect();
+    let mut world = GpuWorld::new(device, queue, kernels, &refs).map_err(|e| e.0)?;
+    let targets: Vec<Vec<Vec<Vec3>>> = sims
+        .iter()
+        .map(|s| vec![s.state().pins().iter().map(|p| p.target).collect()])
+        .collect();
     const QUERIES: u32 = 4096;
     let queries = timestamps.then(|| {
         device.create_query_set(&wgpu::QuerySetDescriptor {
@@ -1024,20 +1031,19 @@ fn simulate_gpu(
     let mut walls = Vec::new();
     let mut per_stage: Vec<Vec<f64>> = vec![Vec::new(); GpuStage::ALL.len()];
     let mut ran = [false; GpuStage::ALL.len()];
+    let mut dispatches = DispatchCount::default();
     for frame in 0..frames {
-        cloth.prepare(
+        world.prepare(
             device,
             queue,
             kernels,
-            sim,
-            DT,
-            core::slice::from_ref(&targets),
-            GpuStepInput::default(),
+            &GpuFrame::uniform(DT, 1, &[], &targets),
         );
+        dispatches = world.dispatches(kernels);
         let mut encoder = device.create_command_encoder(&Default::default());
         let stages = match &queries {
             Some(q) => {
-                let stages = cloth.record_profiled(&mut encoder, kernels, q);
+                let stages = world.record_profiled(&mut encoder, kernels, q);
                 let used = 2 * stages.len() as u32;
                 assert!(used <= QUERIES, "more passes than queries");
                 encoder.resolve_query_set(q, 0..used, &resolve, 0);
@@ -1045,7 +1051,7 @@ fn simulate_gpu(
                 stages
             }
             None => {
-                cloth.record(&mut encoder, kernels);
+                world.record(&mut encoder, kernels);
                 Vec::new()
             }
         };
@@ -1074,10 +1080,15 @@ fn simulate_gpu(
             walls.push(wall);
         }
     }
-    let (pos, vel) = cloth.read_state(device, queue);
-    let mut check = sim.clone();
-    check.state_mut().positions.copy_from_slice(&pos);
-    let nan = pos.iter().chain(&vel).filter(|v| !v.is_finite()).count();
+    let mut max_strain = 0.0f32;
+    let mut nan = 0;
+    for (i, sim) in sims.iter().enumerate() {
+        let (pos, vel) = world.read_state(device, queue, i);
+        nan += pos.iter().chain(&vel).filter(|v| !v.is_finite()).count();
+        let mut check = sim.clone();
+        check.state_mut().positions.copy_from_slice(&pos);
+        max_strain = max_strain.max(check.strain().max);
+    }
     Ok(GpuOutcome {
         wall_ms: median(walls),
         stages: GpuStage::ALL
@@ -1086,8 +1097,9 @@ fn simulate_gpu(
             .filter(|(s, v)| ran[**s as usize] && !v.is_empty())
             .map(|(s, v)| (*s, median(v)))
             .collect(),
-        max_strain: check.strain().max,
+        max_strain,
         nan,
+        dispatches,
     })
 }
 
@@ -1119,7 +1131,13 @@ fn gpu_table(args: &Args, par: &Workers, bending: Bending) {
     let kernels = GpuKernels::new(&device);
     let gpu = (device, queue, kernels, timestamps);
     let mut table = Vec::new();
-    for &n in &sizes {
+    // `--many`: 64 cloths of 32² and 16 of 64², one world each; otherwise one cloth a size.
+    let cases: Vec<(String, u32, usize)> = if args.rest.contains_key("many") {
+        vec![("64 × 32²".into(), 32, 64), ("16 × 64²".into(), 64, 16)]
+    } else {
+        sizes.iter().map(|&n| (format!("{n}²"), n, 1)).collect()
+    };
+    for (label, n, count) in cases {
         for self_collision in [false, true] {
             let make = || {
                 let mut sim = scene(n, "xpbd", 10, 1, bending);
@@ -1136,17 +1154,36 @@ fn gpu_table(args: &Args, par: &Workers, bending: Bending) {
                 }
                 sim
             };
+            let make_all = || (0..count).map(|_| make()).collect::<Vec<_>>();
             // Big CPU cases once: they take seconds.
             let cpu_frames = if n >= 512 { frames.min(20) } else { frames };
-            let cpu = simulate(make, cpu_frames, if n >= 256 { 1 } else { 3 }, par);
-            let sim = make();
-            let gpu_out = simulate_gpu(&gpu, &sim, frames);
+            let cpu_repeat = if n >= 256 { 1 } else { 3 };
+            let (cpu_ms, cpu_strain) = if count == 1 {
+                let cpu = simulate(make, cpu_frames, cpu_repeat, par);
+                (cpu.ms, cpu.max_strain)
+            } else {
+                let ms = time_many(make_all, cpu_frames, cpu_repeat, par);
+                let mut sims = make_all();
+                for _ in 0..cpu_frames {
+                    step_many(
+                        &mut ManyItem::each(&mut sims),
+                        DT,
+                        &Environment::default(),
+                        par,
+                    );
+                }
+                let strain = sims.iter().map(|s| s.strain().max).fold(0.0f32, f32::max);
+                (ms, strain)
+            };
+            let gpu_out = simulate_gpu(&gpu, &make_all(), frames);
             let mut j = Json::default()
                 .str("backend_table", "xpbd_10x1")
+                .str("scene", &label)
                 .num("n", n)
+                .num("cloths", count as u32)
                 .str("self_collision", if self_collision { "on" } else { "off" })
-                .num("cpu_ms_per_frame", (cpu.ms * 1e4).round() / 1e4)
-                .num("cpu_max_strain", cpu.max_strain)
+                .num("cpu_ms_per_frame", (cpu_ms * 1e4).round() / 1e4)
+                .num("cpu_max_strain", cpu_strain)
                 .str("adapter", &info.name)
                 .str(
                     "adapter_kind",
@@ -1157,7 +1194,9 @@ fn gpu_table(args: &Args, par: &Workers, bending: Bending) {
                     j = j
                         .num("gpu_wall_ms_per_frame", (g.wall_ms * 1e4).round() / 1e4)
                         .num("gpu_max_strain", g.max_strain)
-                        .num("gpu_nan_count", g.nan as f64);
+                        .num("gpu_nan_count", g.nan as f64)
+                        .num("gpu_dispatches_per_frame", g.dispatches.per_frame)
+                        .num("gpu_dispatches_per_substep", g.dispatches.per_substep);
                     let total: f64 = g.stages.iter().map(|s| s.1).sum();
                     if !g.stages.is_empty() {
                         j = j.num("gpu_timestamp_ms_per_frame", (total * 1e4).round() / 1e4);
@@ -1172,16 +1211,16 @@ fn gpu_table(args: &Args, par: &Workers, bending: Bending) {
                 Err(why) => j = j.str("gpu", &format!("not on the GPU: {why}")),
             }
             println!("{j}");
-            table.push((n, self_collision, cpu, gpu_out));
+            table.push((label.clone(), self_collision, cpu_ms, cpu_strain, gpu_out));
         }
     }
     if args.rest.contains_key("markdown") {
         eprintln!(
-            "| n | self-collision | CPU ms/frame | GPU wall ms/frame | GPU timestamps ms/frame | CPU max strain | GPU max strain |"
+            "| scene | self-collision | CPU ms/frame | GPU wall ms/frame | GPU timestamps ms/frame | dispatches/frame (/substep) | CPU max strain | GPU max strain |"
         );
-        eprintln!("|---|---|---|---|---|---|---|");
-        for (n, sc, cpu, g) in &table {
-            let (wall, ts, strain) = match g {
+        eprintln!("|---|---|---|---|---|---|---|---|");
+        for (label, sc, cpu_ms, cpu_strain, g) in &table {
+            let (wall, ts, d, strain) = match g {
                 Ok(g) => (
                     format!("{:.2}", g.wall_ms),
                     if g.stages.is_empty() {
@@ -1189,15 +1228,15 @@ fn gpu_table(args: &Args, par: &Workers, bending: Bending) {
                     } else {
                         format!("{:.2}", g.stages.iter().map(|s| s.1).sum::<f64>())
                     },
+                    format!("{} ({})", g.dispatches.per_frame, g.dispatches.per_substep),
                     format!("{:.0} %", g.max_strain * 100.0),
                 ),
-                Err(_) => ("CPU only".into(), "—".into(), "—".into()),
+                Err(_) => ("CPU only".into(), "—".into(), "—".into(), "—".into()),
             };
             eprintln!(
-                "| {n}² | {} | {:.2} | {wall} | {ts} | {:.0} % | {strain} |",
+                "| {label} | {} | {cpu_ms:.2} | {wall} | {ts} | {d} | {:.0} % | {strain} |",
                 if *sc { "on" } else { "off" },
-                cpu.ms,
-                cpu.max_strain * 100.0
+                cpu_strain * 100.0
             );
         }
     }

@@ -31,6 +31,8 @@ struct MeshParams {
     vertex_offsets_at: u32,
     uvs_at: u32,
     handedness_at: u32,
+    particle_base: u32,
+    _pad: [u32; 3],
 }
 
 /// Where a mesh keeps positions and normals in its interleaved vertex buffer.
@@ -195,8 +197,9 @@ impl MeshWriter {
         }
     }
 
-    /// Records the write of `state` (a [`GpuCloth`](super::GpuCloth)'s state buffer) into
-    /// `slab` from vertex `first` on, placed by `transform` (the entity's world transform).
+    /// Records the write of the cloth whose particles start at `particle_base` in `state`
+    /// (a [`GpuWorld`](super::GpuWorld)'s state buffer) into `slab` from vertex `first` on,
+    /// placed by `transform` (the entity's world transform).
     #[expect(
         clippy::too_many_arguments,
         reason = "a record call takes all it needs explicitly"
@@ -208,6 +211,7 @@ impl MeshWriter {
         kernel: &MeshKernel,
         encoder: &mut wgpu::CommandEncoder,
         state: &wgpu::Buffer,
+        particle_base: u32,
         slab: &wgpu::Buffer,
         first: u32,
         transform: Affine3A,
@@ -244,6 +248,8 @@ impl MeshWriter {
             vertex_offsets_at: self.tangent_header.map_or(0, |h| h[0]),
             uvs_at: self.tangent_header.map_or(0, |h| h[1]),
             handedness_at: self.tangent_header.map_or(0, |h| h[2]),
+            particle_base,
+            _pad: [0; 3],
         };
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&p));
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {

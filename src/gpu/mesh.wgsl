@@ -36,6 +36,11 @@ struct MeshParams {
     uvs_at: u32,
     // 0: handedness from the UVs
     handedness_at: u32,
+    // the cloth's first particle in `particles` (a world holds several cloths)
+    particle_base: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> M: MeshParams;
@@ -44,7 +49,7 @@ struct MeshParams {
 @group(0) @binding(3) var<storage, read_write> slab: array<f32>;
 
 fn at(v: u32) -> vec3<f32> {
-    return particles[topo[v]].xyz;
+    return particles[M.particle_base + topo[v]].xyz;
 }
 
 fn uv(t: u32, corner: u32) -> vec2<f32> {

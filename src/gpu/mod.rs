@@ -1,17 +1,32 @@
 //! The GPU backend: the cloth step as WGSL compute kernels, run in Bevy's render graph by
 //! [`ClothGpuPlugin`], writing the mesh's vertex slab in place.
 //!
-//! [`kernels`] runs the CPU solver's step on any `wgpu` device, from the same constraint
-//! layouts ([`ConstraintBatches`](crate::solver::ConstraintBatches)), pins and colliders; its
-//! results match the CPU's within f32 rounding (`tests/gpu_parity.rs`).
+//! Every GPU cloth that steps with the same substeps and iterations lives in one
+//! [`GpuWorld`]: shared buffers, per-cloth ranges, a few dispatches per substep for all of
+//! them ([`GpuWorld::dispatches`]). Its results match the CPU solver's within f32 rounding
+//! (`tests/gpu_parity.rs`).
+//!
+//! - `layout.rs`: how a world lies in the buffers (built on the CPU; no `wgpu`).
+//! - `world.rs`: [`GpuWorld`]: the buffers, a frame's inputs, the dispatches, readback.
+//! - `kernels.rs`: [`GpuKernels`]: the pipelines of `shaders/*.wgsl`, one file per stage.
+//! - `mesh.rs` / `mesh.wgsl`: a cloth's positions, normals and tangents into its mesh slab.
+//! - `backend.rs`: the main world (backend choice, the queued steps, what comes back);
+//!   `render.rs`: the render world; `plugin.rs`: [`ClothGpuPlugin`].
 
+mod backend;
 pub mod kernels;
+mod layout;
 pub mod mesh;
 mod plugin;
+mod render;
+mod world;
 
-pub use kernels::{GpuCloth, GpuKernels, GpuStage, GpuStepInput, GpuUnsupported, sum_impulses};
-pub use plugin::{
-    ClothBackend, ClothBackendInUse, ClothGpuPlugin, ClothGpuSupport, ClothOnGpu, ClothReadback,
+pub use backend::{ClothBackend, ClothBackendInUse, ClothGpuSupport, ClothOnGpu, ClothReadback};
+pub use kernels::{GpuKernels, GpuUnsupported, TILE};
+pub use layout::{WorldKey, gpu_part_count};
+pub use plugin::ClothGpuPlugin;
+pub use world::{
+    ClothFrame, DispatchCount, GpuFrame, GpuStage, GpuWorld, StepColliders, sum_impulses,
 };
 
 /// Appends per-owner lists to a `u32` table (how the kernels find a vertex's triangles, edges,

@@ -127,21 +127,39 @@ impl SelfCollisionScratch {
 
 impl SelfCollisionScratch {
     /// The parallel form of [`Self::find_pairs`]: every vertex lists each other vertex it
-    /// would pair with (so a pair appears in both lists), at most [`MAX_SELF_NEIGHBOURS`].
+    /// would pair with (so a pair appears in both lists), the [`MAX_SELF_NEIGHBOURS`]
+    /// lowest-numbered ones in increasing order (the GPU keeps the same ones, so both sum
+    /// the same corrections in the same order, whatever order the hash found them in).
     fn find_neighbours(&mut self, pos: &[Vec4], rest: &[Vec3], reach: f32, skip: f32) {
         self.find_pairs(pos, rest, reach, skip);
         let n = pos.len();
+        // Every candidate of every vertex, grouped by vertex, then sorted and cut.
+        let mut start = vec![0u32; n + 1];
+        for &(i, j) in &self.pairs {
+            start[i as usize + 1] += 1;
+            start[j as usize + 1] += 1;
+        }
+        for k in 0..n {
+            start[k + 1] += start[k];
+        }
+        let mut all = vec![0u32; start[n] as usize];
+        let mut fill = start.clone();
+        for &(i, j) in &self.pairs {
+            for (a, b) in [(i, j), (j, i)] {
+                all[fill[a as usize] as usize] = b;
+                fill[a as usize] += 1;
+            }
+        }
         self.neighbour_count.clear();
         self.neighbour_count.resize(n, 0);
         self.neighbours.resize(n * MAX_SELF_NEIGHBOURS, 0);
-        for &(i, j) in &self.pairs {
-            for (a, b) in [(i, j), (j, i)] {
-                let c = &mut self.neighbour_count[a as usize];
-                if (*c as usize) < MAX_SELF_NEIGHBOURS {
-                    self.neighbours[a as usize * MAX_SELF_NEIGHBOURS + *c as usize] = b;
-                    *c += 1;
-                }
-            }
+        for v in 0..n {
+            let list = &mut all[start[v] as usize..start[v + 1] as usize];
+            list.sort_unstable();
+            let kept = list.len().min(MAX_SELF_NEIGHBOURS);
+            self.neighbours[v * MAX_SELF_NEIGHBOURS..v * MAX_SELF_NEIGHBOURS + kept]
+                .copy_from_slice(&list[..kept]);
+            self.neighbour_count[v] = kept as u32;
         }
         self.pairs.clear();
     }

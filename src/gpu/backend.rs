@@ -1,0 +1,579 @@
+//! The main world's side of the GPU backend: which cloths run on the GPU
+//! ([`ClothBackend`], [`ClothBackendInUse`]), what each fixed step queues for them
+//! ([`ClothOnGpu`], the frame's colliders), and what comes back (states, recoveries, tears,
+//! impulses).
+//!
+//! Frame flow for a cloth on the GPU:
+//! 1. Main world, the cloth schedule: `ClothSystems::Prepare` as for every cloth (pins follow
+//!    their anchors, settings apply); `choose_backends`, between the phases, decides CPU or
+//!    GPU (a GPU cloth carries `ClothSteppedElsewhere`, so the CPU plugin leaves it alone); in
+//!    `ClothSystems::Simulate` each step's colliders (once, for every GPU cloth) and each
+//!    cloth's pin targets, teleport and air are queued.
+//! 2. Render world (`render.rs`): extracted, packed into worlds, stepped, written into mesh
+//!    slabs, read back.
+//! 3. `PreUpdate`, a few frames later: what came back is applied to [`ClothSim`].
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use bevy::camera::visibility::NoFrustumCulling;
+use bevy::mesh::MeshVertexAttribute;
+use bevy::prelude::*;
+
+use super::mesh::{TangentSource, VertexLayout};
+use super::world::GpuWorld;
+use crate::cloth::{Cloth, ClothSim, ClothSteppedElsewhere, ClothTorn};
+use crate::collider::{ClothColliders, ClothContactImpulse};
+use crate::foundation::EntityName;
+use crate::solver::{Collider, ContactImpulse, Simulation};
+use crate::wind::ClothWindField;
+
+/// Which solver steps a cloth.
+///
+/// Put it on a [`Cloth`](crate::cloth::Cloth) entity; without it the cloth uses
+/// [`ClothGpuPlugin::default_backend`](super::ClothGpuPlugin::default_backend). Which one a cloth actually runs on, and why, is in
+/// [`ClothBackendInUse`].
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[reflect(Component)]
+pub enum ClothBackend {
+    /// The CPU solver: every feature, results in [`ClothSim`] every step.
+    Cpu,
+    /// The GPU kernels in the render graph; the CPU (with a warning) where the GPU cannot
+    /// run this cloth.
+    Gpu,
+    /// The GPU where it can run this cloth, else the CPU (with an info line saying why).
+    #[default]
+    Auto,
+}
+
+/// The backend a cloth runs on now, and why not the other (set by [`ClothGpuPlugin`](super::ClothGpuPlugin)).
+#[derive(Component, Clone, Debug, Default, PartialEq, Eq)]
+pub struct ClothBackendInUse {
+    /// Whether the GPU steps it.
+    pub gpu: bool,
+    /// Why it is not on the GPU (when it is not and the GPU was asked for), in words.
+    pub reason: Option<String>,
+}
+
+/// Whether this app can run cloths on the GPU (a main-world resource, set in
+/// `Plugin::finish`).
+#[derive(Resource, Clone, Debug, PartialEq, Eq)]
+pub struct ClothGpuSupport {
+    /// `None` when available; otherwise why not.
+    pub unavailable: Option<String>,
+}
+
+#[derive(Resource, Clone, Copy)]
+pub(crate) struct DefaultBackend(pub ClothBackend);
+
+/// What the render world needs to build a cloth's buffers.
+pub(crate) struct GpuUpload {
+    pub sim: Simulation,
+    pub weld: crate::solver::Weld,
+    pub drawn: Vec<u32>,
+    pub layout: VertexLayout,
+    pub tangents: Option<TangentSource>,
+    /// Start from the GPU state of the previous upload (a settings change), not from `sim`'s.
+    pub carry: bool,
+}
+
+/// Copies a GPU cloth's positions and velocities into its [`ClothSim`] every frame, a frame
+/// or two after the GPU computed them (opt-in: the copy costs bus bandwidth and CPU time).
+///
+/// Without it a GPU cloth's [`ClothSim`] keeps the state the cloth started from: gameplay that
+/// reads vertex positions, strain or sleep state of a GPU cloth needs this component.
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[reflect(Component)]
+pub struct ClothReadback;
+
+/// A cloth that left the GPU and waits for its last GPU state before the CPU steps it on.
+#[derive(Component)]
+pub(crate) struct ClothLeavingGpu {
+    pub generation: u64,
+    frames: u32,
+}
+
+/// Frames a cloth leaving the GPU waits for its state before going on from the main world's.
+const LEAVE_TIMEOUT_FRAMES: u32 = 30;
+
+/// Removing [`Cloth`] removes its GPU components too.
+pub(crate) fn forget_gpu_cloth(removed: On<Remove, Cloth>, mut commands: Commands) {
+    commands.entity(removed.entity).try_remove::<(
+        ClothOnGpu,
+        ClothLeavingGpu,
+        ClothBackendInUse,
+        ClothSteppedElsewhere,
+        NoFrustumCulling,
+    )>();
+}
+
+/// What a GPU frame read back for one cloth.
+pub(crate) struct GpuResult {
+    pub entity: Entity,
+    pub generation: u64,
+    /// A step left a NaN or infinite position or velocity.
+    pub failed: bool,
+    /// A step ended with an edge past the tear threshold.
+    pub torn: bool,
+    /// Positions and velocities, when asked for.
+    pub state: Option<(Vec<Vec4>, Vec<Vec4>)>,
+}
+
+/// GPU cloths' impulses on colliders, waiting for the next fixed step's
+/// [`ClothContactImpulse`](crate::collider::ClothContactImpulse)s.
+#[derive(Resource, Default)]
+pub(crate) struct GpuImpulses(pub Vec<(Entity, ContactImpulse)>);
+
+/// Results waiting for the main world (filled during extraction): per cloth, and the
+/// impulses of every frame that came back.
+#[derive(Resource, Default)]
+pub(crate) struct GpuClothResults {
+    pub cloths: Vec<GpuResult>,
+    pub impulses: Vec<(Entity, ContactImpulse)>,
+}
+
+/// The steps queued this frame for every GPU cloth: each step's length and colliders (with
+/// their impulse slots), and the frame's collider entities (slot → entity).
+#[derive(Resource, Default, Clone, Debug)]
+pub(crate) struct GpuStepQueue {
+    pub steps: Vec<QueuedStep>,
+    pub entities: Vec<Entity>,
+}
+
+/// One queued step.
+#[derive(Clone, Debug)]
+pub(crate) struct QueuedStep {
+    pub dt: f32,
+    pub colliders: Vec<Collider>,
+    pub slots: Vec<u32>,
+}
+
+/// A cloth the GPU steps, with this frame's queued steps (main world).
+#[derive(Component)]
+pub struct ClothOnGpu {
+    pub(crate) generation: u64,
+    pub(crate) upload: Arc<GpuUpload>,
+    /// [`ClothSim::simulation_mut`] calls the upload was made after.
+    edits: u64,
+    /// Upload the main world's state again (after a recovery).
+    restart: bool,
+    /// Settings the upload was made with (a change re-uploads).
+    key: String,
+    /// Per queued step, every pin's target at its end.
+    pub(crate) pending: Vec<Vec<Vec3>>,
+    /// The index of the first queued step among the frame's steps ([`GpuStepQueue`]).
+    pub(crate) first_step: u32,
+    /// Per queued step, how far the whole cloth jumps at its start (the teleport rule).
+    pub(crate) teleports: Vec<Vec3>,
+    /// The air at each vertex, sampled at the last queued step.
+    pub(crate) air: Vec<Vec4>,
+}
+
+impl ClothOnGpu {
+    /// Steps queued for the GPU this frame.
+    #[must_use]
+    pub fn queued_steps(&self) -> usize {
+        self.pending.len()
+    }
+}
+
+/// Where positions and normals sit in `mesh`'s interleaved vertex buffer (attributes sorted
+/// by id, tightly packed), or why the GPU cannot write it.
+pub(crate) fn vertex_layout(mesh: &Mesh) -> Result<VertexLayout, String> {
+    let mut offset = 0u32;
+    let (mut position, mut normal, mut tangent) = (None, None, None);
+    for (attribute, _) in mesh.attributes() {
+        let attribute: &MeshVertexAttribute = attribute;
+        if attribute.id == Mesh::ATTRIBUTE_POSITION.id {
+            position = Some(offset);
+        } else if attribute.id == Mesh::ATTRIBUTE_NORMAL.id {
+            normal = Some(offset);
+        } else if attribute.id == Mesh::ATTRIBUTE_TANGENT.id {
+            tangent = Some(offset);
+        }
+        offset += attribute.format.size() as u32;
+    }
+    match (position, normal) {
+        (Some(position), Some(normal)) => Ok(VertexLayout {
+            stride: offset,
+            position,
+            normal,
+            tangent,
+        }),
+        _ => Err("the mesh has no normals for the GPU to write".to_owned()),
+    }
+}
+
+/// A short fingerprint of what the GPU buffers were built from: settings, features, pinned
+/// vertices.
+fn settings_key(sim: &Simulation) -> String {
+    let pins: Vec<u32> = sim.state().pins().iter().map(|p| p.vertex).collect();
+    format!(
+        "{:?}{:?}{pins:?}{}",
+        sim.params(),
+        sim.features(),
+        sim.topology().edges().len()
+    )
+}
+
+#[expect(
+    clippy::type_complexity,
+    clippy::too_many_arguments,
+    reason = "a query over the cloth, its backend choice and its GPU twin; a system's inputs"
+)]
+pub(crate) fn choose_backends(
+    mut commands: Commands,
+    support: Option<Res<ClothGpuSupport>>,
+    default: Res<DefaultBackend>,
+    meshes: Option<Res<Assets<Mesh>>>,
+    mut cloths: Query<(
+        (Entity, Option<&Name>),
+        &ClothSim,
+        Option<&ClothBackend>,
+        Option<&mut ClothBackendInUse>,
+        Option<&mut ClothOnGpu>,
+        Has<ClothLeavingGpu>,
+        Has<ClothReadback>,
+    )>,
+    fixed: Res<Time<Fixed>>,
+    mut generation: Local<u64>,
+    // Per cloth: the settings the model was last checked with, and the verdict.
+    mut checked: Local<HashMap<Entity, (String, Result<(), String>)>>,
+) {
+    let dt = fixed.timestep().as_secs_f32();
+    let mut seen = std::collections::HashSet::new();
+    for ((entity, name), cloth, backend, in_use, on_gpu, leaving, readback) in &mut cloths {
+        let who = EntityName::new(entity, name);
+        seen.insert(entity);
+        if leaving {
+            // Waits for its last GPU state (`apply_gpu_results`).
+            continue;
+        }
+        let wanted = backend.copied().unwrap_or(default.0);
+        let verdict: Result<(), String> = match wanted {
+            ClothBackend::Cpu => Err(String::new()),
+            ClothBackend::Gpu | ClothBackend::Auto => support
+                .as_deref()
+                .map_or(Some("ClothGpuPlugin is not added".to_owned()), |s| {
+                    s.unavailable.clone()
+                })
+                .map_or(Ok(()), Err)
+                .and_then(|()| {
+                    // The model check (O(n) for stiff bending) once per change of settings.
+                    let key = settings_key(cloth.simulation());
+                    match checked.get(&entity) {
+                        Some((k, verdict)) if *k == key => verdict.clone(),
+                        _ => {
+                            let verdict =
+                                GpuWorld::supports(cloth.simulation(), dt).map_err(|e| e.0);
+                            checked.insert(entity, (key, verdict.clone()));
+                            verdict
+                        }
+                    }
+                }),
+        };
+        let layout = verdict.clone().and_then(|()| {
+            meshes
+                .as_deref()
+                .and_then(|m| m.get(cloth.mesh()))
+                .ok_or_else(|| "the cloth's mesh is not loaded".to_owned())
+                .and_then(vertex_layout)
+        });
+        match (layout, on_gpu) {
+            (Ok(layout), Some(mut g)) => {
+                let key = settings_key(cloth.simulation());
+                let edited = cloth.edit_count() != g.edits || g.restart;
+                if key != g.key || edited {
+                    // New settings go on from the GPU's state; an edit of the state wins.
+                    *generation += 1;
+                    g.generation = *generation;
+                    g.upload = Arc::new(upload(cloth, layout, !edited));
+                    g.key = key;
+                    g.edits = cloth.edit_count();
+                    g.restart = false;
+                }
+            }
+            (Ok(layout), None) => {
+                *generation += 1;
+                if readback {
+                    info!("cloth {who}: runs on the GPU");
+                } else {
+                    info!(
+                        "cloth {who}: runs on the GPU; its ClothSim keeps the state it started \
+                         from (add ClothReadback to read the GPU's state back)"
+                    );
+                }
+                commands.entity(entity).insert((
+                    ClothOnGpu {
+                        generation: *generation,
+                        upload: Arc::new(upload(cloth, layout, false)),
+                        edits: cloth.edit_count(),
+                        restart: false,
+                        key: settings_key(cloth.simulation()),
+                        pending: Vec::new(),
+                        first_step: 0,
+                        teleports: Vec::new(),
+                        air: Vec::new(),
+                    },
+                    ClothSteppedElsewhere,
+                    // The mesh's bounds are those of the rest shape it was made with.
+                    NoFrustumCulling,
+                    ClothBackendInUse {
+                        gpu: true,
+                        reason: None,
+                    },
+                ));
+            }
+            (Err(why), on_gpu) => {
+                if let Some(g) = on_gpu {
+                    // The CPU goes on from the GPU's state once it is read back.
+                    commands
+                        .entity(entity)
+                        .remove::<(ClothOnGpu, NoFrustumCulling)>()
+                        .insert(ClothLeavingGpu {
+                            generation: g.generation,
+                            frames: 0,
+                        });
+                }
+                let reason = (!why.is_empty()).then_some(why);
+                let changed = in_use
+                    .as_deref()
+                    .is_none_or(|u| u.gpu || u.reason != reason);
+                if changed {
+                    if let Some(why) = &reason {
+                        if wanted == ClothBackend::Gpu {
+                            warn!("cloth {who}: asked for the GPU, runs on the CPU: {why}");
+                        } else {
+                            info!("cloth {who}: runs on the CPU: {why}");
+                        }
+                    }
+                    let value = ClothBackendInUse { gpu: false, reason };
+                    match in_use {
+                        Some(mut u) => *u = value,
+                        None => {
+                            commands.entity(entity).insert(value);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    checked.retain(|e, _| seen.contains(e));
+}
+
+fn upload(cloth: &ClothSim, layout: VertexLayout, carry: bool) -> GpuUpload {
+    let binding = cloth.binding();
+    let shading = binding.shading();
+    let tangents = shading.corner_uvs().map(|uvs| TangentSource {
+        corner_uvs: binding
+            .drawn_triangles()
+            .iter()
+            .map(|&t| uvs[t as usize])
+            .collect(),
+        handedness: shading.handedness().map(<[f32]>::to_vec),
+    });
+    GpuUpload {
+        sim: cloth.simulation().clone(),
+        weld: binding.weld().clone(),
+        drawn: binding.drawn_indices().collect(),
+        layout,
+        tangents,
+        carry,
+    }
+}
+
+/// Main world: applies what the GPU read back. A bad state is recovered as on the CPU (and
+/// re-uploaded); positions and velocities go into [`ClothSim`]; a cloth leaving the GPU
+/// takes its last state and goes on on the CPU.
+#[expect(
+    clippy::type_complexity,
+    reason = "a cloth, its GPU state, its placement"
+)]
+pub(crate) fn apply_gpu_results(
+    mut commands: Commands,
+    mut results: ResMut<GpuClothResults>,
+    mut meshes: Option<ResMut<Assets<Mesh>>>,
+    mut torn_messages: MessageWriter<ClothTorn>,
+    mut impulses: ResMut<GpuImpulses>,
+    mut cloths: Query<(
+        (Entity, Option<&Name>),
+        &mut ClothSim,
+        Option<&mut ClothOnGpu>,
+        Option<&mut ClothLeavingGpu>,
+        Option<&GlobalTransform>,
+    )>,
+) {
+    // Every frame's impulses happened, whichever result per cloth is the latest.
+    impulses.0.append(&mut results.impulses);
+    let mut results = core::mem::take(&mut results.cloths);
+    // The latest result per cloth (a slow frame can bring two).
+    results.reverse();
+    let mut seen = Vec::new();
+    for r in results {
+        if seen.contains(&r.entity) {
+            continue;
+        }
+        seen.push(r.entity);
+        let Ok(((entity, name), mut cloth, on_gpu, leaving, transform)) = cloths.get_mut(r.entity)
+        else {
+            continue;
+        };
+        let current = on_gpu
+            .as_ref()
+            .map(|g| g.generation)
+            .or(leaving.as_ref().map(|l| l.generation));
+        if current != Some(r.generation) {
+            continue;
+        }
+        // An edit of the state since the upload wins over what the GPU computed before it.
+        if on_gpu
+            .as_ref()
+            .is_some_and(|g| g.edits != cloth.edit_count())
+        {
+            continue;
+        }
+        let cloth = &mut *cloth;
+        if r.failed && on_gpu.as_ref().is_some_and(|g| g.restart) {
+            // Already recovered; the restart is on its way.
+            continue;
+        }
+        if r.failed {
+            cloth.recover(EntityName::new(entity, name), transform.copied());
+        } else if let Some((positions, velocities)) = &r.state {
+            cloth.receive_state(positions, velocities);
+            // Tear on the CPU; the new topology goes to the GPU as a settings change (its
+            // state carried over), and the index buffer loses the torn triangles.
+            if r.torn
+                && cloth.tear_now(entity, &mut torn_messages)
+                && let Some(mesh) = meshes.as_deref_mut().and_then(|m| m.get_mut(cloth.mesh()))
+            {
+                cloth.write_indices(mesh.into_inner());
+            }
+        }
+        if leaving.is_some() && (r.failed || r.state.is_some()) {
+            cloth.mark_changed();
+            commands
+                .entity(entity)
+                .remove::<(ClothLeavingGpu, ClothSteppedElsewhere)>();
+        } else if r.failed
+            && let Some(mut g) = on_gpu
+        {
+            // Restart the GPU cloth from the recovered state (a new generation).
+            g.restart = true;
+        }
+    }
+    for ((entity, name), mut cloth, _, leaving, _) in &mut cloths {
+        if let Some(mut l) = leaving {
+            l.frames += 1;
+            if l.frames > LEAVE_TIMEOUT_FRAMES {
+                let who = EntityName::new(entity, name);
+                warn!(
+                    "cloth {who}: its GPU state did not come back; the CPU goes on from the \
+                     state it last had"
+                );
+                cloth.mark_changed();
+                commands
+                    .entity(entity)
+                    .remove::<(ClothLeavingGpu, ClothSteppedElsewhere)>();
+            }
+        }
+    }
+}
+
+pub(crate) fn clear_queued_steps(
+    mut queue: ResMut<GpuStepQueue>,
+    mut cloths: Query<&mut ClothOnGpu>,
+) {
+    queue.steps.clear();
+    queue.entities.clear();
+    for mut g in &mut cloths {
+        g.pending.clear();
+        g.teleports.clear();
+    }
+}
+
+/// Each fixed step with GPU cloths: its length and colliders (every GPU cloth feels the same
+/// ones), each collider in its frame slot.
+pub(crate) fn queue_gpu_colliders(
+    time: Res<Time>,
+    colliders: Option<Res<ClothColliders>>,
+    mut queue: ResMut<GpuStepQueue>,
+    gpu: Query<(), With<ClothOnGpu>>,
+) {
+    let dt = time.delta_secs();
+    if dt <= 0.0 || gpu.is_empty() {
+        return;
+    }
+    let (list, entities): (&[Collider], &[Entity]) = colliders
+        .as_deref()
+        .map_or((&[], &[]), |c| (&c.colliders, &c.entities));
+    let queue = &mut *queue;
+    let slots = entities
+        .iter()
+        .map(|e| match queue.entities.iter().position(|x| x == e) {
+            Some(k) => k as u32,
+            None => {
+                queue.entities.push(*e);
+                (queue.entities.len() - 1) as u32
+            }
+        })
+        .collect();
+    queue.steps.push(QueuedStep {
+        dt,
+        colliders: list.to_vec(),
+        slots,
+    });
+}
+
+/// In place of the CPU step: queue the step's pin targets, teleport and air for the GPU.
+pub(crate) fn queue_gpu_steps(
+    time: Res<Time>,
+    queue: Res<GpuStepQueue>,
+    wind: Option<Res<ClothWindField>>,
+    mut cloths: Query<(&mut ClothSim, &mut ClothOnGpu)>,
+) {
+    let dt = time.delta_secs();
+    if dt <= 0.0 {
+        return;
+    }
+    let step = queue.steps.len().saturating_sub(1) as u32;
+    for (mut cloth, mut g) in &mut cloths {
+        let g = &mut *g;
+        if g.pending.is_empty() {
+            g.first_step = step;
+        }
+        g.pending.push(
+            cloth
+                .simulation()
+                .state()
+                .pins()
+                .iter()
+                .map(|p| p.target)
+                .collect(),
+        );
+        cloth.count_external_steps(1);
+        g.teleports
+            .push(cloth.take_teleport().unwrap_or(Vec3::ZERO));
+        match wind.as_deref() {
+            Some(w) if !w.field.is_empty() && !cloth.simulation().params().air.is_none() => {
+                cloth.sample_air(&w.field, w.time + 0.5 * f64::from(dt), &mut g.air);
+            }
+            _ => g.air.clear(),
+        }
+    }
+}
+
+/// In the fixed step after they arrive (their `ClothContactImpulse`s were just reset): GPU
+/// cloths' impulses on colliders, a few frames after the GPU computed them.
+pub(crate) fn add_gpu_impulses(
+    mut pending: ResMut<GpuImpulses>,
+    mut targets: Query<&mut ClothContactImpulse>,
+) {
+    for (entity, imp) in pending.0.drain(..) {
+        if let Ok(mut t) = targets.get_mut(entity) {
+            t.linear += imp.linear;
+            t.angular += imp.angular;
+        }
+    }
+}

@@ -1,0 +1,546 @@
+//! How a world of cloths lies in the GPU's buffers: built on the CPU, once per world, from
+//! each cloth's [`Simulation`] (no `wgpu` here, so it is tested without a device).
+//!
+//! Every cloth gets its own [`ConstraintBatches`] with the GPU's part count
+//! ([`gpu_part_count`]): parts small enough for workgroup memory where the mesh allows it.
+//! Their parts, seams and boundaries become *groups* (one workgroup each), laid out level by
+//! level across all cloths: every cloth's parts, then every even seam, every odd seam, every
+//! boundary. A level is one dispatch; its groups share no vertex (different cloths share
+//! none at all).
+
+use glam::{Vec3, Vec4};
+
+use super::append_lists;
+use super::kernels::TILE;
+use crate::solver::constraints::{ConstraintBatches, Part};
+use crate::solver::{Simulation, Solver, Tethers};
+
+/// Words of a cloth's record in `topo` (`common.wgsl`'s `CLOTH_WORDS`).
+pub(crate) const CLOTH_WORDS: usize = 20;
+/// Words of a group's record in `topo` (`common.wgsl`'s `GROUP_WORDS`).
+pub(crate) const GROUP_WORDS: usize = 16;
+/// `common.wgsl`'s `NO_PIN`.
+pub(crate) const NO_PIN: u32 = u32::MAX;
+
+/// Cloth flags (`common.wgsl`'s `FLAG_*`).
+pub(crate) const FLAG_AIR: u32 = 1;
+pub(crate) const FLAG_XPBD: u32 = 2;
+pub(crate) const FLAG_DIHEDRAL: u32 = 4;
+pub(crate) const FLAG_ACCUMULATE: u32 = 8;
+pub(crate) const FLAG_SC: u32 = 16;
+pub(crate) const FLAG_TETHERS: u32 = 32;
+
+/// The part count the GPU projects `sim` with: parts of at most [`TILE`] vertices (one
+/// workgroup each, in workgroup memory), fewer when the mesh's vertex order would leave
+/// constraints joining parts further apart than neighbours (those run in one workgroup, in
+/// order). `sim.set_part_count(gpu_part_count(sim))` gives the CPU twin of a GPU cloth.
+#[must_use]
+pub fn gpu_part_count(sim: &Simulation) -> usize {
+    choose_batches(sim).part_count()
+}
+
+/// The GPU's batches for `sim` (see [`gpu_part_count`]).
+fn choose_batches(sim: &Simulation) -> ConstraintBatches {
+    let n = sim.state().len();
+    let solver = sim.params().solver;
+    let mut k = n.div_ceil(TILE).max(1);
+    loop {
+        let b = ConstraintBatches::new(sim.topology(), solver, k);
+        let straddling = b.boundary.distance.a().len() + b.boundary.bending.v()[0].len();
+        if k == 1 || straddling == 0 {
+            return b;
+        }
+        k = (k / 2).max(1);
+    }
+}
+
+/// One cloth's place in a world.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct ClothLayout {
+    /// Its first vertex in every per-vertex region.
+    pub vbase: u32,
+    /// Its vertices.
+    pub n: u32,
+    /// Its first pin among the world's pins, and how many it has.
+    pub pin_base: u32,
+    pub pins: u32,
+    /// Its parts (the GPU's part count).
+    pub parts: usize,
+    /// Its record's flags.
+    pub flags: u32,
+    /// Whether its edges are checked against a tear threshold.
+    pub tearing: bool,
+    /// Gravity, damping (1/s) and, for the lab solver, the velocity kept per step: what the
+    /// record's per-frame words (gravity·h, damping factor) are made from.
+    pub gravity: Vec3,
+    pub damping: f32,
+    pub keep: Option<f32>,
+}
+
+/// Where a level's groups sit in the group table.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct LevelRange {
+    pub first: u32,
+    pub count: u32,
+}
+
+/// A world's buffers' contents (apart from the per-frame inputs) and where everything is.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct WorldLayout {
+    pub cloths: Vec<ClothLayout>,
+    /// Vertices and pins of every cloth.
+    pub n: u32,
+    pub pins: u32,
+    /// `cons`: distances, then hinges (three vec4 each, from `bend_at`).
+    pub cons: Vec<[u32; 4]>,
+    pub distances: u32,
+    pub hinges: u32,
+    pub bend_at: u32,
+    /// `topo` and where its tables start.
+    pub topo: Vec<u32>,
+    pub cloth_at: u32,
+    pub vertex_cloth_at: u32,
+    pub vertex_pin_at: u32,
+    pub group_at: u32,
+    pub tri_offsets_at: u32,
+    pub tri_at: u32,
+    pub tether_at: u32,
+    pub lab_at: u32,
+    pub edges_at: u32,
+    pub edges: u32,
+    /// The levels: parts, even seams, odd seams, boundaries.
+    pub levels: [LevelRange; 4],
+    /// Words of self-collision hash heads (2 per vertex of each self-colliding cloth).
+    pub head_words: u32,
+    /// Rest positions of every vertex (self-collision's topological skip), if any cloth
+    /// collides with itself.
+    pub rest: Vec<Vec4>,
+    /// What any cloth needs.
+    pub any_sc: bool,
+    pub any_tethers: bool,
+    pub any_accumulate: bool,
+    pub any_tearing: bool,
+    /// The lab solver (a world is all lab or all not).
+    pub lab: bool,
+    /// The world's substeps and iterations (every cloth's).
+    pub substeps: u32,
+    pub iterations: u32,
+}
+
+/// A group's constraints appended to `cons` and its record: `(record, colour bounds)`.
+struct GroupSpec {
+    record: [u32; GROUP_WORDS],
+    dist_bounds: Vec<u32>,
+    bend_bounds: Vec<u32>,
+}
+
+/// Appends `part`'s distance constraints of `range` (local indices).
+fn push_distances(part: &Part, range: core::ops::Range<usize>, out: &mut Vec<[u32; 4]>) {
+    let d = &part.distance;
+    for i in range {
+        out.push([
+            d.a()[i],
+            d.b()[i],
+            d.rest[i].to_bits(),
+            d.param[i].to_bits(),
+        ]);
+    }
+}
+
+/// Appends hinges: four local vertices, then four weights (isometric) or the rest angle
+/// (dihedral), then the material parameter.
+fn push_hinges(part: &Part, range: core::ops::Range<usize>, out: &mut Vec<[[u32; 4]; 3]>) {
+    let b = &part.bending;
+    for i in range {
+        let a = if b.iso {
+            [0, 1, 2, 3].map(|k| b.a[k][i].to_bits())
+        } else {
+            [b.rest[i].to_bits(), 0, 0, 0]
+        };
+        out.push([
+            [0, 1, 2, 3].map(|k| b.v()[k][i]),
+            a,
+            [b.param[i].to_bits(), 0, 0, 0],
+        ]);
+    }
+}
+
+/// The group of `part` of cloth `cloth` (its range starting at global vertex `vbase +
+/// range.start`): its constraints appended colour by colour, leftovers last.
+fn group(
+    cloth: u32,
+    vbase: u32,
+    part: &Part,
+    bending: bool,
+    shared: bool,
+    dist: &mut Vec<[u32; 4]>,
+    hinges: &mut Vec<[[u32; 4]; 3]>,
+) -> GroupSpec {
+    let mut record = [0u32; GROUP_WORDS];
+    record[0] = cloth;
+    record[1] = vbase + part.range.start as u32;
+    record[2] = part.range.len() as u32;
+    record[3] = u32::from(shared);
+    let mut dist_bounds = vec![dist.len() as u32];
+    for r in &part.distance.colours.independent {
+        push_distances(part, r.clone(), dist);
+        dist_bounds.push(dist.len() as u32);
+    }
+    record[5] = part.distance.colours.independent.len() as u32;
+    record[7] = dist.len() as u32;
+    push_distances(part, part.distance.colours.sequential.clone(), dist);
+    record[8] = dist.len() as u32 - record[7];
+    let mut bend_bounds = vec![hinges.len() as u32];
+    if bending {
+        for r in &part.bending.colours.independent {
+            push_hinges(part, r.clone(), hinges);
+            bend_bounds.push(hinges.len() as u32);
+        }
+        record[10] = part.bending.colours.independent.len() as u32;
+    }
+    record[12] = hinges.len() as u32;
+    if bending {
+        push_hinges(part, part.bending.colours.sequential.clone(), hinges);
+    }
+    record[13] = hinges.len() as u32 - record[12];
+    GroupSpec {
+        record,
+        dist_bounds,
+        bend_bounds,
+    }
+}
+
+impl WorldLayout {
+    /// The layout of `sims`, which must share their substep and iteration counts and be all
+    /// lab-solver cloths or none (the caller groups cloths by [`WorldKey`]).
+    ///
+    /// # Panics
+    /// If `sims` do not share a key.
+    #[must_use]
+    pub(crate) fn build(sims: &[&Simulation]) -> Self {
+        let key = sims.first().map(|s| WorldKey::of(s));
+        assert!(
+            sims.iter().all(|s| Some(WorldKey::of(s)) == key),
+            "a world's cloths share substeps, iterations and solver kind"
+        );
+        let key = key.unwrap_or(WorldKey {
+            substeps: 1,
+            iterations: 1,
+            lab: false,
+        });
+        let mut out = WorldLayout {
+            substeps: key.substeps,
+            iterations: key.iterations,
+            lab: key.lab,
+            ..Default::default()
+        };
+        let mut dist: Vec<[u32; 4]> = Vec::new();
+        let mut hinges: Vec<[[u32; 4]; 3]> = Vec::new();
+        let mut levels: [Vec<GroupSpec>; 4] = Default::default();
+        let mut vertex_cloth = Vec::new();
+        let mut vertex_pin = Vec::new();
+        let mut records = Vec::new();
+        let mut triangles: Vec<[u32; 3]> = Vec::new();
+        let mut tethers: Vec<(u32, [u32; 2])> = Vec::new();
+        let mut lab_edges: Vec<(u32, [u32; 2])> = Vec::new();
+        let mut tear_edges: Vec<[u32; 4]> = Vec::new();
+        let any_sc = sims.iter().any(|s| s.features().self_collision.is_some());
+        for (c, sim) in sims.iter().enumerate() {
+            let c = c as u32;
+            let n = sim.state().len() as u32;
+            let vbase = out.n;
+            let pin_base = out.pins;
+            let pins = sim.state().pins();
+            vertex_cloth.extend(core::iter::repeat_n(c, n as usize));
+            let first_pin = vertex_pin.len();
+            vertex_pin.extend(core::iter::repeat_n(NO_PIN, n as usize));
+            for (k, p) in pins.iter().enumerate() {
+                vertex_pin[first_pin + p.vertex as usize] = pin_base + k as u32;
+            }
+            let params = sim.params();
+            let features = sim.features();
+            let xpbd = matches!(params.solver, Solver::Xpbd { .. });
+            let mut flags = 0;
+            if !params.air.is_none() && !key.lab {
+                flags |= FLAG_AIR;
+            }
+            if xpbd {
+                flags |= FLAG_XPBD;
+            }
+            if xpbd && params.iterations > 1 {
+                flags |= FLAG_ACCUMULATE;
+            }
+            let sc = features.self_collision.filter(|_| !key.lab);
+            if sc.is_some() {
+                flags |= FLAG_SC;
+            }
+            let batches = choose_batches(sim);
+            if batches.bending && !batches.boundary.bending.iso {
+                flags |= FLAG_DIHEDRAL;
+            }
+            if let Some(tp) = features.tethers.filter(|_| !key.lab) {
+                let pinned: Vec<u32> = pins.iter().map(|p| p.vertex).collect();
+                let t = Tethers::build(sim.topology(), &pinned, tp);
+                if !t.is_empty() {
+                    flags |= FLAG_TETHERS;
+                    tethers.extend(
+                        t.entries()
+                            .map(|(v, pin, max)| (vbase + v, [vbase + pin, max.to_bits()])),
+                    );
+                }
+            }
+            triangles.extend(
+                sim.topology()
+                    .triangles()
+                    .iter()
+                    .map(|t| t.map(|v| v + vbase)),
+            );
+            if key.lab {
+                lab_edges.extend(sim.topology().edges().iter().flat_map(|e| {
+                    let rest = e.rest.to_bits();
+                    [
+                        (vbase + e.v[0], [vbase + e.v[1], rest]),
+                        (vbase + e.v[1], [vbase + e.v[0], rest]),
+                    ]
+                }));
+            }
+            let tearing = features.tear_threshold.is_some_and(|t| t > 1.0);
+            if tearing {
+                tear_edges.extend(
+                    sim.topology()
+                        .edges()
+                        .iter()
+                        .map(|e| [vbase + e.v[0], vbase + e.v[1], e.rest.to_bits(), c]),
+                );
+            }
+            // The record (`common.wgsl`'s `cloth_of`); gravity·h and the damping factor
+            // (words 5–8) depend on the step length and are written per frame.
+            let mut rec = [0u32; CLOTH_WORDS];
+            rec[0] = vbase;
+            rec[1] = n;
+            rec[2] = pin_base;
+            rec[3] = pins.len() as u32;
+            rec[4] = flags;
+            rec[9] = params.max_speed.to_bits();
+            rec[10] = params.air.drag.to_bits();
+            rec[11] = params.air.lift.to_bits();
+            rec[12] = params.air.friction.to_bits();
+            rec[13] = sc.map_or(0.0, |s| s.thickness).to_bits();
+            rec[14] = sc.map_or(0.0, |s| s.friction).to_bits();
+            rec[15] = features.tear_threshold.unwrap_or(0.0).to_bits();
+            rec[16] = c;
+            rec[17] = if sc.is_some() { out.head_words } else { 0 };
+            if sc.is_some() {
+                out.head_words += 2 * n;
+            }
+            records.push(rec);
+            // Groups: parts (in workgroup memory when they fit), seams, the boundary.
+            if !key.lab {
+                let bending = batches.bending;
+                for part in &batches.parts {
+                    let shared = part.range.len() <= TILE;
+                    let g = group(c, vbase, part, bending, shared, &mut dist, &mut hinges);
+                    levels[0].push(g);
+                }
+                for (parity, seams) in batches.seams.iter().enumerate() {
+                    for seam in seams {
+                        let g = group(c, vbase, seam, bending, false, &mut dist, &mut hinges);
+                        levels[1 + parity].push(g);
+                    }
+                }
+                let b = &batches.boundary;
+                if !b.distance.a().is_empty() || !b.bending.v()[0].is_empty() {
+                    let g = group(c, vbase, b, bending, false, &mut dist, &mut hinges);
+                    levels[3].push(g);
+                }
+            }
+            out.any_tethers |= flags & FLAG_TETHERS != 0;
+            out.any_accumulate |= flags & FLAG_ACCUMULATE != 0;
+            out.any_tearing |= tearing;
+            out.cloths.push(ClothLayout {
+                vbase,
+                n,
+                pin_base,
+                pins: pins.len() as u32,
+                parts: batches.part_count(),
+                flags,
+                tearing,
+                gravity: params.gravity,
+                damping: params.damping,
+                keep: match params.solver {
+                    Solver::Lab { velocity_keep } => Some(velocity_keep),
+                    _ => None,
+                },
+            });
+            out.n += n;
+            out.pins += pins.len() as u32;
+            if any_sc {
+                let rest = sim.topology().rest_positions();
+                out.rest.extend(rest.iter().map(|p| p.extend(0.0)));
+            }
+        }
+        out.any_sc = any_sc && out.head_words > 0;
+        if !out.any_sc {
+            out.rest.clear();
+        }
+        // `cons`: distances, then hinges.
+        out.distances = dist.len() as u32;
+        out.hinges = hinges.len() as u32;
+        out.bend_at = dist.len() as u32;
+        out.cons = dist;
+        out.cons.extend(hinges.iter().flatten());
+        // `topo`.
+        let n = out.n as usize;
+        let mut topo: Vec<u32> = Vec::new();
+        out.cloth_at = topo.len() as u32;
+        topo.extend(records.iter().flatten());
+        out.vertex_cloth_at = topo.len() as u32;
+        topo.extend(&vertex_cloth);
+        out.vertex_pin_at = topo.len() as u32;
+        topo.extend(&vertex_pin);
+        // Group records, then each group's colour bounds (absolute constraint indices).
+        out.group_at = topo.len() as u32;
+        let groups: Vec<GroupSpec> = levels
+            .iter_mut()
+            .enumerate()
+            .flat_map(|(l, g)| {
+                let first = out.levels[..l].iter().map(|r| r.count).sum::<u32>();
+                out.levels[l] = LevelRange {
+                    first,
+                    count: g.len() as u32,
+                };
+                core::mem::take(g)
+            })
+            .collect();
+        let bounds_at = topo.len() + groups.len() * GROUP_WORDS;
+        topo.resize(bounds_at, 0);
+        for (i, g) in groups.iter().enumerate() {
+            let mut rec = g.record;
+            rec[6] = topo.len() as u32;
+            topo.extend(&g.dist_bounds);
+            rec[11] = topo.len() as u32;
+            // Hinge bounds count hinges; the kernel indexes hinges from `bend_at`.
+            topo.extend(&g.bend_bounds);
+            let at = out.group_at as usize + i * GROUP_WORDS;
+            topo[at..at + GROUP_WORDS].copy_from_slice(&rec);
+        }
+        // Triangles per vertex in triangle order, then the triangles.
+        out.tri_offsets_at = append_lists(
+            &mut topo,
+            n,
+            triangles
+                .iter()
+                .enumerate()
+                .flat_map(|(i, t)| t.map(|v| (v, [i as u32]))),
+        );
+        out.tri_at = topo.len() as u32;
+        topo.extend(triangles.iter().flatten());
+        out.tether_at = append_lists(&mut topo, n, tethers.iter().copied());
+        out.lab_at = append_lists(&mut topo, n, lab_edges.iter().copied());
+        out.edges_at = topo.len() as u32;
+        out.edges = tear_edges.len() as u32;
+        topo.extend(tear_edges.iter().flatten());
+        out.topo = topo;
+        out
+    }
+}
+
+/// What cloths must share to step in one world: the dispatches of a substep, and how many.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct WorldKey {
+    /// Substeps per step.
+    pub substeps: u32,
+    /// Iterations per substep.
+    pub iterations: u32,
+    /// Whether the cloths use the lab solver (its own kernels).
+    pub lab: bool,
+}
+
+impl WorldKey {
+    /// The key of `sim`'s settings.
+    #[must_use]
+    pub fn of(sim: &Simulation) -> Self {
+        let p = sim.params();
+        Self {
+            substeps: p.substeps.max(1),
+            iterations: p.iterations.max(1),
+            lab: matches!(p.solver, Solver::Lab { .. }),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::solver::{Features, Grid, HangingCloth, SelfCollision, SolverParams, TetherParams};
+
+    fn standard(n: u32) -> Simulation {
+        HangingCloth::new(n).build().unwrap()
+    }
+
+    #[test]
+    fn parts_fit_workgroup_memory_without_constraints_far_apart() {
+        for (n, parts) in [(8, 1), (32, 1), (64, 4), (256, 64), (512, 256)] {
+            let sim = standard(n);
+            let b = choose_batches(&sim);
+            assert_eq!(b.part_count(), parts, "{n}²");
+            assert!(b.boundary.distance.a().is_empty(), "{n}²: boundary");
+        }
+    }
+
+    #[test]
+    fn every_constraint_is_in_exactly_one_group_of_a_level_whose_groups_share_no_vertex() {
+        let mut a = HangingCloth::new(48);
+        a.features = Features {
+            self_collision: Some(SelfCollision {
+                thickness: 0.02,
+                friction: 0.2,
+            }),
+            tethers: Some(TetherParams::default()),
+            tear_threshold: Some(2.0),
+        };
+        let a = a.build().unwrap();
+        let b = standard(64);
+        let world = WorldLayout::build(&[&a, &b]);
+        let total_edges: usize = [&a, &b].iter().map(|s| s.topology().edges().len()).sum();
+        let total_bends: usize = [&a, &b].iter().map(|s| s.topology().bends().len()).sum();
+        assert_eq!(world.distances as usize, total_edges);
+        assert_eq!(world.hinges as usize, total_bends);
+        assert_eq!(world.cloths[1].vbase, 48 * 48);
+        assert!(world.any_sc && world.any_tethers && world.any_tearing);
+        // Within each level, no two groups touch the same vertex.
+        for level in &world.levels {
+            let mut owner = vec![u32::MAX; world.n as usize];
+            for g in level.first..level.first + level.count {
+                let at = (world.group_at as usize) + g as usize * GROUP_WORDS;
+                let rec = &world.topo[at..at + GROUP_WORDS];
+                let base = rec[1];
+                let (d_from, d_to) = (world.topo[rec[6] as usize], rec[7] + rec[8]);
+                for i in d_from..d_to {
+                    let c = world.cons[i as usize];
+                    for v in [c[0], c[1]] {
+                        let v = (base + v) as usize;
+                        assert!(
+                            owner[v] == u32::MAX || owner[v] == g,
+                            "vertex {v} in two groups"
+                        );
+                        owner[v] = g;
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn worlds_hold_one_key() {
+        let a = standard(8);
+        let mut b = HangingCloth::new(8);
+        b.params = SolverParams {
+            substeps: 3,
+            ..Default::default()
+        };
+        let b = b.build().unwrap();
+        assert_ne!(WorldKey::of(&a), WorldKey::of(&b));
+        let _ = Grid::new(2, 2, 1.0, 1.0);
+    }
+}

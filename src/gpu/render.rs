@@ -1,0 +1,534 @@
+//! The render world's side of the GPU backend: extraction, the worlds (every GPU cloth with
+//! the same substeps and iterations in one [`GpuWorld`]), the `RenderGraph` system that steps
+//! them and writes their meshes, and the readback.
+//!
+//! Frame flow:
+//! 1. Extract: the frame's queued steps (colliders per step), each GPU cloth's pin targets,
+//!    teleports and air, transform, and (new cloth, changed settings, an edit) its upload; the
+//!    cloths leaving the GPU, which wait for a last readback.
+//! 2. `PrepareResources`: the cloths grouped by [`WorldKey`]; a world whose members changed
+//!    is rebuilt, carrying the GPU state of the cloths that go on; every world is prepared
+//!    for the frame.
+//! 3. `RenderGraph`, before the camera driver: every world's steps, then every cloth's mesh
+//!    kernel into its vertex slab, so this frame's main, shadow and prepass passes draw it;
+//!    then a copy of the statuses, the read-back states and the impulse slots to staging.
+//! 4. `Cleanup`: the copies mapped; extraction hands what arrived to the main world.
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
+use std::sync::Mutex;
+use std::sync::mpsc::{Receiver, Sender};
+
+use bevy::prelude::*;
+use bevy::render::mesh::allocator::MeshAllocator;
+use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue};
+use bevy::render::{Extract, MainWorld};
+
+use super::backend::{
+    ClothLeavingGpu, ClothOnGpu, ClothReadback, GpuClothResults, GpuResult, GpuStepQueue,
+    GpuUpload, QueuedStep,
+};
+use super::kernels::GpuKernels;
+use super::layout::WorldKey;
+use super::mesh::{MeshKernel, MeshWriter};
+use super::world::{ClothFrame, GpuFrame, GpuWorld, StepColliders, sum_impulses};
+
+/// The compiled kernels (render world).
+#[derive(Resource)]
+pub(crate) struct GpuClothPipelines {
+    pub kernels: GpuKernels,
+    pub mesh: MeshKernel,
+}
+
+/// One GPU cloth's frame, in the render world.
+struct ExtractedGpuCloth {
+    entity: Entity,
+    mesh: AssetId<Mesh>,
+    generation: u64,
+    /// `None` for a cloth leaving the GPU (read back, not stepped).
+    upload: Option<Arc<GpuUpload>>,
+    pin_targets: Vec<Vec<Vec3>>,
+    first_step: u32,
+    teleports: Vec<Vec3>,
+    air: Vec<Vec4>,
+    transform: bevy::math::Affine3A,
+    /// Read positions and velocities back this frame.
+    readback: bool,
+}
+
+#[derive(Resource, Default)]
+pub(crate) struct ExtractedGpuCloths {
+    cloths: Vec<ExtractedGpuCloth>,
+    queue: GpuStepQueue,
+}
+
+#[expect(
+    clippy::type_complexity,
+    reason = "the GPU cloths and those leaving the GPU"
+)]
+pub(crate) fn extract_gpu_cloths(
+    mut out: ResMut<ExtractedGpuCloths>,
+    queue: Extract<Res<GpuStepQueue>>,
+    cloths: Extract<
+        Query<(
+            Entity,
+            &ClothOnGpu,
+            &Mesh3d,
+            &GlobalTransform,
+            Has<ClothReadback>,
+        )>,
+    >,
+    leaving: Extract<Query<(Entity, &ClothLeavingGpu, &Mesh3d, &GlobalTransform)>>,
+) {
+    out.cloths.clear();
+    out.queue = queue.clone();
+    for (entity, g, mesh, transform, readback) in &cloths {
+        // A tearing cloth is always read back: the CPU tears it.
+        let readback = readback || g.upload.sim.features().tear_threshold.is_some();
+        out.cloths.push(ExtractedGpuCloth {
+            entity,
+            mesh: mesh.id(),
+            generation: g.generation,
+            upload: Some(g.upload.clone()),
+            pin_targets: g.pending.clone(),
+            first_step: g.first_step,
+            teleports: g.teleports.clone(),
+            air: g.air.clone(),
+            transform: transform.affine(),
+            readback,
+        });
+    }
+    for (entity, l, mesh, transform) in &leaving {
+        out.cloths.push(ExtractedGpuCloth {
+            entity,
+            mesh: mesh.id(),
+            generation: l.generation,
+            upload: None,
+            pin_targets: Vec::new(),
+            first_step: 0,
+            teleports: Vec::new(),
+            air: Vec::new(),
+            transform: transform.affine(),
+            readback: true,
+        });
+    }
+}
+
+/// A cloth of a world.
+struct Member {
+    entity: Entity,
+    generation: u64,
+    upload: Arc<GpuUpload>,
+    /// Stepped this frame (not leaving the GPU).
+    on_gpu: bool,
+    /// Read its positions and velocities back this frame.
+    readback: bool,
+}
+
+/// A world and its cloths, in the world's order.
+struct WorldEntry {
+    key: WorldKey,
+    world: GpuWorld,
+    members: Vec<Member>,
+    /// The frame's collider entities (slot → entity), for the impulses.
+    slots: Vec<Entity>,
+    /// Whether the frame stepped (impulses to read).
+    stepped: bool,
+    /// Staging buffers not being mapped (a few, of the sizes recently used).
+    staging: Vec<wgpu::Buffer>,
+}
+
+/// A cloth's mesh writer.
+struct WriterEntry {
+    generation: u64,
+    writer: MeshWriter,
+    mesh: AssetId<Mesh>,
+    transform: bevy::math::Affine3A,
+}
+
+/// A copy of a world's statuses, read-back states and impulses on its way to the main world.
+pub(crate) struct Readback {
+    /// Per member: entity, generation, vertices, where its state is in the copy (if read).
+    cloths: Vec<(Entity, u64, usize, Option<u64>)>,
+    /// The collider entities of the impulse slots after the states (empty: none copied).
+    colliders: Vec<Entity>,
+    impulses_at: u64,
+    buffer: wgpu::Buffer,
+    /// The mapped bytes (`None` if mapping failed).
+    data: Option<Vec<u8>>,
+    /// The world the staging buffer goes back to.
+    key: WorldKey,
+}
+
+#[derive(Resource, Default)]
+pub(crate) struct GpuWorlds {
+    worlds: Vec<WorldEntry>,
+    writers: HashMap<Entity, WriterEntry>,
+    /// Copies recorded this frame, to map once submitted.
+    requested: Vec<Readback>,
+}
+
+#[derive(Resource)]
+pub(crate) struct ReadbackChannel {
+    pub sender: Sender<Readback>,
+    pub receiver: Mutex<Receiver<Readback>>,
+}
+
+/// Groups the frame's GPU cloths into worlds (rebuilding those whose cloths changed, with the
+/// state of the cloths that go on), prepares every world for the frame, keeps mesh writers.
+pub(crate) fn prepare_gpu_worlds(
+    extracted: Res<ExtractedGpuCloths>,
+    pipelines: Option<Res<GpuClothPipelines>>,
+    mut worlds: ResMut<GpuWorlds>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+) {
+    let Some(pipelines) = pipelines else {
+        return;
+    };
+    let device = device.wgpu_device();
+    let worlds = &mut *worlds;
+    // The wanted members per key: cloths on the GPU with their upload; cloths leaving it keep
+    // their place (and upload) in the world that holds them until their last readback.
+    let mut wanted: BTreeMap<WorldKey, Vec<Member>> = BTreeMap::new();
+    for x in &extracted.cloths {
+        let upload = match &x.upload {
+            Some(u) => u.clone(),
+            None => {
+                let held = worlds
+                    .worlds
+                    .iter()
+                    .flat_map(|w| &w.members)
+                    .find(|m| m.entity == x.entity && m.generation == x.generation);
+                match held {
+                    Some(m) => m.upload.clone(),
+                    None => continue,
+                }
+            }
+        };
+        wanted
+            .entry(WorldKey::of(&upload.sim))
+            .or_default()
+            .push(Member {
+                entity: x.entity,
+                generation: x.generation,
+                upload,
+                on_gpu: x.upload.is_some(),
+                readback: x.readback,
+            });
+    }
+    let mut old: Vec<WorldEntry> = core::mem::take(&mut worlds.worlds);
+    for (key, mut members) in wanted {
+        members.sort_by_key(|m| m.entity);
+        let same = |w: &WorldEntry| {
+            w.key == key
+                && w.members.len() == members.len()
+                && w.members
+                    .iter()
+                    .zip(&members)
+                    .all(|(a, b)| a.entity == b.entity && a.generation == b.generation)
+        };
+        let entry = match old.iter().position(same) {
+            Some(i) => {
+                let mut e = old.swap_remove(i);
+                e.members = members;
+                e
+            }
+            None => {
+                let sims: Vec<&crate::solver::Simulation> =
+                    members.iter().map(|m| &m.upload.sim).collect();
+                let Ok(mut world) = GpuWorld::new(device, &queue, &pipelines.kernels, &sims) else {
+                    continue;
+                };
+                // Cloths that go on carry their GPU state over: the same upload, or new
+                // settings made to go on from where the GPU cloth is.
+                let mut encoder =
+                    device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+                for (i, m) in members.iter().enumerate() {
+                    let from = old.iter().find_map(|w| {
+                        w.members
+                            .iter()
+                            .position(|o| {
+                                o.entity == m.entity
+                                    && (o.generation == m.generation || m.upload.carry)
+                            })
+                            .filter(|&k| w.world.cloth_len(k) == world.cloth_len(i))
+                            .map(|k| (w, k))
+                    });
+                    if let Some((w, k)) = from {
+                        world.record_carry(&mut encoder, &w.world, k, i);
+                    }
+                }
+                queue.submit([encoder.finish()]);
+                WorldEntry {
+                    key,
+                    world,
+                    members,
+                    slots: Vec::new(),
+                    stepped: false,
+                    staging: Vec::new(),
+                }
+            }
+        };
+        worlds.worlds.push(entry);
+    }
+    // Prepare every world for the frame.
+    let steps: Vec<StepColliders<'_>> = extracted
+        .queue
+        .steps
+        .iter()
+        .map(|s: &QueuedStep| StepColliders {
+            colliders: &s.colliders,
+            slots: &s.slots,
+        })
+        .collect();
+    let dt = extracted.queue.steps.first().map_or(0.0, |s| s.dt);
+    for w in &mut worlds.worlds {
+        let cloths: Vec<ClothFrame<'_>> = w
+            .members
+            .iter()
+            .map(|m| {
+                let x = extracted.cloths.iter().find(|x| x.entity == m.entity);
+                match x.filter(|_| m.on_gpu) {
+                    Some(x) => ClothFrame {
+                        first_step: x.first_step,
+                        pin_targets: &x.pin_targets,
+                        teleports: &x.teleports,
+                        air_velocities: &x.air,
+                    },
+                    // Leaving: not stepped.
+                    None => ClothFrame {
+                        first_step: u32::MAX,
+                        ..Default::default()
+                    },
+                }
+            })
+            .collect();
+        let stepped = w.members.iter().any(|m| m.on_gpu);
+        let frame = GpuFrame {
+            dt,
+            steps: if stepped { steps.clone() } else { Vec::new() },
+            cloths,
+        };
+        w.world.prepare(device, &queue, &pipelines.kernels, &frame);
+        w.stepped = stepped && !frame.steps.is_empty();
+        w.slots.clone_from(&extracted.queue.entities);
+    }
+    // Mesh writers for the cloths on the GPU.
+    worlds.writers.retain(|e, _| {
+        extracted
+            .cloths
+            .iter()
+            .any(|x| x.entity == *e && x.upload.is_some())
+    });
+    for x in &extracted.cloths {
+        let Some(upload) = &x.upload else {
+            continue;
+        };
+        let fresh = worlds
+            .writers
+            .get(&x.entity)
+            .is_none_or(|w| w.generation != x.generation);
+        if fresh {
+            let writer = MeshWriter::new(
+                device,
+                &upload.weld,
+                &upload.drawn,
+                upload.layout,
+                upload.tangents.as_ref(),
+            );
+            worlds.writers.insert(
+                x.entity,
+                WriterEntry {
+                    generation: x.generation,
+                    writer,
+                    mesh: x.mesh,
+                    transform: x.transform,
+                },
+            );
+        }
+        if let Some(w) = worlds.writers.get_mut(&x.entity) {
+            w.mesh = x.mesh;
+            w.transform = x.transform;
+        }
+    }
+}
+
+/// `RenderGraph`, before the camera driver: every world's steps, every GPU cloth's mesh, and
+/// the copies to read back.
+pub(crate) fn run_gpu_worlds(
+    mut ctx: RenderContext,
+    pipelines: Option<Res<GpuClothPipelines>>,
+    mut worlds: ResMut<GpuWorlds>,
+    allocator: Res<MeshAllocator>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+) {
+    let Some(pipelines) = pipelines else {
+        return;
+    };
+    let worlds = &mut *worlds;
+    let encoder = ctx.command_encoder();
+    for w in &mut worlds.worlds {
+        w.world.record(encoder, &pipelines.kernels);
+        for (i, m) in w.members.iter().enumerate() {
+            if !m.on_gpu {
+                continue;
+            }
+            // The mesh every frame while on the GPU: a change of the mesh asset (torn
+            // triangles leaving the index buffer) uploads its main-world vertices again.
+            if let Some(writer) = worlds.writers.get(&m.entity)
+                && writer.generation == m.generation
+                && let Some(slice) = allocator.mesh_vertex_slice(&writer.mesh)
+            {
+                writer.writer.record(
+                    device.wgpu_device(),
+                    &queue,
+                    &pipelines.mesh,
+                    encoder,
+                    w.world.state_buffer(),
+                    w.world.vertex_base(i),
+                    slice.buffer,
+                    slice.range.start,
+                    writer.transform,
+                );
+            }
+        }
+        let any_state = w.members.iter().any(|m| m.readback);
+        if !w.stepped && !any_state {
+            continue;
+        }
+        // [statuses | per read-back cloth: positions, velocities | impulse slots].
+        let members = w.members.len() as u64;
+        let mut cloths = Vec::with_capacity(w.members.len());
+        let mut at = 16 * members;
+        for (i, m) in w.members.iter().enumerate() {
+            let n = w.world.cloth_len(i);
+            let state_at = m.readback.then(|| {
+                let here = at;
+                at += 32 * n as u64;
+                here
+            });
+            cloths.push((m.entity, m.generation, n, state_at));
+        }
+        let impulses_at = at;
+        let (impulse_from, impulse_bytes) = if w.stepped {
+            w.world.impulse_region()
+        } else {
+            (0, 0)
+        };
+        let size = impulses_at + impulse_bytes;
+        let buffer = match w.staging.iter().position(|b| b.size() == size) {
+            Some(k) => w.staging.swap_remove(k),
+            None => device.wgpu_device().create_buffer(&wgpu::BufferDescriptor {
+                label: Some("cloth_readback"),
+                size,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+        };
+        let state = w.world.state_buffer();
+        encoder.copy_buffer_to_buffer(state, w.world.status_offset(0), &buffer, 0, 16 * members);
+        for (i, c) in cloths.iter().enumerate() {
+            if let Some(to) = c.3 {
+                let (p, bytes) = w.world.positions_range(i);
+                let (v, _) = w.world.velocities_range(i);
+                if bytes > 0 {
+                    encoder.copy_buffer_to_buffer(state, p, &buffer, to, bytes);
+                    encoder.copy_buffer_to_buffer(state, v, &buffer, to + bytes, bytes);
+                }
+            }
+        }
+        if impulse_bytes > 0 {
+            encoder.copy_buffer_to_buffer(
+                w.world.scratch_buffer(),
+                impulse_from,
+                &buffer,
+                impulses_at,
+                impulse_bytes,
+            );
+        }
+        let colliders = if impulse_bytes > 0 {
+            w.slots[..w.world.collider_slots().min(w.slots.len())].to_vec()
+        } else {
+            Vec::new()
+        };
+        worlds.requested.push(Readback {
+            cloths,
+            colliders,
+            impulses_at,
+            buffer,
+            data: None,
+            key: w.key,
+        });
+    }
+}
+
+/// `Cleanup`, after the frame's commands were submitted: maps this frame's copies; the
+/// results come back through the channel when the GPU is done.
+pub(crate) fn map_readbacks(mut worlds: ResMut<GpuWorlds>, channel: Res<ReadbackChannel>) {
+    for mut r in worlds.requested.drain(..) {
+        let sender = channel.sender.clone();
+        let buffer = r.buffer.clone();
+        buffer
+            .clone()
+            .map_async(wgpu::MapMode::Read, .., move |result| {
+                if result.is_ok() {
+                    r.data = Some(buffer.get_mapped_range(..).to_vec());
+                    buffer.unmap();
+                }
+                // The receiver lives as long as the render world.
+                let _ = sender.send(r);
+            });
+    }
+}
+
+/// Extraction: what the GPU finished goes to the main world; staging buffers return to their
+/// worlds.
+pub(crate) fn send_gpu_results(
+    channel: Res<ReadbackChannel>,
+    mut worlds: ResMut<GpuWorlds>,
+    mut main_world: ResMut<MainWorld>,
+) {
+    let Ok(receiver) = channel.receiver.lock() else {
+        return;
+    };
+    let mut cloths = Vec::new();
+    let mut impulses = Vec::new();
+    for r in receiver.try_iter() {
+        if let Some(w) = worlds.worlds.iter_mut().find(|w| w.key == r.key)
+            && w.staging.len() < 4
+        {
+            w.staging.push(r.buffer.clone());
+        }
+        let Some(data) = &r.data else {
+            continue;
+        };
+        for (i, &(entity, generation, n, state_at)) in r.cloths.iter().enumerate() {
+            let status: Vec4 = bytemuck::pod_read_unaligned(&data[16 * i..16 * i + 16]);
+            let state = state_at.map(|at| {
+                let at = at as usize;
+                let values: Vec<Vec4> = bytemuck::pod_collect_to_vec(&data[at..at + 32 * n]);
+                (values[..n].to_vec(), values[n..].to_vec())
+            });
+            cloths.push(GpuResult {
+                entity,
+                generation,
+                failed: status.x != 0.0,
+                torn: status.y != 0.0,
+                state,
+            });
+        }
+        if !r.colliders.is_empty() {
+            let words: Vec<u32> = bytemuck::pod_collect_to_vec(&data[r.impulses_at as usize..]);
+            let sums = sum_impulses(&words, r.colliders.len());
+            impulses.extend(r.colliders.iter().copied().zip(sums));
+        }
+    }
+    if (!cloths.is_empty() || !impulses.is_empty())
+        && let Some(mut results) = main_world.get_resource_mut::<GpuClothResults>()
+    {
+        results.cloths.extend(cloths);
+        results.impulses.extend(impulses);
+    }
+}
