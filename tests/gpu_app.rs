@@ -75,29 +75,72 @@ fn without_a_renderer_every_cloth_runs_on_the_cpu_and_says_why() {
 }
 
 /// A rendering app with no window, driven by hand (see BEVY019.md).
-fn render_app() -> App {
+fn render_app() -> ExitingApp {
+    render_app_with(ClothPlugins::default(), true)
+}
+
+/// A render app that exits (sends `AppExit` and runs the exit frame) when dropped, as a game
+/// does when its window closes, so no pipeline is still compiling when the test binary ends.
+struct ExitingApp(Option<App>);
+
+impl ExitingApp {
+    /// The app, to drop without exiting.
+    fn into_inner(mut self) -> App {
+        self.0.take().expect("taken once")
+    }
+}
+
+impl std::ops::Deref for ExitingApp {
+    type Target = App;
+    fn deref(&self) -> &App {
+        self.0.as_ref().expect("not taken")
+    }
+}
+
+impl std::ops::DerefMut for ExitingApp {
+    fn deref_mut(&mut self) -> &mut App {
+        self.0.as_mut().expect("not taken")
+    }
+}
+
+impl Drop for ExitingApp {
+    fn drop(&mut self) {
+        if let Some(app) = self.0.as_mut()
+            && !std::thread::panicking()
+        {
+            app.world_mut().write_message(AppExit::Success);
+            app.update();
+        }
+    }
+}
+
+/// `render_app` with `cloth`'s plugins; without pipelined rendering the render world stays a
+/// sub-app of `app`, where a test can look at it.
+fn render_app_with(cloth: ClothPlugins, pipelined: bool) -> ExitingApp {
     let mut app = App::new();
-    app.add_plugins(
-        DefaultPlugins
-            .build()
-            .disable::<bevy::winit::WinitPlugin>()
-            .set(WindowPlugin {
-                primary_window: None,
-                exit_condition: bevy::window::ExitCondition::DontExit,
-                ..default()
-            }),
-    )
-    .add_plugins(ClothPlugins::default())
-    .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
-        1.0 / 60.0,
-    )))
-    .insert_resource(Time::<Fixed>::from_hz(60.0));
+    let mut plugins = DefaultPlugins
+        .build()
+        .disable::<bevy::winit::WinitPlugin>()
+        .set(WindowPlugin {
+            primary_window: None,
+            exit_condition: bevy::window::ExitCondition::DontExit,
+            ..default()
+        });
+    if !pipelined {
+        plugins = plugins.disable::<bevy::render::pipelined_rendering::PipelinedRenderingPlugin>();
+    }
+    app.add_plugins(plugins)
+        .add_plugins(cloth)
+        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+            1.0 / 60.0,
+        )))
+        .insert_resource(Time::<Fixed>::from_hz(60.0));
     while app.plugins_state() == bevy::app::PluginsState::Adding {
         bevy::tasks::tick_global_task_pools_on_main_thread();
     }
     app.finish();
     app.cleanup();
-    app
+    ExitingApp(Some(app))
 }
 
 #[test]
@@ -433,5 +476,220 @@ fn a_gpu_cloth_pushes_on_its_colliders() {
     assert!(
         (g - c).abs() < 0.15 * c.abs(),
         "GPU cloth {g} N·s against CPU cloth {c} N·s"
+    );
+}
+
+/// `render_app` simulating in `schedule`.
+fn render_app_in(schedule: impl bevy::ecs::schedule::ScheduleLabel) -> ExitingApp {
+    render_app_with(ClothPlugins::new(schedule), true)
+}
+
+/// Whether any pipeline of `app`'s render world (a sub-app: no pipelined rendering) is still
+/// being compiled.
+fn compiling(app: &App) -> bool {
+    use bevy::render::render_resource::{CachedPipelineState, PipelineCache};
+    let render = app
+        .get_sub_app(bevy::render::RenderApp)
+        .expect("the render world is a sub-app without pipelined rendering");
+    render
+        .world()
+        .resource::<PipelineCache>()
+        .pipelines()
+        .any(|p| matches!(p.state, CachedPipelineState::Creating(_)))
+}
+
+/// An app that exits a frame after its first GPU cloth started (pipelines still compiling):
+/// the exit frame waits for them and for the GPU, so nothing is compiling when the app is
+/// dropped; and dropping a render app mid-run, without exiting, leaves the next one working.
+#[test]
+fn an_app_exiting_right_after_a_gpu_cloth_starts_shuts_down_cleanly() {
+    if common::gpu_or_skip("an_app_exiting_right_after_a_gpu_cloth_starts_shuts_down_cleanly")
+        .is_none()
+    {
+        return;
+    }
+    let mut app = render_app_with(ClothPlugins::default(), false);
+    // A camera and a lit material, so the renderer has pipelines of its own to compile.
+    let target = app
+        .world_mut()
+        .resource_mut::<Assets<Image>>()
+        .add(Image::new_target_texture(
+            64,
+            64,
+            bevy::render::render_resource::TextureFormat::Rgba8UnormSrgb,
+            None,
+        ));
+    app.world_mut().spawn((
+        Camera3d::default(),
+        bevy::camera::RenderTarget::Image(target.into()),
+        Transform::from_xyz(0.0, 1.0, 3.0).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    app.world_mut().spawn(DirectionalLight::default());
+    let material = app
+        .world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial::default());
+    let cloth = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    app.world_mut()
+        .entity_mut(cloth)
+        .insert((ClothReadback, MeshMaterial3d(material)));
+    // Exit on the first frame that leaves a pipeline compiling (llvmpipe: the first).
+    let mut seen_compiling = false;
+    for _ in 0..3 {
+        app.update();
+        seen_compiling = compiling(&app);
+        if seen_compiling {
+            break;
+        }
+    }
+    if !seen_compiling {
+        eprintln!("every pipeline compiled within a frame: the exit frame had none to wait for");
+    }
+    app.world_mut().write_message(AppExit::Success);
+    app.update();
+    assert!(
+        !compiling(&app),
+        "a pipeline is still compiling after the exit frame"
+    );
+    assert!(in_use(&app, cloth).gpu);
+    drop(app.into_inner());
+    // Dropped without exiting, two frames in.
+    let mut app = render_app();
+    spawn(&mut app, Some(ClothBackend::Gpu), false);
+    common::run(&mut app, 2);
+    drop(app.into_inner());
+    // And the next app runs its GPU cloth.
+    let mut app = render_app();
+    let cloth = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    app.world_mut().entity_mut(cloth).insert(ClothReadback);
+    let start = centre_y(app_after(&mut app, 5), cloth);
+    common::run(&mut app, 40);
+    assert!(
+        centre_y(&app, cloth) < start - 0.05,
+        "the GPU cloth did not fall"
+    );
+}
+
+fn app_after(app: &mut App, frames: usize) -> &App {
+    common::run(app, frames);
+    app
+}
+
+/// `ClothPlugins::new(schedule)` reaches the GPU backend: with cloth simulated in `FixedLast`
+/// (after `FixedPostUpdate`), a GPU cloth resting on a ball still presses on it (its contact
+/// impulses arrive in the schedule the colliders are gathered in) and follows its pins in the
+/// same step.
+#[test]
+fn a_gpu_cloth_in_another_schedule_presses_on_its_colliders() {
+    if common::gpu_or_skip("a_gpu_cloth_in_another_schedule_presses_on_its_colliders").is_none() {
+        return;
+    }
+    let mut app = render_app_in(FixedLast);
+    let grid = Grid::new(16, 16, 1.0, 1.0);
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    app.world_mut().spawn((
+        Mesh3d(mesh),
+        Transform::from_xyz(0.0, 0.6, 0.0),
+        Cloth::default(),
+        ClothBackend::Gpu,
+    ));
+    let ball = app
+        .world_mut()
+        .spawn((ClothCollider::sphere(0.3), Transform::default()))
+        .id();
+    let mut pushes = Vec::new();
+    for _ in 0..120 {
+        app.update();
+        pushes.push(
+            app.world()
+                .get::<ClothContactImpulse>(ball)
+                .map_or(0.0, |i| i.linear.y),
+        );
+    }
+    let mean = pushes[60..].iter().sum::<f32>() / 60.0;
+    eprintln!("mean push per step in FixedLast: {mean} N·s");
+    assert!(mean < -1e-4, "the ball feels nothing ({mean} N·s)");
+}
+
+/// A character moved in `FixedUpdate` with 15 fixed steps per rendered frame (a slow frame,
+/// or llvmpipe): each step gives the GPU its own pin targets and collider poses, so the GPU
+/// cape stretches as the CPU cape does instead of crumpling on a body swept across the whole
+/// frame's path.
+#[test]
+fn many_fixed_steps_a_frame_give_the_gpu_the_cpus_cape() {
+    if common::gpu_or_skip("many_fixed_steps_a_frame_give_the_gpu_the_cpus_cape").is_none() {
+        return;
+    }
+    /// Walks a circle of 2 m around its centre.
+    #[derive(Component)]
+    struct Walker(Vec3);
+    fn walk(time: Res<Time>, mut walkers: Query<(&mut Transform, &Walker)>) {
+        for (mut t, w) in &mut walkers {
+            let angle = 0.8 * time.elapsed_secs();
+            t.translation = w.0 + Vec3::new(2.0 * angle.cos(), 1.0, 2.0 * angle.sin());
+            t.rotation = Quat::from_rotation_y(-angle);
+        }
+    }
+    let steps_per_frame = 15.0;
+    let mut app = render_app();
+    app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+        steps_per_frame / 60.0,
+    )))
+    .add_systems(FixedUpdate, walk);
+    let grid = Grid::new(10, 14, 0.6, 0.9);
+    let capes: Vec<Entity> = [ClothBackend::Cpu, ClothBackend::Gpu]
+        .into_iter()
+        .enumerate()
+        .map(|(k, backend)| {
+            // Two walkers far apart, each with a body and a cape attached to it.
+            let offset = Vec3::X * 20.0 * k as f32;
+            let walker = app
+                .world_mut()
+                .spawn((
+                    Walker(offset),
+                    Transform::from_translation(offset + Vec3::new(2.0, 1.0, 0.0)),
+                ))
+                .id();
+            let body = app
+                .world_mut()
+                .spawn((
+                    ClothCollider::capsule(0.25, 0.9).with_thickness(0.02),
+                    Transform::default(),
+                    ChildOf(walker),
+                ))
+                .id();
+            let mesh = app
+                .world_mut()
+                .resource_mut::<Assets<Mesh>>()
+                .add(grid_mesh(&grid));
+            let top: Vec<u32> = (0..10).map(|i| grid.index(i, 0)).collect();
+            let cape = Transform::from_translation(Vec3::new(2.0, 1.2, 0.3) + offset)
+                .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
+            app.world_mut()
+                .spawn((
+                    Mesh3d(mesh),
+                    cape,
+                    Cloth::default(),
+                    ClothPins::attached(top, body),
+                    ClothTethers::default(),
+                    backend,
+                    ClothReadback,
+                ))
+                .id()
+        })
+        .collect();
+    // The GPU state comes back a few frames late: compare at the end of a steady walk.
+    common::run(&mut app, (360.0 / steps_per_frame) as usize);
+    assert!(in_use(&app, capes[1]).gpu);
+    let strain = |e| app.world().get::<ClothSim>(e).unwrap().max_strain();
+    let (cpu, gpu) = (strain(capes[0]), strain(capes[1]));
+    eprintln!("max strain with 15 steps a frame: CPU cape {cpu}, GPU cape {gpu}");
+    assert!(cpu < 0.2, "the CPU cape itself stretched ({cpu})");
+    assert!(
+        gpu < 2.0 * cpu + 0.02,
+        "GPU cape {gpu} against CPU cape {cpu}"
     );
 }

@@ -19,8 +19,9 @@ use super::backend::{
 use super::kernels::GpuKernels;
 use super::mesh::MeshKernel;
 use super::render::{
-    ExtractedGpuCloths, GpuClothPipelines, GpuWorlds, ReadbackChannel, extract_gpu_cloths,
-    map_readbacks, prepare_gpu_worlds, run_gpu_worlds, send_gpu_results,
+    ExitRequested, ExtractedGpuCloths, GpuClothPipelines, GpuWorlds, ReadbackChannel,
+    drain_on_exit, extract_exit, extract_gpu_cloths, map_readbacks, prepare_gpu_worlds,
+    run_gpu_worlds, send_gpu_results,
 };
 use crate::foundation::{ClothSchedule, ClothSystems};
 
@@ -110,19 +111,22 @@ impl Plugin for ClothGpuPlugin {
         render_app
             .init_resource::<ExtractedGpuCloths>()
             .init_resource::<GpuWorlds>()
+            .init_resource::<ExitRequested>()
             .insert_resource(ReadbackChannel {
                 sender,
                 receiver: Mutex::new(receiver),
             })
             .add_systems(
                 ExtractSchedule,
-                (send_gpu_results, extract_gpu_cloths).chain(),
+                ((send_gpu_results, extract_gpu_cloths).chain(), extract_exit),
             )
             .add_systems(
                 Render,
                 (
                     prepare_gpu_worlds.in_set(RenderSystems::PrepareResources),
-                    map_readbacks.in_set(RenderSystems::Cleanup),
+                    (map_readbacks, drain_on_exit)
+                        .chain()
+                        .in_set(RenderSystems::Cleanup),
                 ),
             )
             .add_systems(RenderGraph, run_gpu_worlds.before(camera_driver));

@@ -532,3 +532,53 @@ pub(crate) fn send_gpu_results(
         results.impulses.extend(impulses);
     }
 }
+
+/// Whether the main world asked the app to exit (set during extraction).
+#[derive(Resource, Default)]
+pub(crate) struct ExitRequested(pub bool);
+
+pub(crate) fn extract_exit(
+    mut flag: ResMut<ExitRequested>,
+    exits: Extract<Option<Res<Messages<AppExit>>>>,
+) {
+    flag.0 |= exits.as_ref().is_some_and(|m| !m.is_empty());
+}
+
+/// Longest an exiting app waits for pipelines still compiling.
+const EXIT_DRAIN: std::time::Duration = std::time::Duration::from_secs(20);
+
+/// `Cleanup` of the frame in which the app exits: waits until no pipeline is still being
+/// compiled on the async compute pool and the GPU is idle, so the app (and the process) is not
+/// torn down while a driver thread is inside `create_*_pipeline` or a readback is in flight —
+/// which is how GPU-cloth apps died at exit on an NVIDIA driver (a debugger showed an async
+/// compute thread inside `create_compute_pipeline` while the app was dropped). The cloth
+/// kernels themselves are compiled synchronously when the plugin starts; what is still compiling
+/// are Bevy's own pipelines, which it compiles on that pool as the scene appears (on llvmpipe,
+/// the first frame with a camera leaves mesh preprocessing, clustering, irradiance and depth
+/// downsampling pipelines compiling), and a start slowed by the cloth kernels' compilation makes
+/// a short run end before they are done.
+pub(crate) fn drain_on_exit(
+    flag: Res<ExitRequested>,
+    mut cache: ResMut<bevy::render::render_resource::PipelineCache>,
+    device: Res<RenderDevice>,
+) {
+    if !flag.0 {
+        return;
+    }
+    let start = std::time::Instant::now();
+    let compiling = |cache: &bevy::render::render_resource::PipelineCache| {
+        cache.pipelines().any(|p| {
+            matches!(
+                p.state,
+                bevy::render::render_resource::CachedPipelineState::Creating(_)
+            )
+        })
+    };
+    while compiling(&cache) && start.elapsed() < EXIT_DRAIN {
+        cache.process_queue();
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let _ = device
+        .wgpu_device()
+        .poll(wgpu::PollType::wait_indefinitely());
+}
