@@ -14,7 +14,7 @@
 //!    bit-identical however many threads run.
 //! 2. **Colouring.** Inside each part (and the boundary), constraints are greedily coloured so
 //!    that no two of one colour share a vertex. A colour is projected four constraints at a
-//!    time with SIMD lanes; the GPU backend will project a colour per dispatch. Constraints
+//!    time with SIMD lanes; the GPU backend projects a colour per workgroup barrier. Constraints
 //!    that find no free colour among 128 go to a last batch projected one by one.
 //! 3. **Layout.** Each set stores its constraints colour by colour in parallel arrays
 //!    (indices, rest values, material parameter, XPBD multiplier λ).

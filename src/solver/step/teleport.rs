@@ -5,8 +5,8 @@
 //! world by its pinned corners (a character stepping through a portal keeps its cape); a
 //! collider that teleports appears at its new place instead of sweeping through every cloth
 //! on the way. The plugin decides with [`teleport_offset`] and [`is_teleport`] and moves the
-//! cloth with [`ClothState::teleport`]; the GPU's `teleport` kernel (`gpu/step.wgsl`) is the
-//! twin of that last one.
+//! cloth with [`ClothState::teleport`]; the GPU's `teleport` kernel
+//! (`gpu/shaders/step_begin.wgsl`) is the twin of that last one.
 
 use glam::Vec3;
 
