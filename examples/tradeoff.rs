@@ -1155,8 +1155,9 @@ fn gpu_table(args: &Args, par: &Workers, bending: Bending) {
                 sim
             };
             let make_all = || (0..count).map(|_| make()).collect::<Vec<_>>();
-            // Big CPU cases once: they take seconds.
-            let cpu_frames = if n >= 512 { frames.min(20) } else { frames };
+            // Big CPU cases once: they take seconds. Every frame, so both strains are at the
+            // same moment.
+            let cpu_frames = frames;
             let cpu_repeat = if n >= 256 { 1 } else { 3 };
             let (cpu_ms, cpu_strain) = if count == 1 {
                 let cpu = simulate(make, cpu_frames, cpu_repeat, par);
