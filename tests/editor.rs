@@ -17,6 +17,7 @@ use bevy_cloth::editor::{
     ClothEditor, NewCloth, NewShape, PinPreset, actions, panel_contents, scene,
 };
 use bevy_cloth::prelude::*;
+use bevy_cloth::solver::Shape;
 use bevy_cloth::wind::ClothWindField;
 use common::run;
 
@@ -575,6 +576,99 @@ fn scene_files_round_trip_exactly() {
     let err = scene::load_scene(world, &bad).unwrap_err();
     assert!(err.contains("cloth 0"), "{err}");
     assert_eq!(objects(world), before);
+}
+
+/// A scene file that cannot be built is refused whole, before anything is despawned: a mesh
+/// asset that does not exist, a pin on a vertex the cloth lacks, a grid too large to allocate
+/// (60 000², as a file from a mod folder might ask), values outside their limits. Each leaves
+/// the running scene as it was, with no `ClothInvalid` cloth.
+#[test]
+fn a_scene_file_that_cannot_be_built_changes_nothing() {
+    let mut app = editor_app();
+    actions::add_cloth(app.world_mut(), &small());
+    actions::add_collider(app.world_mut(), NewShape::Sphere);
+    actions::add_wind_zone(app.world_mut());
+    run(&mut app, 3);
+    let good = scene::save_scene(app.world_mut());
+    assert_eq!((good.cloths.len(), good.colliders.len()), (1, 1));
+    let state = |world: &mut World| {
+        let mut q = world
+            .query_filtered::<Entity, Or<(With<Cloth>, With<ClothCollider>, With<WindZone>)>>();
+        let mut objects: Vec<Entity> = q.iter(world).collect();
+        objects.sort();
+        let invalid = world
+            .query_filtered::<(), With<ClothInvalid>>()
+            .iter(world)
+            .count();
+        (objects, invalid)
+    };
+    let before = state(app.world_mut());
+    assert_eq!((before.0.len(), before.1), (3, 0));
+
+    type Break = fn(&mut scene::ClothScene);
+    let cases: [(&str, Break, &str); 9] = [
+        (
+            "a mesh asset that does not exist",
+            |s| s.cloths[0].mesh = scene::SavedMesh::Asset("no_such_cloth.obj".into()),
+            "cannot load no_such_cloth.obj",
+        ),
+        (
+            "a pin on a vertex the cloth lacks",
+            |s| s.cloths[0].pins[0].vertex = 10_000,
+            "10000",
+        ),
+        (
+            "a 60 000 × 60 000 grid",
+            |s| {
+                s.cloths[0].mesh = scene::SavedMesh::Grid {
+                    columns: 60_000,
+                    rows: 60_000,
+                    width: 1.0,
+                    height: 1.0,
+                }
+            },
+            "at most 4194304 vertices",
+        ),
+        ("a negative mass", |s| s.cloths[0].cloth.mass = -1.0, "mass"),
+        (
+            "no substeps",
+            |s| s.cloths[0].config.substeps = 0,
+            "substeps",
+        ),
+        (
+            "a NaN position",
+            |s| s.cloths[0].transform.translation.x = f32::NAN,
+            "position",
+        ),
+        (
+            "a ball of negative radius",
+            |s| s.colliders[0].shape = Shape::Sphere { radius: -1.0 },
+            "collider 0",
+        ),
+        (
+            "a wind zone of NaN falloff",
+            |s| s.zones[0].zone.falloff = f32::NAN,
+            "wind zone 0",
+        ),
+        (
+            "a pin anchored at infinity",
+            |s| s.cloths[0].pins[0].anchor = scene::SavedAnchor::World(Vec3::INFINITY),
+            "anchored",
+        ),
+    ];
+    for (what, break_it, says) in cases {
+        let mut bad = good.clone();
+        break_it(&mut bad);
+        let err = scene::load_scene(app.world_mut(), &bad).expect_err(what);
+        assert!(err.contains(says), "{what}: {err}");
+        run(&mut app, 2);
+        assert_eq!(state(app.world_mut()), before, "{what} changed the scene");
+    }
+    // The good file still loads.
+    scene::load_scene(app.world_mut(), &good).unwrap();
+    run(&mut app, 2);
+    let after = state(app.world_mut());
+    assert_eq!((after.0.len(), after.1), (3, 0));
 }
 
 #[test]

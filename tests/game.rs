@@ -464,6 +464,77 @@ fn cape_app(frame: Duration) -> (App, Entity) {
     (app, e)
 }
 
+/// A wind zone hopping 10 m along x every fixed step, as a game moves a fan in `FixedUpdate`.
+#[derive(Component)]
+struct Hopper;
+
+fn hop(mut steps: Local<u32>, mut zones: Query<&mut Transform, With<Hopper>>) {
+    *steps += 1;
+    for mut t in &mut zones {
+        t.translation.x = 10.0 * *steps as f32;
+    }
+}
+
+/// The wind this step's field blows where the zone is now, and where it was a step before.
+#[derive(Resource, Default)]
+struct WindSeen(Vec<(f32, f32)>);
+
+fn feel_wind(
+    field: Res<bevy_cloth::wind::ClothWindField>,
+    zones: Query<&Transform, With<Hopper>>,
+    mut out: ResMut<WindSeen>,
+) {
+    for t in &zones {
+        let (now, before) = (t.translation, t.translation - 10.0 * Vec3::X);
+        out.0.push((
+            field.field.velocity_at(now, field.time).x,
+            field.field.velocity_at(before, field.time).x,
+        ));
+    }
+}
+
+#[test]
+fn a_wind_zone_moved_in_fixed_update_blows_from_there_in_that_step() {
+    for frame in [1.0 / 60.0, 6.0 / 60.0] {
+        let mut app = app_with_frame(Duration::from_secs_f64(frame));
+        app.init_resource::<WindSeen>()
+            .add_systems(FixedUpdate, hop)
+            .add_systems(FixedPostUpdate, feel_wind.after(ClothSystems::Prepare));
+        let wind = WindParams {
+            velocity: Vec3::new(5.0, 0.0, 0.0),
+            gust_amplitude: 0.0,
+            turbulence: 0.0,
+            ..default()
+        };
+        app.world_mut().spawn((
+            Hopper,
+            WindZone {
+                wind,
+                half_extents: Vec3::ONE,
+                falloff: 0.5,
+            },
+            Transform::default(),
+        ));
+        run(&mut app, 12);
+        let seen = &app.world().resource::<WindSeen>().0;
+        assert!(
+            seen.len() >= 10,
+            "{frame} s frames: {} fixed steps",
+            seen.len()
+        );
+        for (k, &(now, before)) in seen.iter().enumerate() {
+            assert!(
+                (now - 5.0).abs() < 1e-5,
+                "{frame} s frames, step {k}: {now} m/s where the zone is now"
+            );
+            assert_eq!(
+                before, 0.0,
+                "{frame} s frames, step {k}: wind where the zone was a step before"
+            );
+        }
+    }
+}
+
 #[test]
 fn pins_sit_on_an_anchor_moved_in_fixed_update_at_one_and_six_steps_per_frame() {
     for frame in [1.0 / 60.0, 6.0 / 60.0] {

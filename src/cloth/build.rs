@@ -11,8 +11,8 @@ use super::{
 };
 use crate::foundation::{FixedPoses, read_mesh};
 use crate::solver::{
-    Features, MeshBinding, SelfCollision, Simulation, SolverError, TetherParams, TopologyOptions,
-    limits,
+    Features, MeshBinding, SelfCollision, Simulation, SolverError, TetherParams, TopologyError,
+    TopologyOptions, limits,
 };
 
 /// A cloth built from its mesh, before its own mesh asset exists.
@@ -50,16 +50,20 @@ impl Built {
     }
 }
 
-/// Builds the simulation of `cloth` from `mesh`, placed by `own` (its entity's pose now), its
-/// pins on their anchors.
-pub(super) fn build(
+/// A cloth's simulation before its pins: the mesh read, welded and placed.
+struct Unpinned {
+    sim: Simulation,
+    binding: MeshBinding,
+    data: crate::foundation::MeshData,
+}
+
+/// Reads, welds and places `mesh` (by `own`) into an unpinned simulation of `cloth`.
+fn build_unpinned(
     cloth: &Cloth,
     config: &ClothConfig,
-    pins: &ClothPins,
     mesh: &Mesh,
     own: &GlobalTransform,
-    poses: &FixedPoses,
-) -> Result<Built, ClothError> {
+) -> Result<Unpinned, ClothError> {
     if !limits::MASS.contains(cloth.mass) {
         return Err(ClothError::BadMass(cloth.mass));
     }
@@ -70,6 +74,15 @@ pub(super) fn build(
         return Err(ClothError::BadWeldTolerance(cloth.weld_tolerance));
     }
     let data = read_mesh(mesh)?;
+    // Refused before welding allocates anything for it.
+    if data.positions.len() > limits::MAX_VERTICES || data.indices.len() / 3 > limits::MAX_TRIANGLES
+    {
+        return Err(SolverError::from(TopologyError::TooLarge {
+            vertices: data.positions.len() as u64,
+            triangles: (data.indices.len() / 3) as u64,
+        })
+        .into());
+    }
     let (lo, hi) = data.positions.iter().filter(|p| p.is_finite()).fold(
         (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
@@ -103,7 +116,58 @@ pub(super) fn build(
         )
         .map_err(SolverError::from)?;
     let masses = topology.masses(cloth.mass, cloth.mass_distribution);
-    let mut sim = Simulation::new(topology, &masses, *config)?;
+    let sim = Simulation::new(topology, &masses, *config)?;
+    Ok(Unpinned { sim, binding, data })
+}
+
+/// A cloth's components, to check before spawning them ([`check_cloth`]).
+#[derive(Clone, Copy, Debug)]
+pub struct ClothParts<'a> {
+    /// The cloth.
+    pub cloth: &'a Cloth,
+    /// Its solver settings.
+    pub config: &'a ClothConfig,
+    /// Its pins.
+    pub pins: &'a ClothPins,
+    /// Self-collision, if on.
+    pub self_collision: Option<&'a ClothSelfCollision>,
+    /// Tethers, if on.
+    pub tethers: Option<&'a ClothTethers>,
+    /// Tearing, if on.
+    pub tearing: Option<&'a ClothTearing>,
+}
+
+/// Checks that a cloth with these components would start from `mesh` placed by `at`: what
+/// the plugin checks when it builds the cloth (mass, teleport distance, weld tolerance, the
+/// mesh and its size, settings, pinned vertices in range, features), without an app and
+/// without keeping anything. Where a pin's anchor is is not checked (its entity may not exist
+/// yet). Scene files are checked with it before the world is touched.
+///
+/// # Errors
+/// The [`ClothError`] the plugin would report for the cloth.
+pub fn check_cloth(parts: ClothParts, mesh: &Mesh, at: &GlobalTransform) -> Result<(), ClothError> {
+    let mut u = build_unpinned(parts.cloth, parts.config, mesh, at)?;
+    pin_list(parts.pins, u.binding.weld())?;
+    let wanted = features(&u.sim, parts.self_collision, parts.tethers, parts.tearing);
+    u.sim.set_features(wanted).map_err(SolverError::Params)?;
+    Ok(())
+}
+
+/// Builds the simulation of `cloth` from `mesh`, placed by `own` (its entity's pose now), its
+/// pins on their anchors.
+pub(super) fn build(
+    cloth: &Cloth,
+    config: &ClothConfig,
+    pins: &ClothPins,
+    mesh: &Mesh,
+    own: &GlobalTransform,
+    poses: &FixedPoses,
+) -> Result<Built, ClothError> {
+    let Unpinned {
+        mut sim,
+        binding,
+        data,
+    } = build_unpinned(cloth, config, mesh, own)?;
     let rest_local = binding.weld().gather(&data.positions);
     let mut list = pin_list(pins, binding.weld())?;
     let mut attached = Vec::new();

@@ -22,6 +22,7 @@ mod systems;
 mod workers;
 mod writeback;
 
+pub use build::{ClothParts, check_cloth};
 pub use components::{
     Cloth, ClothConfig, ClothPin, ClothPins, ClothSelfCollision, ClothSteppedElsewhere,
     ClothTearing, ClothTethers, ClothTorn, PinAnchor,

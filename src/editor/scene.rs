@@ -21,14 +21,14 @@ use serde::{Deserialize, Serialize};
 use super::actions::{dress_cloth, say, spawn_collider};
 use super::state::{ClothEditor, EditorGrid};
 use crate::cloth::{
-    Cloth, ClothConfig, ClothPin, ClothPins, ClothSelfCollision, ClothSim, ClothSource,
-    ClothTearing, ClothTethers, PinAnchor,
+    Cloth, ClothConfig, ClothParts, ClothPin, ClothPins, ClothSelfCollision, ClothSim, ClothSource,
+    ClothTearing, ClothTethers, PinAnchor, check_cloth,
 };
 use crate::collider::{ClothCollider, ColliderMesh, ColliderShape};
 use crate::foundation::{EntityName, grid_mesh};
 use crate::gpu::ClothBackend;
 use crate::render::VelvetMaterial;
-use crate::solver::{Shape, WindParams};
+use crate::solver::{MAX_COORDINATE, Shape, WindParams, limits};
 use crate::wind::{Wind, WindZone};
 
 /// A whole scene's cloth setup, as saved.
@@ -433,73 +433,39 @@ pub fn scene_from_ron(text: &str) -> Result<ClothScene, String> {
     ron::from_str(text).map_err(|e| e.to_string())
 }
 
-/// The mesh of an entry [`check_mesh`] accepted.
-fn build_mesh(world: &mut World, saved: &SavedMesh) -> Handle<Mesh> {
-    let mesh = match saved {
-        SavedMesh::Grid {
-            columns,
-            rows,
-            width,
-            height,
-        } => grid_mesh(&crate::solver::Grid::new(*columns, *rows, *width, *height)),
-        SavedMesh::Asset(path) => return world.resource::<AssetServer>().load(path.clone()),
-        SavedMesh::Inline {
-            positions,
-            uvs,
-            indices,
-        } => {
-            let mut m = Mesh::new(
-                PrimitiveTopology::TriangleList,
-                RenderAssetUsages::default(),
-            )
-            .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions.clone())
-            .with_inserted_indices(Indices::U32(indices.clone()));
-            if let Some(uv) = uvs {
-                m.insert_attribute(Mesh::ATTRIBUTE_UV_0, uv.clone());
-            }
-            m
+/// The mesh of an entry [`check_mesh`] accepted: made from the file, or an asset loaded while
+/// checking (kept, so the scene is built from the mesh that was checked).
+enum ReadyMesh {
+    Made(Mesh),
+    Loaded(Handle<Mesh>),
+}
+
+impl ReadyMesh {
+    fn get<'a>(&'a self, world: &'a World) -> Option<&'a Mesh> {
+        match self {
+            ReadyMesh::Made(m) => Some(m),
+            ReadyMesh::Loaded(h) => world.resource::<Assets<Mesh>>().get(h),
         }
-    };
-    world.resource_mut::<Assets<Mesh>>().add(mesh)
+    }
+
+    fn into_handle(self, world: &mut World) -> Handle<Mesh> {
+        match self {
+            ReadyMesh::Made(m) => world.resource_mut::<Assets<Mesh>>().add(m),
+            ReadyMesh::Loaded(h) => h,
+        }
+    }
 }
 
 /// Replaces the scene's cloths, colliders, wind zones and wind with `scene`'s. Everything is
-/// checked first: nothing is changed when the scene cannot be built (a bad grid or mesh in
-/// it, a pin naming an object it lacks), and the error says which.
+/// checked first: nothing is changed when the scene cannot be built (a grid too large, a mesh
+/// asset that does not exist or load, a pin on a vertex the cloth lacks or naming an object
+/// the file lacks, a setting outside its limits), and the error says which object and why.
+/// Mesh assets are loaded (waited for) while checking.
 ///
 /// # Errors
 /// Which object of the file is broken, and why.
 pub fn load_scene(world: &mut World, scene: &ClothScene) -> Result<(), String> {
-    // Check the meshes first, so a broken file changes nothing.
-    for (k, c) in scene.cloths.iter().enumerate() {
-        check_mesh(world, &c.mesh).map_err(|e| format!("cloth {k}: {e}"))?;
-        for p in &c.pins {
-            match p.anchor {
-                SavedAnchor::Collider(i, _) if i >= scene.colliders.len() => {
-                    return Err(format!(
-                        "cloth {k}: a pin names collider {i}, which is not in the file"
-                    ));
-                }
-                SavedAnchor::Cloth(i, _) if i >= scene.cloths.len() => {
-                    return Err(format!(
-                        "cloth {k}: a pin names cloth {i}, which is not in the file"
-                    ));
-                }
-                _ => {}
-            }
-        }
-    }
-    for (k, c) in scene.colliders.iter().enumerate() {
-        match (&c.shape, &c.mesh) {
-            (Shape::Mesh(_), Some(m)) => {
-                check_mesh(world, m).map_err(|e| format!("collider {k}: {e}"))?;
-            }
-            (Shape::Mesh(_), None) => {
-                return Err(format!("collider {k}: a mesh collider without its mesh"));
-            }
-            _ => {}
-        }
-    }
+    let (cloth_meshes, collider_meshes) = check_scene(world, scene)?;
     // Out with the old.
     let old: Vec<Entity> = world
         .query_filtered::<Entity, Or<(With<Cloth>, With<ClothCollider>, With<WindZone>)>>()
@@ -525,11 +491,8 @@ pub fn load_scene(world: &mut World, scene: &ClothScene) -> Result<(), String> {
     }
     // Colliders first: pins may name them.
     let mut colliders = Vec::with_capacity(scene.colliders.len());
-    for c in &scene.colliders {
-        let mesh = match c.shape {
-            Shape::Mesh(_) => Some(build_mesh(world, c.mesh.as_ref().expect("checked above"))),
-            _ => None,
-        };
+    for (c, mesh) in scene.colliders.iter().zip(collider_meshes) {
+        let mesh = mesh.map(|m| m.into_handle(world));
         let shape = c.shape.map_mesh(|bake| ColliderMesh::Asset {
             mesh: None,
             resolution: bake.resolution,
@@ -546,8 +509,8 @@ pub fn load_scene(world: &mut World, scene: &ClothScene) -> Result<(), String> {
     }
     // Cloths: spawned first, pinned after (pins may name other cloths).
     let mut cloths = Vec::with_capacity(scene.cloths.len());
-    for c in &scene.cloths {
-        let mesh = build_mesh(world, &c.mesh);
+    for (c, mesh) in scene.cloths.iter().zip(cloth_meshes) {
+        let mesh = mesh.into_handle(world);
         let mut e = world.spawn((
             Mesh3d(mesh),
             Transform::from(c.transform),
@@ -630,9 +593,142 @@ fn set_name(world: &mut World, e: Entity, name: &Option<String>) {
     }
 }
 
-/// Whether `m` can be built in this app: a valid grid, an asset path with an asset server,
-/// triangles that index their vertices; and mesh assets to put it in.
-fn check_mesh(world: &World, m: &SavedMesh) -> Result<(), String> {
+/// Checks everything `scene` needs before the world is touched: every mesh (grids within
+/// their size limit, inline triangles that index their vertices, assets that exist and load as
+/// meshes), every cloth as the plugin would build it ([`check_cloth`]: mass, settings,
+/// features, pinned vertices in range), pins naming objects of the file, colliders, wind zones
+/// and the wind within their limits, and every transform finite. Returns the meshes to build
+/// the cloths and the mesh colliders from.
+#[expect(clippy::type_complexity, reason = "two lists, read once by load_scene")]
+fn check_scene(
+    world: &mut World,
+    scene: &ClothScene,
+) -> Result<(Vec<ReadyMesh>, Vec<Option<ReadyMesh>>), String> {
+    let named = |kind: &str, k: usize, name: &Option<String>| match name {
+        Some(n) => format!("{kind} {k} ({n:?})"),
+        None => format!("{kind} {k}"),
+    };
+    let mut cloth_meshes = Vec::with_capacity(scene.cloths.len());
+    for (k, c) in scene.cloths.iter().enumerate() {
+        let who = named("cloth", k, &c.name);
+        check_transform(&c.transform).map_err(|e| format!("{who}: {e}"))?;
+        for p in &c.pins {
+            let (kind, i, len, offset) = match p.anchor {
+                SavedAnchor::Rest => continue,
+                SavedAnchor::World(at) => ("", 0, 1, at),
+                SavedAnchor::Own(offset) => ("", 0, 1, offset),
+                SavedAnchor::Collider(i, offset) => ("collider", i, scene.colliders.len(), offset),
+                SavedAnchor::Cloth(i, offset) => ("cloth", i, scene.cloths.len(), offset),
+            };
+            if i >= len {
+                return Err(format!(
+                    "{who}: a pin names {kind} {i}, which is not in the file"
+                ));
+            }
+            if !coordinate_ok(offset) {
+                return Err(format!(
+                    "{who}: the pin of vertex {} is anchored at {offset}, not finite or over \
+                     {MAX_COORDINATE} m",
+                    p.vertex
+                ));
+            }
+        }
+        let mesh = check_mesh(world, &c.mesh).map_err(|e| format!("{who}: {e}"))?;
+        // Pins are checked for their vertex here; their anchors above.
+        let pins = ClothPins(
+            c.pins
+                .iter()
+                .map(|p| ClothPin {
+                    vertex: p.vertex,
+                    anchor: PinAnchor::Rest,
+                })
+                .collect(),
+        );
+        let parts = ClothParts {
+            cloth: &c.cloth,
+            config: &c.config,
+            pins: &pins,
+            self_collision: c.self_collision.as_ref(),
+            tethers: c.tethers.as_ref(),
+            tearing: c.tearing.as_ref(),
+        };
+        let at = GlobalTransform::from(Transform::from(c.transform));
+        let m = mesh
+            .get(world)
+            .ok_or_else(|| format!("{who}: its mesh did not load"))?;
+        check_cloth(parts, m, &at).map_err(|e| format!("{who}: {e}"))?;
+        cloth_meshes.push(mesh);
+    }
+    let mut collider_meshes = Vec::with_capacity(scene.colliders.len());
+    for (k, c) in scene.colliders.iter().enumerate() {
+        let who = named("collider", k, &c.name);
+        check_transform(&c.transform).map_err(|e| format!("{who}: {e}"))?;
+        let limits_ok = limits::COLLIDER_THICKNESS
+            .check(c.thickness)
+            .and_then(|()| limits::COLLIDER_FRICTION.check(c.friction))
+            .and_then(|()| limits::TELEPORT_DISTANCE.check(c.teleport_distance))
+            .map_err(|e| e.to_string());
+        limits_ok.map_err(|e| format!("{who}: {e}"))?;
+        if !c.shape.sizes_valid() {
+            return Err(format!(
+                "{who}: a size of {:?} is negative, not finite or over {MAX_COORDINATE} m",
+                c.shape
+            ));
+        }
+        collider_meshes.push(match (&c.shape, &c.mesh) {
+            (Shape::Mesh(bake), Some(m)) => {
+                // Resolutions are far below 2^24: the conversion is exact.
+                limits::SDF_RESOLUTION
+                    .check(bake.resolution as f32)
+                    .map_err(|e| format!("{who}: {e}"))?;
+                Some(check_mesh(world, m).map_err(|e| format!("{who}: {e}"))?)
+            }
+            (Shape::Mesh(_), None) => {
+                return Err(format!("{who}: a mesh collider without its mesh"));
+            }
+            _ => None,
+        });
+    }
+    for (k, z) in scene.zones.iter().enumerate() {
+        let who = named("wind zone", k, &z.name);
+        check_transform(&z.transform).map_err(|e| format!("{who}: {e}"))?;
+        z.zone.validate().map_err(|e| format!("{who}: {e}"))?;
+    }
+    if let Some(w) = &scene.wind {
+        w.validate().map_err(|e| format!("the wind: {e}"))?;
+    }
+    Ok((cloth_meshes, collider_meshes))
+}
+
+/// Finite and within [`MAX_COORDINATE`] of the origin along every axis.
+fn coordinate_ok(p: Vec3) -> bool {
+    p.is_finite() && p.abs().max_element() <= MAX_COORDINATE
+}
+
+/// A placement Bevy can use: finite, within range, a unit rotation, no zero scale.
+fn check_transform(t: &SavedTransform) -> Result<(), String> {
+    if !coordinate_ok(t.translation) {
+        return Err(format!(
+            "position {} is not finite or over {MAX_COORDINATE} m",
+            t.translation
+        ));
+    }
+    if !(t.rotation.is_finite() && (t.rotation.length() - 1.0).abs() < 1e-3) {
+        return Err(format!("rotation {} is not a unit quaternion", t.rotation));
+    }
+    if !(coordinate_ok(t.scale) && t.scale.abs().min_element() > 0.0) {
+        return Err(format!(
+            "scale {} is zero, not finite or too large",
+            t.scale
+        ));
+    }
+    Ok(())
+}
+
+/// Whether `m` can be built in this app: a grid within its limits, triangles that index
+/// their vertices, an asset that exists and loads as a mesh (loaded now: the file is checked
+/// against the mesh itself); and mesh assets to put it in. Returns the mesh.
+fn check_mesh(world: &mut World, m: &SavedMesh) -> Result<ReadyMesh, String> {
     if !world.contains_resource::<Assets<Mesh>>() {
         return Err("this app has no mesh assets (MeshPlugin)".into());
     }
@@ -642,29 +738,68 @@ fn check_mesh(world: &World, m: &SavedMesh) -> Result<(), String> {
             rows,
             width,
             height,
-        } => crate::solver::Grid::new(*columns, *rows, *width, *height)
-            .validate()
-            .map_err(|e| e.to_string()),
-        SavedMesh::Asset(p) if p.trim().is_empty() => Err("an empty asset path".into()),
-        SavedMesh::Asset(p) if !world.contains_resource::<AssetServer>() => {
-            Err(format!("this app has no asset server to load {p}"))
+        } => {
+            let grid = crate::solver::Grid::new(*columns, *rows, *width, *height);
+            grid.validate().map_err(|e| e.to_string())?;
+            Ok(ReadyMesh::Made(grid_mesh(&grid)))
         }
-        SavedMesh::Asset(_) => Ok(()),
+        SavedMesh::Asset(p) if p.trim().is_empty() => Err("an empty asset path".into()),
+        SavedMesh::Asset(p) => load_mesh_now(world, p).map(ReadyMesh::Loaded),
         SavedMesh::Inline {
             positions,
             uvs,
             indices,
         } => {
             let n = positions.len();
+            if n > limits::MAX_VERTICES || indices.len() / 3 > limits::MAX_TRIANGLES {
+                return Err(format!(
+                    "{n} vertices and {} triangles: a cloth may have at most {} and {}",
+                    indices.len() / 3,
+                    limits::MAX_VERTICES,
+                    limits::MAX_TRIANGLES
+                ));
+            }
             if indices.iter().any(|&i| i as usize >= n) {
                 return Err(format!("an index is beyond the {n} vertices"));
             }
             if uvs.as_ref().is_some_and(|u| u.len() != n) {
                 return Err(format!("texture coordinates do not match the {n} vertices"));
             }
-            Ok(())
+            let mut mesh = Mesh::new(
+                PrimitiveTopology::TriangleList,
+                RenderAssetUsages::default(),
+            )
+            .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions.clone())
+            .with_inserted_indices(Indices::U32(indices.clone()));
+            if let Some(uv) = uvs {
+                mesh.insert_attribute(Mesh::ATTRIBUTE_UV_0, uv.clone());
+            }
+            Ok(ReadyMesh::Made(mesh))
         }
     }
+}
+
+/// Loads the mesh asset at `path` now, waiting for it, and puts it in `Assets<Mesh>` (rather
+/// than at the next frame), so a file naming a missing file, a missing label or something
+/// that is not a mesh is refused before the scene is replaced.
+fn load_mesh_now(world: &mut World, path: &str) -> Result<Handle<Mesh>, String> {
+    let Some(server) = world.get_resource::<AssetServer>().cloned() else {
+        return Err(format!("this app has no asset server to load {path}"));
+    };
+    let owned = bevy::asset::AssetPath::from(path.to_owned());
+    let handle = bevy::tasks::block_on(server.load_builder().load_untyped_async(owned))
+        .map_err(|e| format!("cannot load {path}: {e}"))?;
+    bevy::asset::handle_internal_asset_events(world);
+    let handle = handle.try_typed::<Mesh>().map_err(|_| {
+        format!(
+            "{path} is not a mesh (a glTF file's mesh is named by a label, e.g. \
+             model.glb#Mesh0/Primitive0)"
+        )
+    })?;
+    if world.resource::<Assets<Mesh>>().get(&handle).is_none() {
+        return Err(format!("{path} did not load as a mesh"));
+    }
+    Ok(handle)
 }
 
 /// Saves the scene to a RON file.

@@ -38,6 +38,16 @@ impl std::error::Error for ParamError {}
 /// `f32` resolves 1 m; keep cloth within a few km of the origin for millimetre precision.
 pub const MAX_COORDINATE: f32 = 1.0e7;
 
+/// The most vertices a cloth may have: 2²² = 4 194 304 (a 2048 × 2048 grid). The solver keeps
+/// a few hundred bytes a vertex (positions, constraints, colours, scratch), so this is about
+/// 1.5 GB; a mesh, grid or scene file asking for more is refused before anything is
+/// allocated, so a file from a mod folder cannot take the game down.
+pub const MAX_VERTICES: usize = 1 << 22;
+
+/// The most triangles a cloth may have: twice [`MAX_VERTICES`] (a closed surface has about two
+/// triangles a vertex).
+pub const MAX_TRIANGLES: usize = 2 * MAX_VERTICES;
+
 /// Finite and within [`MAX_COORDINATE`] of the origin along every axis.
 #[inline]
 pub(crate) fn within_range(p: Vec3) -> bool {

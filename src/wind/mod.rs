@@ -1,6 +1,7 @@
 //! Wind for cloth: a global [`Wind`] resource and local [`WindZone`]s.
 //!
-//! Each fixed step, [`ClothWindPlugin`] turns them into a
+//! Each fixed step, [`ClothWindPlugin`] turns them, with each zone where it is at that step
+//! ([`FixedPoses`]: a zone moved in `FixedUpdate` blows from there in the same step), into a
 //! [`WindField`] (noise generators included) stored in
 //! [`ClothWindField`]; every cloth samples it on a coarse [`AirGrid`](crate::solver::AirGrid)
 //! around itself once per step and feels it, every substep, through its own
@@ -10,7 +11,7 @@
 use bevy::prelude::*;
 use bevy::reflect::impl_reflect_opaque;
 
-use crate::foundation::{ClothSchedule, ClothSystems, EntityName};
+use crate::foundation::{ClothSchedule, ClothSystems, EntityName, FixedPoses};
 use crate::solver::{ParamError, Pose, WindField, WindParams, WindRegion, limits};
 
 impl_reflect_opaque!((in bevy_cloth::solver) WindParams(Debug, Clone, PartialEq, Default));
@@ -119,7 +120,8 @@ impl Plugin for ClothWindPlugin {
 fn gather_wind(
     time: Res<Time>,
     global: Option<Res<Wind>>,
-    zones: Query<(Entity, &WindZone, &GlobalTransform)>,
+    zones: Query<(Entity, &WindZone)>,
+    poses: FixedPoses,
     names: Query<&Name>,
     mut out: ResMut<ClothWindField>,
     mut reported: Local<bevy::platform::collections::HashSet<Option<Entity>>>,
@@ -148,8 +150,12 @@ fn gather_wind(
     let sources = global.map(|w| (w.0, None)).into_iter().chain(
         zones
             .iter()
-            .filter(|(e, z, gt)| valid(Some(*e), z.validate()) && gt.translation().is_finite())
-            .map(|(_, z, gt)| (z.wind, Some(z.region(gt)))),
+            .filter(|(e, z)| valid(Some(*e), z.validate()))
+            // Where the zone is at this fixed step (moved in `FixedUpdate`, spawned this
+            // step), not last frame's `GlobalTransform`.
+            .filter_map(|(e, z)| poses.get(e).map(|at| (z, at)))
+            .filter(|(_, at)| at.translation().is_finite())
+            .map(|(z, at)| (z.wind, Some(z.region(&at)))),
     );
     out.field = WindField::new(sources);
 }

@@ -58,17 +58,7 @@ impl Collider {
         limits::COLLIDER_FRICTION
             .check(self.friction)
             .map_err(|e| e.to_string())?;
-        let ok = |v: f32| limits::COLLIDER_SIZE.contains(v);
-        let sizes_ok = match &self.shape {
-            Shape::Sphere { radius } => ok(*radius),
-            Shape::Cuboid { half_extents } => half_extents.to_array().into_iter().all(ok),
-            Shape::Capsule {
-                half_length,
-                radius,
-            } => ok(*half_length) && ok(*radius),
-            Shape::Plane | Shape::Mesh(_) => true,
-        };
-        if !sizes_ok {
+        if !self.shape.sizes_valid() {
             return Err(format!(
                 "a size of {:?} is negative, not finite or over {MAX_COORDINATE} m",
                 self.shape

@@ -5,6 +5,7 @@ use std::sync::Arc;
 use glam::{Quat, Vec3};
 
 use super::sdf::SdfGrid;
+use crate::solver::limits;
 
 /// A rigid shape in its local frame: the one shape type of the crate.
 ///
@@ -43,6 +44,22 @@ pub enum Shape<M = Arc<SdfGrid>> {
 }
 
 impl<M> Shape<M> {
+    /// Whether every size of the shape (radius, half extents, half length) is within
+    /// [`limits::COLLIDER_SIZE`]: finite, not negative, at most `MAX_COORDINATE`.
+    #[must_use]
+    pub fn sizes_valid(&self) -> bool {
+        let ok = |v: f32| limits::COLLIDER_SIZE.contains(v);
+        match self {
+            Shape::Sphere { radius } => ok(*radius),
+            Shape::Cuboid { half_extents } => half_extents.to_array().into_iter().all(ok),
+            Shape::Capsule {
+                half_length,
+                radius,
+            } => ok(*half_length) && ok(*radius),
+            Shape::Plane | Shape::Mesh(_) => true,
+        }
+    }
+
     /// The same shape with its mesh (if it is one) turned into `f(mesh)`.
     pub fn map_mesh<N>(self, f: impl FnOnce(M) -> N) -> Shape<N> {
         self.try_map_mesh(|m| Some(f(m)))

@@ -3,6 +3,7 @@
 use glam::{Vec2, Vec3};
 
 use super::topology::{Topology, TopologyError, TopologyOptions};
+use crate::solver::limits::MAX_VERTICES;
 
 /// A rectangular grid of `columns × rows` vertices in the XZ plane, centred on the origin,
 /// front face towards +Y.
@@ -35,10 +36,12 @@ impl Grid {
         }
     }
 
-    /// Checks the grid is at least 2×2 with a positive, finite size and under 2³² vertices.
+    /// Checks the grid is at least 2×2 with a positive, finite size and at most
+    /// [`MAX_VERTICES`] vertices.
     ///
     /// # Errors
-    /// [`TopologyError::BadGrid`] saying what is wrong.
+    /// [`TopologyError::BadGrid`] saying what is wrong; [`TopologyError::TooLarge`] past the
+    /// vertex limit.
     pub fn validate(&self) -> Result<(), TopologyError> {
         if self.columns < 2 || self.rows < 2 {
             return Err(TopologyError::BadGrid {
@@ -48,9 +51,11 @@ impl Grid {
                 ),
             });
         }
-        if u64::from(self.columns) * u64::from(self.rows) > u64::from(u32::MAX) {
-            return Err(TopologyError::BadGrid {
-                reason: "more than 2³² vertices".into(),
+        let vertices = u64::from(self.columns) * u64::from(self.rows);
+        if vertices > MAX_VERTICES as u64 {
+            return Err(TopologyError::TooLarge {
+                vertices,
+                triangles: 2 * u64::from(self.columns - 1) * u64::from(self.rows - 1),
             });
         }
         for (name, v) in [("width", self.width), ("height", self.height)] {

@@ -9,7 +9,7 @@
 use glam::{Vec2, Vec3};
 
 use super::hinge::{bend_angle, dihedral_weight, hinge_coefficients};
-use crate::solver::limits::MAX_COORDINATE;
+use crate::solver::limits::{MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES};
 
 /// What a distance edge resists.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -154,6 +154,14 @@ pub enum TopologyError {
     /// Every triangle has zero area: the mesh has no size (all vertices on one point or one
     /// line).
     ZeroArea,
+    /// More vertices or triangles than a cloth may have ([`MAX_VERTICES`],
+    /// [`MAX_TRIANGLES`]).
+    TooLarge {
+        /// Number of vertices asked for.
+        vertices: u64,
+        /// Number of triangles asked for.
+        triangles: u64,
+    },
     /// A grid needs at least 2×2 vertices and a positive, finite size.
     BadGrid {
         /// What is wrong.
@@ -193,6 +201,14 @@ impl core::fmt::Display for TopologyError {
             TopologyError::ZeroArea => {
                 write!(f, "every triangle has zero area (the mesh has no size)")
             }
+            TopologyError::TooLarge {
+                vertices,
+                triangles,
+            } => write!(
+                f,
+                "{vertices} vertices and {triangles} triangles: a cloth may have at most \
+                 {MAX_VERTICES} vertices and {MAX_TRIANGLES} triangles"
+            ),
             TopologyError::BadGrid { reason } => write!(f, "bad grid: {reason}"),
         }
     }
@@ -252,6 +268,12 @@ impl Topology {
         let n = positions.len();
         if n == 0 {
             return Err(TopologyError::NoVertices);
+        }
+        if n > MAX_VERTICES || indices.len() / 3 > MAX_TRIANGLES {
+            return Err(TopologyError::TooLarge {
+                vertices: n as u64,
+                triangles: (indices.len() / 3) as u64,
+            });
         }
         if !indices.len().is_multiple_of(3) {
             return Err(TopologyError::NotTriangles {
@@ -549,6 +571,35 @@ impl Topology {
 mod tests {
     use super::*;
     use crate::solver::mesh::Grid;
+
+    #[test]
+    fn cloths_too_large_to_allocate_are_refused_before_allocating() {
+        // 60 000² vertices would be tens of gigabytes: refused by the grid's own check,
+        // before any position is made.
+        let huge = Grid::new(60_000, 60_000, 1.0, 1.0);
+        assert!(matches!(
+            huge.validate(),
+            Err(TopologyError::TooLarge {
+                vertices: 3_600_000_000,
+                ..
+            })
+        ));
+        assert!(huge.topology(TopologyOptions::default()).is_err());
+        // The limit itself is accepted (2048²), one row more is not.
+        assert!(Grid::new(2048, 2048, 1.0, 1.0).validate().is_ok());
+        assert!(matches!(
+            Grid::new(2048, 2049, 1.0, 1.0).validate(),
+            Err(TopologyError::TooLarge { .. })
+        ));
+        // A triangle list of more vertices than the limit, refused by count alone.
+        let positions = vec![Vec3::ZERO; MAX_VERTICES + 1];
+        let err =
+            Topology::from_triangles(&positions, None, &[0, 1, 2], TopologyOptions::default());
+        assert!(
+            matches!(err, Err(TopologyError::TooLarge { .. })),
+            "{err:?}"
+        );
+    }
 
     #[test]
     fn grid_has_six_edges_per_interior_vertex() {
