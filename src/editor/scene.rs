@@ -599,7 +599,6 @@ fn set_name(world: &mut World, e: Entity, name: &Option<String>) {
 /// features, pinned vertices in range), pins naming objects of the file, colliders, wind zones
 /// and the wind within their limits, and every transform finite. Returns the meshes to build
 /// the cloths and the mesh colliders from.
-#[expect(clippy::type_complexity, reason = "two lists, read once by load_scene")]
 fn check_scene(
     world: &mut World,
     scene: &ClothScene,
