@@ -807,6 +807,30 @@ mod tests {
     }
 
     #[test]
+    fn parts_follow_the_vertex_count_and_never_the_machine() {
+        // (grid side, parts): about 2048 vertices a part, at most 16. A step then runs on
+        // min(parts, threads) threads (`Workers` seats one helper per part beyond the first),
+        // so a 64² cloth uses two threads on a 16-core machine and results are the same on
+        // any thread count.
+        for (side, parts) in [
+            (16, 1),
+            (32, 1),
+            (45, 1),
+            (64, 2),
+            (90, 3),
+            (128, 8),
+            (181, 15),
+            (256, 16),
+            (512, 16),
+            (1024, 16),
+        ] {
+            assert_eq!(default_part_count(side * side), parts, "{side}²");
+        }
+        let (_, b) = batches(64, default_part_count(64 * 64));
+        assert_eq!(b.part_count(), 2);
+    }
+
+    #[test]
     fn colours_share_no_vertex_and_cover_everything() {
         for parts in [1, 3, 7] {
             let (t, b) = batches(17, parts);

@@ -17,12 +17,16 @@ use super::Parallel;
 /// parallel regions of a step (about one per substep, tens of microseconds each), where a
 /// general-purpose task pool spends as long waking its threads as the work takes.
 ///
-/// [`Workers::for_each_mut`] publishes the items; the calling thread and every awake worker
-/// claim them one at a time until none are left, so the call never waits for a worker that
+/// [`Workers::for_each_mut`] publishes the items with one *seat* for a helper per item beyond
+/// the first (at most one per helper); the calling thread and the helpers that take a seat
+/// claim items one at a time until none are left, so the call never waits for a worker that
 /// has not started (a worker the system does not schedule costs nothing but its share of the
-/// speed-up). The call returns once every claimed item is done. A worker spins for
-/// [`Workers::SPIN`] after its last work and then sleeps until the next call wakes it, so an
-/// idle pool costs no CPU. A call made while another runs (from inside it, or from another thread)
+/// speed-up). The call returns once every claimed item is done. A call of `k` items wakes at
+/// most `k − 1` sleeping helpers, and a helper that found no seat goes back to sleep at once:
+/// on a 16-core machine a cloth of two parts keeps two threads busy, not sixteen spinning on
+/// the same counters (work grows the threads a step uses, not the core count). A helper that
+/// worked spins for [`Workers::SPIN`] after its last item and then sleeps until a call wakes
+/// it, so an idle pool costs no CPU. A call made while another runs (from inside it, or from another thread)
 /// runs serially on its own thread.
 ///
 /// The solver itself never starts threads: create one `Workers` (the Bevy plugin keeps one
@@ -38,6 +42,8 @@ struct Job<'a> {
     done: AtomicUsize,
     len: usize,
     run: &'a (dyn Fn(usize) + Sync),
+    /// Helpers that may still join: one per item beyond the first, at most one per helper.
+    seats: AtomicUsize,
     /// An item panicked (the panic is raised again on the calling thread).
     panicked: AtomicBool,
 }
@@ -51,6 +57,8 @@ struct Shared {
     busy: AtomicUsize,
     /// Workers asleep (or about to be) on `wake`.
     sleepers: AtomicUsize,
+    /// How many times a worker has woken from `wake` (for tests and diagnostics).
+    wakes: AtomicUsize,
     /// Set while a call runs (a nested call runs serially).
     active: AtomicBool,
     stop: AtomicBool,
@@ -72,6 +80,7 @@ impl Workers {
             epoch: AtomicU64::new(0),
             busy: AtomicUsize::new(0),
             sleepers: AtomicUsize::new(0),
+            wakes: AtomicUsize::new(0),
             active: AtomicBool::new(false),
             stop: AtomicBool::new(false),
             lock: Mutex::new(()),
@@ -140,10 +149,27 @@ fn drain(job: &Job<'_>) {
     }
 }
 
+impl Job<'_> {
+    /// Takes a seat at this call, if one is left.
+    fn take_seat(&self) -> bool {
+        self.seats
+            .fetch_update(SeqCst, SeqCst, |s| s.checked_sub(1))
+            .is_ok()
+    }
+}
+
 fn worker(shared: &Shared) {
     let mut seen = 0u64;
+    // Whether the last call seated this helper: only a helper that worked spins for the next
+    // call; one that was not needed sleeps at once.
+    let mut worked = true;
     loop {
         // Wait for a new call: spin, then sleep.
+        let spin = if worked {
+            Workers::SPIN
+        } else {
+            Duration::ZERO
+        };
         let start = Instant::now();
         let mut spins = 0u32;
         loop {
@@ -154,7 +180,7 @@ fn worker(shared: &Shared) {
                 break;
             }
             spins += 1;
-            if spins.is_multiple_of(64) && start.elapsed() > Workers::SPIN {
+            if spins.is_multiple_of(64) && start.elapsed() >= spin {
                 let guard = shared.lock.lock().unwrap_or_else(PoisonError::into_inner);
                 shared.sleepers.fetch_add(1, SeqCst);
                 let guard = shared
@@ -164,6 +190,7 @@ fn worker(shared: &Shared) {
                     })
                     .unwrap_or_else(PoisonError::into_inner);
                 shared.sleepers.fetch_sub(1, SeqCst);
+                shared.wakes.fetch_add(1, SeqCst);
                 drop(guard);
                 break;
             }
@@ -172,10 +199,15 @@ fn worker(shared: &Shared) {
         seen = shared.epoch.load(SeqCst);
         shared.busy.fetch_add(1, SeqCst);
         let job = shared.job.load(SeqCst);
+        worked = false;
         if !job.is_null() {
             // SAFETY: the caller keeps the job alive until `busy` is back to zero after it
             // withdrew the pointer, and this thread counted itself in `busy` before loading it.
-            drain(unsafe { &*job });
+            let job = unsafe { &*job };
+            if job.take_seat() {
+                drain(job);
+                worked = true;
+            }
         }
         shared.busy.fetch_sub(1, SeqCst);
     }
@@ -199,20 +231,30 @@ impl Parallel for Workers {
             // SAFETY: `i < len` and each index is claimed once (`Job::next`).
             f(unsafe { &mut *base.0.add(i) });
         };
+        let seats = (items.len() - 1).min(self.handles.len());
         let job = Job {
             next: AtomicUsize::new(0),
             done: AtomicUsize::new(0),
             len: items.len(),
             run: &run,
+            seats: AtomicUsize::new(seats),
             panicked: AtomicBool::new(false),
         };
         // SAFETY (lifetime erased): withdrawn below, and waited for, before `job` goes.
         let ptr = core::ptr::from_ref(&job).cast_mut().cast::<Job<'static>>();
         s.job.store(ptr, SeqCst);
         s.epoch.fetch_add(1, SeqCst);
-        if s.sleepers.load(SeqCst) > 0 {
+        // Wake only the seats the helpers still awake (spinning after their last call) cannot
+        // fill; one woken for nothing sleeps again at once. A helper that counted itself
+        // asleep after this load sees the new epoch before it waits, so none is missed.
+        let sleeping = s.sleepers.load(SeqCst);
+        let awake = self.handles.len().saturating_sub(sleeping);
+        let wake = seats.saturating_sub(awake).min(sleeping);
+        if wake > 0 {
             let _guard = s.lock.lock().unwrap_or_else(PoisonError::into_inner);
-            s.wake.notify_all();
+            for _ in 0..wake {
+                s.wake.notify_one();
+            }
         }
         drain(&job);
         // Every item is claimed: wait for those still running elsewhere.
@@ -279,6 +321,51 @@ mod tests {
             }
         }
         assert_eq!(seen.len(), 2, "the helper never took an item");
+    }
+
+    #[test]
+    fn a_call_of_few_items_leaves_the_other_helpers_asleep() {
+        let workers = Workers::new(7);
+        let asleep = || workers.shared.sleepers.load(SeqCst);
+        let start = Instant::now();
+        while asleep() < 7 {
+            assert!(
+                start.elapsed() < Duration::from_secs(10),
+                "helpers never slept"
+            );
+            std::thread::sleep(Workers::SPIN);
+        }
+        // A cloth of two parts, called after every helper has gone to sleep: one seat a
+        // call, so one helper woken a call (before seats, every call woke all seven to spin
+        // on the same counters: 479 wake-ups when tried here).
+        let rounds = 100;
+        let before = workers.shared.wakes.load(SeqCst);
+        for round in 0..rounds {
+            std::thread::sleep(Workers::SPIN * 2);
+            let mut items = vec![0u32; 2];
+            workers.for_each_mut(&mut items, |x| *x += 1);
+            assert_eq!(items, [1, 1], "round {round}");
+        }
+        let woken = workers.shared.wakes.load(SeqCst) - before;
+        // Slack for spurious wake-ups; 7 a call would be 700.
+        assert!(
+            woken <= 2 * rounds,
+            "{woken} wake-ups for {rounds} calls of two items"
+        );
+        // Many items still reach every helper.
+        let mut seen = std::collections::HashSet::new();
+        for _ in 0..200 {
+            let mut items: Vec<Option<std::thread::ThreadId>> = vec![None; 64];
+            workers.for_each_mut(&mut items, |t| {
+                std::thread::sleep(Duration::from_micros(100));
+                *t = Some(std::thread::current().id());
+            });
+            seen.extend(items.into_iter().flatten());
+            if seen.len() == 8 {
+                break;
+            }
+        }
+        assert!(seen.len() > 2, "only {} threads took items", seen.len());
     }
 
     #[test]
