@@ -73,10 +73,13 @@ fn setup(
             Vec3::new(0.35, 0.1, 0.8),
         ),
     ];
+    // Half the cloth's vertex spacing (at least 1 cm): a coarse cloth's flat triangles then
+    // span a box's edges without cutting into the box drawn under them.
+    let thickness = (0.5 * 2.4 / (n - 1) as f32).max(0.01);
     for (collider, mesh, at) in obstacles {
         let e = commands
             .spawn((
-                collider.with_thickness(0.01),
+                collider.with_thickness(thickness),
                 Mesh3d(meshes.add(mesh)),
                 Transform::from_translation(at),
             ))
