@@ -671,6 +671,69 @@ fn a_scene_file_that_cannot_be_built_changes_nothing() {
     assert_eq!((after.0.len(), after.1), (3, 0));
 }
 
+/// A scene file whose cloth is a mesh inside a glTF file (as the editor saves a cloth loaded
+/// from one): the file is loaded and checked before the scene is replaced, and a label the
+/// file lacks is refused by name.
+#[test]
+fn a_scene_file_naming_a_gltf_mesh_loads_it_before_replacing_the_scene() {
+    let mut app = common::app();
+    app.add_plugins((
+        ClothEditorPlugin::default(),
+        bevy::image::ImagePlugin::default(),
+        bevy::world_serialization::WorldSerializationPlugin,
+        bevy::gltf::GltfPlugin::default(),
+    ));
+    app.finish();
+    app.cleanup();
+    app.update();
+    let cloth = scene::SavedCloth {
+        name: Some("Banner".into()),
+        transform: Transform::from_xyz(0.0, 1.0, 0.0).into(),
+        mesh: scene::SavedMesh::Asset("banner_statue.gltf#Mesh1/Primitive0".into()),
+        color: None,
+        cloth: Cloth::default(),
+        config: ClothConfig::default(),
+        pins: vec![scene::SavedPin {
+            vertex: 0,
+            anchor: scene::SavedAnchor::Rest,
+        }],
+        self_collision: None,
+        tethers: None,
+        tearing: None,
+        backend: None,
+    };
+    let file = scene::ClothScene {
+        cloths: vec![cloth],
+        ..default()
+    };
+    let mut wrong = file.clone();
+    wrong.cloths[0].mesh = scene::SavedMesh::Asset("banner_statue.gltf#Mesh7/Primitive0".into());
+    let err = scene::load_scene(app.world_mut(), &wrong).unwrap_err();
+    assert!(err.contains("Mesh7/Primitive0"), "{err}");
+    assert_eq!(
+        app.world_mut()
+            .query_filtered::<(), With<Cloth>>()
+            .iter(app.world())
+            .count(),
+        0
+    );
+    // The banner has 33 × 33 vertices and 33 seam copies: 1122, so vertex 1122 is past the end.
+    let mut past_the_end = file.clone();
+    past_the_end.cloths[0].pins[0].vertex = 33 * 33 + 33;
+    let err = scene::load_scene(app.world_mut(), &past_the_end).unwrap_err();
+    assert!(err.contains("pin on vertex 1122"), "{err}");
+
+    scene::load_scene(app.world_mut(), &file).unwrap();
+    run(&mut app, 3);
+    let world = app.world_mut();
+    let sims: Vec<usize> = world
+        .query::<&ClothSim>()
+        .iter(world)
+        .map(|s| s.simulation().state().len())
+        .collect();
+    assert_eq!(sims, vec![33 * 33], "the banner, welded, simulated");
+}
+
 #[test]
 fn an_arrow_drag_moves_a_child_along_one_world_axis() {
     let mut app = editor_app();
