@@ -624,7 +624,7 @@ fn check_scene(
                     "{who}: a pin names {kind} {i}, which is not in the file"
                 ));
             }
-            if !coordinate_ok(offset) {
+            if !limits::within_range(offset) {
                 return Err(format!(
                     "{who}: the pin of vertex {} is anchored at {offset}, not finite or over \
                      {MAX_COORDINATE} m",
@@ -699,14 +699,9 @@ fn check_scene(
     Ok((cloth_meshes, collider_meshes))
 }
 
-/// Finite and within [`MAX_COORDINATE`] of the origin along every axis.
-fn coordinate_ok(p: Vec3) -> bool {
-    p.is_finite() && p.abs().max_element() <= MAX_COORDINATE
-}
-
 /// A placement Bevy can use: finite, within range, a unit rotation, no zero scale.
 fn check_transform(t: &SavedTransform) -> Result<(), String> {
-    if !coordinate_ok(t.translation) {
+    if !limits::within_range(t.translation) {
         return Err(format!(
             "position {} is not finite or over {MAX_COORDINATE} m",
             t.translation
@@ -715,7 +710,7 @@ fn check_transform(t: &SavedTransform) -> Result<(), String> {
     if !(t.rotation.is_finite() && (t.rotation.length() - 1.0).abs() < 1e-3) {
         return Err(format!("rotation {} is not a unit quaternion", t.rotation));
     }
-    if !(coordinate_ok(t.scale) && t.scale.abs().min_element() > 0.0) {
+    if !(limits::within_range(t.scale) && t.scale.abs().min_element() > 0.0) {
         return Err(format!(
             "scale {} is zero, not finite or too large",
             t.scale
