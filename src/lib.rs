@@ -118,9 +118,9 @@ impl PluginGroup for ClothPlugins {
 pub mod prelude {
     pub use crate::ClothPlugins;
     pub use crate::cloth::{
-        Cloth, ClothConfig, ClothError, ClothFailed, ClothInvalid, ClothPick, ClothPin, ClothPins,
-        ClothPlugin, ClothSelfCollision, ClothSim, ClothTearing, ClothTethers, ClothTorn,
-        PinAnchor,
+        Cloth, ClothConfig, ClothError, ClothFailed, ClothInertia, ClothInvalid, ClothPick,
+        ClothPin, ClothPins, ClothPlugin, ClothSelfCollision, ClothSim, ClothTearing, ClothTethers,
+        ClothTorn, PinAnchor,
     };
     #[cfg(feature = "rapier")]
     pub use crate::collider::rapier::ClothRapierPlugin;

@@ -169,8 +169,21 @@ fn with_a_renderer_gpu_cloths_leave_the_cpu_and_the_rest_say_why() {
         bending_solve: bevy_cloth::solver::BendingSolve::Implicit,
         ..default()
     });
+    // Inertia below 1 has no GPU twin yet: on the CPU, saying so.
+    let inert = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    app.world_mut()
+        .entity_mut(inert)
+        .insert(ClothInertia::new(0.5));
     common::run(&mut app, 12);
     assert!(in_use(&app, gpu).gpu);
+    let u = in_use(&app, inert);
+    assert!(
+        !u.gpu
+            && u.reason
+                .as_deref()
+                .is_some_and(|r| r.contains("ClothInertia")),
+        "{u:?}"
+    );
     let u = in_use(&app, cpu);
     assert!(!u.gpu && u.reason.is_none(), "{u:?}");
     let u = in_use(&app, torn);

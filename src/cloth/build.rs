@@ -46,6 +46,8 @@ impl Built {
             attached: self.attached,
             settings_error: None,
             pins_error: None,
+            inertia_from: None,
+            inertia_error: None,
         }
     }
 }

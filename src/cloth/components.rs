@@ -133,6 +133,83 @@ impl Default for ClothTethers {
     }
 }
 
+/// How much of its anchor's motion a cloth feels, for fast movers (opt-in): a cape on a
+/// sprinting character, a flag on a vehicle. `1` feels all of it (world space, as without
+/// this component); `0` feels none (the cloth moves rigidly with its anchor, as if glued to
+/// it); in between, the rest of the motion is carried rigidly each step, so a dash stretches
+/// and swings the cloth less. As Unity's world velocity scale and NvCloth's inertia
+/// multipliers.
+///
+/// The anchor is `anchor`, or the cloth's own entity when `None` (a cloth parented to a
+/// character). Its pose is read at each fixed step (as pins read theirs); a jump farther
+/// than [`Cloth::teleport_distance`] is a teleport, not a motion, and is not carried.
+/// Values outside `0..=1`, or an anchor that does not exist, are reported once
+/// ([`ClothFailed`](super::ClothFailed)) and the cloth feels all of its motion until fixed.
+/// The CPU backend only: a GPU cloth with inertia below 1 runs on the CPU (its
+/// `ClothBackendInUse` says why).
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Default, Clone, PartialEq)]
+pub struct ClothInertia {
+    /// Share of the anchor's linear motion felt, `0..=1`.
+    pub linear: f32,
+    /// Share of the anchor's rotation felt, `0..=1`.
+    pub angular: f32,
+    /// The entity whose motion is the reference; `None`: the cloth's own entity.
+    pub anchor: Option<Entity>,
+}
+
+impl Default for ClothInertia {
+    /// Feels everything (the same as no component).
+    fn default() -> Self {
+        Self::new(1.0)
+    }
+}
+
+impl ClothInertia {
+    /// The same share `inertia` of linear and angular motion, relative to the cloth's own
+    /// entity.
+    #[must_use]
+    pub fn new(inertia: f32) -> Self {
+        Self {
+            linear: inertia,
+            angular: inertia,
+            anchor: None,
+        }
+    }
+
+    /// Relative to `anchor`'s motion instead of the cloth entity's.
+    #[must_use]
+    pub fn relative_to(self, anchor: Entity) -> Self {
+        Self {
+            anchor: Some(anchor),
+            ..self
+        }
+    }
+
+    /// Whether both shares are within `0..=1`.
+    ///
+    /// # Errors
+    /// [`ClothError::BadInertia`](super::ClothError::BadInertia) naming them.
+    pub fn validate(&self) -> Result<(), super::ClothError> {
+        let ok = |v: f32| (0.0..=1.0).contains(&v);
+        if ok(self.linear) && ok(self.angular) {
+            Ok(())
+        } else {
+            Err(super::ClothError::BadInertia {
+                linear: self.linear,
+                angular: self.angular,
+            })
+        }
+    }
+
+    /// Whether the cloth feels all of its anchor's motion (both shares 1 or more: nothing to
+    /// carry).
+    #[must_use]
+    pub fn is_world_space(&self) -> bool {
+        self.linear >= 1.0 && self.angular >= 1.0
+    }
+}
+
 /// Lets a cloth tear: an edge stretched past `threshold ×` its rest length breaks, its
 /// triangles disappear, and a [`ClothTorn`] message says which (opt-in).
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]

@@ -21,6 +21,16 @@ pub enum ClothError {
     BadTeleportDistance(f32),
     /// [`Cloth::weld_tolerance`](super::Cloth::weld_tolerance) is outside [`limits::WELD_TOLERANCE`].
     BadWeldTolerance(f32),
+    /// A [`ClothInertia`](super::ClothInertia) share outside `0..=1`.
+    BadInertia {
+        /// Share of linear motion.
+        linear: f32,
+        /// Share of rotation.
+        angular: f32,
+    },
+    /// The [`ClothInertia`](super::ClothInertia) anchor has no pose (it does not exist, or
+    /// has no transform).
+    InertiaAnchorMissing(Entity),
     /// The solver rejected the mesh, masses, pins or parameters.
     Solver(SolverError),
 }
@@ -45,6 +55,17 @@ impl core::fmt::Display for ClothError {
             ClothError::BadWeldTolerance(t) => {
                 let l = limits::WELD_TOLERANCE;
                 write!(f, "weld tolerance {t} is outside [{}, {}]", l.min, l.max)
+            }
+            ClothError::BadInertia { linear, angular } => write!(
+                f,
+                "inertia (linear {linear}, angular {angular}) is outside [0, 1] (1 feels all \
+                 of the anchor's motion, 0 none)"
+            ),
+            ClothError::InertiaAnchorMissing(e) => {
+                write!(
+                    f,
+                    "the inertia anchor {e} does not exist or has no transform"
+                )
             }
             ClothError::Solver(e) => e.fmt(f),
         }

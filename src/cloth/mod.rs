@@ -14,6 +14,7 @@
 mod build;
 mod components;
 mod error;
+mod inertia;
 mod mesh;
 mod pins;
 mod plugin;
@@ -24,8 +25,8 @@ mod writeback;
 
 pub use build::{ClothParts, check_cloth};
 pub use components::{
-    Cloth, ClothConfig, ClothPin, ClothPins, ClothSelfCollision, ClothSteppedElsewhere,
-    ClothTearing, ClothTethers, ClothTorn, PinAnchor,
+    Cloth, ClothConfig, ClothInertia, ClothPin, ClothPins, ClothSelfCollision,
+    ClothSteppedElsewhere, ClothTearing, ClothTethers, ClothTorn, PinAnchor,
 };
 pub use error::{ClothError, ClothFailed, ClothInvalid};
 pub use plugin::ClothPlugin;

@@ -5,8 +5,8 @@ use bevy::prelude::*;
 use super::systems::{init_cloths, on_cloth_removed, retry_cloths, step_cloths, sync_cloths};
 use super::writeback::write_back;
 use super::{
-    Cloth, ClothConfig, ClothFailed, ClothPin, ClothPins, ClothSelfCollision, ClothTearing,
-    ClothTethers, ClothTorn, ClothWorkers, PinAnchor,
+    Cloth, ClothConfig, ClothFailed, ClothInertia, ClothPin, ClothPins, ClothSelfCollision,
+    ClothTearing, ClothTethers, ClothTorn, ClothWorkers, PinAnchor,
 };
 use crate::foundation::{ClothSchedule, ClothSystems};
 
@@ -35,6 +35,7 @@ impl Plugin for ClothPlugin {
             .register_type::<ClothSelfCollision>()
             .register_type::<ClothTethers>()
             .register_type::<ClothTearing>()
+            .register_type::<ClothInertia>()
             .init_resource::<ClothWorkers>()
             .add_message::<ClothTorn>()
             .add_message::<ClothFailed>()

@@ -54,6 +54,11 @@ pub struct ClothSim {
     pub(super) settings_error: Option<ClothError>,
     /// A pin list that was refused (the last valid pins hold meanwhile).
     pub(super) pins_error: Option<ClothError>,
+    /// The [`ClothInertia`](super::ClothInertia) anchor and its pose at the last step.
+    pub(super) inertia_from: Option<(Entity, Vec3, Quat)>,
+    /// A refused [`ClothInertia`](super::ClothInertia) (the cloth feels all its motion
+    /// meanwhile).
+    pub(super) inertia_error: Option<ClothError>,
 }
 
 impl ClothSim {

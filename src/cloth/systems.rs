@@ -8,11 +8,12 @@ use bevy::tasks::ComputeTaskPool;
 
 use super::build::{build, features};
 use super::error::report;
+use super::inertia::carry_unfelt_motion;
 use super::pins::{attach, follow_anchors, pin_list, repin};
 use super::{
-    Cloth, ClothConfig, ClothError, ClothFailed, ClothInvalid, ClothPins, ClothSelfCollision,
-    ClothSim, ClothSource, ClothSteppedElsewhere, ClothTearing, ClothTethers, ClothTorn,
-    ClothWorkers, TaskPoolParallel,
+    Cloth, ClothConfig, ClothError, ClothFailed, ClothInertia, ClothInvalid, ClothPins,
+    ClothSelfCollision, ClothSim, ClothSource, ClothSteppedElsewhere, ClothTearing, ClothTethers,
+    ClothTorn, ClothWorkers, TaskPoolParallel,
 };
 use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
 use crate::foundation::{EntityName, FixedPoses};
@@ -182,13 +183,14 @@ type FeatureQuery = (
     Option<&'static ClothTearing>,
 );
 
-/// Logs and sends a refused change once, when a cloth goes from fine to refused.
-fn note_rejection(
+/// Logs and sends a refused change once, when a cloth goes from fine to refused; `what` names
+/// it (plural), `meanwhile` says what the cloth does until it is fixed.
+pub(super) fn note_rejection(
     commands: &mut Commands,
     who: EntityName<'_>,
     slot: &mut Option<ClothError>,
     result: Result<(), ClothError>,
-    what: &str,
+    (what, meanwhile): (&str, &str),
 ) {
     match result {
         Ok(()) => {
@@ -198,7 +200,7 @@ fn note_rejection(
         }
         Err(e) => {
             if slot.is_none() {
-                error!("cloth {who}: {e}; it keeps its last valid {what}");
+                error!("cloth {who}: {e}; {meanwhile}");
                 commands.write_message(ClothFailed {
                     cloth: who.entity,
                     error: e.clone(),
@@ -222,15 +224,19 @@ pub(super) fn sync_cloths(
             Ref<ClothConfig>,
             Ref<ClothPins>,
             FeatureQuery,
+            Option<&ClothInertia>,
         ),
         Without<ClothInvalid>,
     >,
     poses: FixedPoses,
 ) {
-    for ((entity, name), cloth, mut sim, config, pins, (sc, tethers, tearing)) in &mut cloths {
+    for ((entity, name), cloth, mut sim, config, pins, (sc, tethers, tearing), inertia) in
+        &mut cloths
+    {
         let who = EntityName::new(entity, name);
         let cs = &mut *sim;
         let own = poses.get(entity).unwrap_or_default();
+        carry_unfelt_motion(&mut commands, who, cs, cloth, inertia, &poses);
         // A changed (or still refused) config is applied with the features; otherwise only
         // changed features are.
         let config_due = config.is_changed() || cs.settings_error.is_some();
@@ -257,7 +263,7 @@ pub(super) fn sync_cloths(
                 who,
                 &mut cs.settings_error,
                 result,
-                "settings",
+                ("settings", "it keeps its last valid settings"),
             );
         }
         let list = pin_list(&pins, cs.binding.weld()).map(|mut list| {
@@ -284,7 +290,7 @@ pub(super) fn sync_cloths(
                 who,
                 &mut cs.pins_error,
                 result.map(|_| ()),
-                "pins",
+                ("pins", "it keeps its last valid pins"),
             );
             cs.dirty = true;
             continue;

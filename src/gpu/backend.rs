@@ -22,7 +22,7 @@ use bevy::prelude::*;
 
 use super::mesh::{TangentSource, VertexLayout};
 use super::world::GpuWorld;
-use crate::cloth::{Cloth, ClothSim, ClothSteppedElsewhere, ClothTorn};
+use crate::cloth::{Cloth, ClothInertia, ClothSim, ClothSteppedElsewhere, ClothTorn};
 use crate::collider::{ClothColliders, ClothContactImpulse};
 use crate::foundation::EntityName;
 use crate::solver::{Collider, ContactImpulse, Simulation};
@@ -228,7 +228,7 @@ pub(crate) fn choose_backends(
     default: Res<DefaultBackend>,
     meshes: Option<Res<Assets<Mesh>>>,
     mut cloths: Query<(
-        (Entity, Option<&Name>),
+        (Entity, Option<&Name>, Option<&ClothInertia>),
         &ClothSim,
         Option<&ClothBackend>,
         Option<&mut ClothBackendInUse>,
@@ -243,7 +243,8 @@ pub(crate) fn choose_backends(
 ) {
     let dt = fixed.timestep().as_secs_f32();
     let mut seen = std::collections::HashSet::new();
-    for ((entity, name), cloth, backend, in_use, on_gpu, leaving, readback) in &mut cloths {
+    for ((entity, name, inertia), cloth, backend, in_use, on_gpu, leaving, readback) in &mut cloths
+    {
         let who = EntityName::new(entity, name);
         seen.insert(entity);
         if leaving {
@@ -259,6 +260,13 @@ pub(crate) fn choose_backends(
                     s.unavailable.clone()
                 })
                 .map_or(Ok(()), Err)
+                .and_then(|()| match inertia {
+                    Some(i) if !i.is_world_space() => Err(
+                        "ClothInertia below 1 runs on the CPU backend only (not yet on the GPU)"
+                            .to_owned(),
+                    ),
+                    _ => Ok(()),
+                })
                 .and_then(|()| {
                     // The model check (O(n) for stiff bending) once per change of settings.
                     let key = settings_key(cloth.simulation());

@@ -7,6 +7,7 @@
 //! settling after a change of settings, tearing, the NaN guard, sleeping. [`step_many`] steps
 //! several cloths on shared threads.
 
+mod inertia;
 mod lab;
 mod many;
 mod params;
@@ -17,6 +18,7 @@ pub(crate) mod substeps;
 mod tear;
 mod teleport;
 
+pub use inertia::Carry;
 pub use lab::{LabScratch, lab_step};
 pub use many::{ManyItem, step_many};
 pub use params::{Features, SolverParams};

@@ -1,0 +1,161 @@
+//! Inertia: how much of its anchor's motion a cloth feels.
+//!
+//! A cloth is simulated in world space, so a character that sprints drags its cape through
+//! the air at full speed and a turn swings it round: realistic, and often more than a game
+//! wants (a cape stretched to twice its length by a dash). Engines scale the motion a cloth
+//! feels (Unity's world velocity and acceleration scales, NvCloth's inertia multipliers): each
+//! step the part of the anchor's motion the cloth should *not* feel is applied to every
+//! vertex as a rigid motion ([`Carry`]), so that part moves the cloth as if it were glued to
+//! its anchor and only the rest drives its dynamics.
+
+use glam::{Quat, Vec3, Vec4};
+
+use super::state::ClothState;
+
+/// A rigid motion applied to a whole cloth: `x ↦ rotation·(x − pivot) + pivot + translation`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Carry {
+    /// Rotation about `pivot`.
+    pub rotation: Quat,
+    /// The point the rotation turns about.
+    pub pivot: Vec3,
+    /// Translation after the rotation.
+    pub translation: Vec3,
+}
+
+impl Carry {
+    /// Where `p` goes.
+    #[must_use]
+    pub fn apply(&self, p: Vec3) -> Vec3 {
+        self.rotation * (p - self.pivot) + self.pivot + self.translation
+    }
+
+    /// The part of an anchor's motion from `(from, from_rotation)` to `(to, to_rotation)` a
+    /// cloth with inertia `linear` and `angular` (each in `0..=1`: 1 feels all of it, 0
+    /// none) does not feel: `1 − linear` of the translation, and `1 − angular` of the
+    /// rotation about the anchor's old position. `None` when nothing is to be carried (both
+    /// inertias 1, or an anchor that did not move) or when an input is not finite.
+    #[must_use]
+    pub fn unfelt(
+        (from, from_rotation): (Vec3, Quat),
+        (to, to_rotation): (Vec3, Quat),
+        linear: f32,
+        angular: f32,
+    ) -> Option<Self> {
+        let finite = from.is_finite()
+            && to.is_finite()
+            && from_rotation.is_finite()
+            && to_rotation.is_finite()
+            && linear.is_finite()
+            && angular.is_finite();
+        if !finite || (linear >= 1.0 && angular >= 1.0) {
+            return None;
+        }
+        let delta = (to_rotation * from_rotation.inverse()).normalize();
+        let rotation = Quat::IDENTITY
+            .slerp(delta, (1.0 - angular).clamp(0.0, 1.0))
+            .normalize();
+        let translation = (1.0 - linear).clamp(0.0, 1.0) * (to - from);
+        let carry = Self {
+            rotation,
+            pivot: from,
+            translation,
+        };
+        (carry.rotation != Quat::IDENTITY || carry.translation != Vec3::ZERO).then_some(carry)
+    }
+}
+
+impl ClothState {
+    /// Moves every vertex rigidly by `carry` (positions and substep starts; velocities turn
+    /// with the rotation), leaving pin targets where they are: the motion a cloth does not
+    /// feel. A non-finite carry is ignored.
+    pub fn carry(&mut self, carry: &Carry) {
+        let finite =
+            carry.rotation.is_finite() && carry.pivot.is_finite() && carry.translation.is_finite();
+        if !finite {
+            return;
+        }
+        let moved = |p: Vec4| carry.apply(p.truncate()).extend(p.w);
+        for (p, q) in self.positions.iter_mut().zip(&mut self.prev) {
+            *p = moved(*p);
+            *q = moved(*q);
+        }
+        for v in &mut self.velocities {
+            *v = (carry.rotation * v.truncate()).extend(v.w);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::state::Pin;
+    use super::*;
+
+    const FROM: (Vec3, Quat) = (Vec3::new(1.0, 2.0, 3.0), Quat::IDENTITY);
+
+    #[test]
+    fn full_inertia_carries_nothing_and_none_carries_the_whole_motion() {
+        let to = (Vec3::new(4.0, 2.0, -1.0), Quat::from_rotation_y(0.7));
+        assert_eq!(Carry::unfelt(FROM, to, 1.0, 1.0), None);
+        assert_eq!(Carry::unfelt(FROM, FROM, 0.3, 0.3), None);
+        // Inertia 0: a point fixed to the anchor goes exactly where the anchor takes it.
+        let glued = Carry::unfelt(FROM, to, 0.0, 0.0).unwrap();
+        let offset = Vec3::new(0.2, -0.5, 0.4);
+        let expected = to.0 + to.1 * (FROM.1.inverse() * offset);
+        assert!(glued.apply(FROM.0 + offset).distance(expected) < 1e-5);
+        // Inertia 0.25 in translation only: three quarters of the move carried.
+        let linear = Carry::unfelt(FROM, (to.0, FROM.1), 0.25, 1.0).unwrap();
+        assert!(
+            linear
+                .apply(FROM.0)
+                .distance(FROM.0 + 0.75 * (to.0 - FROM.0))
+                < 1e-6
+        );
+        // Half the turn about the anchor, none of the move.
+        let turn = Carry::unfelt(FROM, (FROM.0, to.1), 1.0, 0.5).unwrap();
+        assert!(turn.rotation.angle_between(Quat::from_rotation_y(0.35)) < 1e-5);
+        assert_eq!(turn.apply(FROM.0), FROM.0);
+        // Not finite: nothing.
+        assert_eq!(
+            Carry::unfelt((Vec3::NAN, Quat::IDENTITY), to, 0.0, 0.0),
+            None
+        );
+    }
+
+    #[test]
+    fn a_carried_state_keeps_its_shape_its_pin_targets_and_its_own_velocity() {
+        let positions = [Vec3::ZERO, Vec3::X, Vec3::new(0.0, 1.0, 1.0)];
+        let mut s = ClothState::new(&positions, &[1.0; 3]).unwrap();
+        s.set_pins([Pin {
+            vertex: 0,
+            target: Vec3::new(0.0, 0.5, 0.0),
+        }])
+        .unwrap();
+        s.velocities[1] = Vec4::new(0.0, 0.0, 2.0, 0.0);
+        let carry = Carry {
+            rotation: Quat::from_rotation_x(0.5),
+            pivot: Vec3::new(0.5, 0.0, 0.0),
+            translation: Vec3::new(0.0, 0.0, 3.0),
+        };
+        let before = s.clone();
+        s.carry(&carry);
+        for i in 0..3 {
+            let (a, b) = (before.position(i), s.position(i));
+            assert!(b.distance(carry.apply(a)) < 1e-6, "vertex {i}");
+        }
+        assert!(
+            (s.position(1).distance(s.position(2)) - positions[1].distance(positions[2])).abs()
+                < 1e-6
+        );
+        assert_eq!(s.pins(), before.pins(), "pin targets stay");
+        let v = s.velocities[1].truncate();
+        assert!(v.distance(carry.rotation * Vec3::new(0.0, 0.0, 2.0)) < 1e-6);
+        // Not finite: nothing moves.
+        let mut t = before.clone();
+        t.carry(&Carry {
+            translation: Vec3::NAN,
+            ..carry
+        });
+        assert_eq!(t.positions, before.positions);
+    }
+}
