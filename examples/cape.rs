@@ -5,8 +5,12 @@
 //! ```text
 //! cargo run --release --example cape
 //! cargo run --release --example cape -- --headless --frames 600
+//! cargo run --release --example cape -- --speed 8 --inertia 0.3
 //! ```
-//! The JSON line adds `pin_error` (largest distance between a pinned vertex and its anchor).
+//! `--speed M/S` sets the walking speed (default 1.6); `--inertia X` gives the cape a
+//! `ClothInertia` of `X` relative to the character (1: it feels all of the motion, as without;
+//! lower: less stretch and swing when the character runs). The JSON line adds `pin_error`
+//! (largest distance between a pinned vertex and its anchor).
 
 #[path = "support/mod.rs"]
 mod support;
@@ -21,6 +25,13 @@ struct Walker {
     speed: f32,
 }
 
+/// `--speed` and `--inertia`.
+#[derive(Resource)]
+struct Options {
+    speed: f32,
+    inertia: Option<f32>,
+}
+
 const COLUMNS: u32 = 16;
 const ROWS: u32 = 22;
 
@@ -28,12 +39,13 @@ fn setup(
     mut commands: Commands,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: Option<ResMut<Assets<StandardMaterial>>>,
+    options: Res<Options>,
 ) {
     // The character: a capsule 1.7 m tall walking towards its local +z; its back is −z.
     let mut body = commands.spawn((
         Walker {
             radius: 3.0,
-            speed: 1.6,
+            speed: options.speed,
         },
         Transform::from_xyz(3.0, 0.85, 0.0),
         ClothCollider::capsule(0.28, 1.1).with_thickness(0.02),
@@ -79,6 +91,9 @@ fn setup(
         ClothPins(pins.collect()),
         ClothTethers::default(),
     ));
+    if let Some(inertia) = options.inertia {
+        cape.insert(ClothInertia::new(inertia).relative_to(character));
+    }
     if let Some(mut m) = materials {
         cape.insert(support::ClothLook(Color::srgb(0.6, 0.08, 0.12)));
         support::stage(
@@ -132,7 +147,11 @@ fn report(world: &mut World) -> support::Json {
 fn main() {
     let args = Args::parse();
     let mut app = support::app(&args, "bevy_cloth: cape", 1.0 / 60.0);
-    app.add_systems(Startup, setup)
-        .add_systems(FixedUpdate, walk);
+    app.insert_resource(Options {
+        speed: args.get("speed", 1.6),
+        inertia: args.rest.get("inertia").map(|_| args.get("inertia", 1.0)),
+    })
+    .add_systems(Startup, setup)
+    .add_systems(FixedUpdate, walk);
     support::run(app, &args, report);
 }
