@@ -46,6 +46,7 @@ impl Built {
             attached: self.attached,
             settings_error: None,
             pins_error: None,
+            carry: None,
             inertia_from: None,
             inertia_error: None,
         }

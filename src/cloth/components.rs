@@ -145,8 +145,7 @@ impl Default for ClothTethers {
 /// than [`Cloth::teleport_distance`] is a teleport, not a motion, and is not carried.
 /// Values outside `0..=1`, or an anchor that does not exist, are reported once
 /// ([`ClothFailed`](super::ClothFailed)) and the cloth feels all of its motion until fixed.
-/// The CPU backend only: a GPU cloth with inertia below 1 runs on the CPU (its
-/// `ClothBackendInUse` says why).
+/// Both backends: the GPU applies each step's carried motion in its `teleport` kernel.
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component, Default, Clone, PartialEq)]
 pub struct ClothInertia {

@@ -25,6 +25,7 @@ pub(super) fn carry_unfelt_motion(
         "inertia",
         "it feels all of its anchor's motion until this is fixed",
     );
+    cs.carry = None;
     let inertia = match inertia.map(|i| i.validate().map(|()| i)) {
         Some(Ok(i)) if !i.is_world_space() => i,
         other => {
@@ -62,6 +63,7 @@ pub(super) fn carry_unfelt_motion(
             Carry::unfelt((from, from_rotation), now, inertia.linear, inertia.angular)
     {
         cs.sim.state_mut().carry(&carry);
+        cs.carry = Some(carry);
         cs.dirty = true;
     }
     cs.inertia_from = Some((anchor, now.0, now.1));

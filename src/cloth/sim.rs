@@ -7,7 +7,7 @@ use bevy::prelude::*;
 use super::ClothError;
 use super::ClothTorn;
 use crate::foundation::EntityName;
-use crate::solver::{MeshBinding, Simulation, Weld, WindField, ray_hit};
+use crate::solver::{Carry, MeshBinding, Simulation, Weld, WindField, ray_hit};
 
 /// The running simulation of a cloth entity, inserted by the plugin on its first step.
 ///
@@ -54,6 +54,10 @@ pub struct ClothSim {
     pub(super) settings_error: Option<ClothError>,
     /// A pin list that was refused (the last valid pins hold meanwhile).
     pub(super) pins_error: Option<ClothError>,
+    /// The motion carried at the start of this fixed step
+    /// ([`ClothInertia`](super::ClothInertia); a backend stepping elsewhere applies it to its
+    /// own state).
+    pub(super) carry: Option<Carry>,
     /// The [`ClothInertia`](super::ClothInertia) anchor and its pose at the last step.
     pub(super) inertia_from: Option<(Entity, Vec3, Quat)>,
     /// A refused [`ClothInertia`](super::ClothInertia) (the cloth feels all its motion
@@ -176,6 +180,14 @@ impl ClothSim {
     /// teleport rule), taken: a backend stepping elsewhere applies it to its own state.
     pub fn take_teleport(&mut self) -> Option<Vec3> {
         self.teleport.take()
+    }
+
+    /// The rigid motion carried at the start of this fixed step (the part of its
+    /// [`ClothInertia`](super::ClothInertia) anchor's motion the cloth does not feel, applied
+    /// before the pins and the teleport rule), taken: a backend stepping elsewhere applies it
+    /// to its own state.
+    pub fn take_carry(&mut self) -> Option<Carry> {
+        self.carry.take()
     }
 
     /// How many times [`Self::simulation_mut`] was called: a backend stepping elsewhere

@@ -22,10 +22,10 @@ use bevy::prelude::*;
 
 use super::mesh::{TangentSource, VertexLayout};
 use super::world::GpuWorld;
-use crate::cloth::{Cloth, ClothInertia, ClothSim, ClothSteppedElsewhere, ClothTorn};
+use crate::cloth::{Cloth, ClothSim, ClothSteppedElsewhere, ClothTorn};
 use crate::collider::{ClothColliders, ClothContactImpulse};
 use crate::foundation::EntityName;
-use crate::solver::{Collider, ContactImpulse, Simulation};
+use crate::solver::{Carry, Collider, ContactImpulse, Simulation};
 use crate::wind::ClothWindField;
 
 /// Which solver steps a cloth.
@@ -166,6 +166,8 @@ pub struct ClothOnGpu {
     pub(crate) first_step: u32,
     /// Per queued step, how far the whole cloth jumps at its start (the teleport rule).
     pub(crate) teleports: Vec<Vec3>,
+    /// Per queued step, the rigid motion carried at its start (`ClothInertia`).
+    pub(crate) carries: Vec<Carry>,
     /// The air at each vertex, sampled at the last queued step.
     pub(crate) air: Vec<Vec4>,
 }
@@ -228,7 +230,7 @@ pub(crate) fn choose_backends(
     default: Res<DefaultBackend>,
     meshes: Option<Res<Assets<Mesh>>>,
     mut cloths: Query<(
-        (Entity, Option<&Name>, Option<&ClothInertia>),
+        (Entity, Option<&Name>),
         &ClothSim,
         Option<&ClothBackend>,
         Option<&mut ClothBackendInUse>,
@@ -243,8 +245,7 @@ pub(crate) fn choose_backends(
 ) {
     let dt = fixed.timestep().as_secs_f32();
     let mut seen = std::collections::HashSet::new();
-    for ((entity, name, inertia), cloth, backend, in_use, on_gpu, leaving, readback) in &mut cloths
-    {
+    for ((entity, name), cloth, backend, in_use, on_gpu, leaving, readback) in &mut cloths {
         let who = EntityName::new(entity, name);
         seen.insert(entity);
         if leaving {
@@ -260,13 +261,6 @@ pub(crate) fn choose_backends(
                     s.unavailable.clone()
                 })
                 .map_or(Ok(()), Err)
-                .and_then(|()| match inertia {
-                    Some(i) if !i.is_world_space() => Err(
-                        "ClothInertia below 1 runs on the CPU backend only (not yet on the GPU)"
-                            .to_owned(),
-                    ),
-                    _ => Ok(()),
-                })
                 .and_then(|()| {
                     // The model check (O(n) for stiff bending) once per change of settings.
                     let key = settings_key(cloth.simulation());
@@ -322,6 +316,7 @@ pub(crate) fn choose_backends(
                         pending: Vec::new(),
                         first_step: 0,
                         teleports: Vec::new(),
+                        carries: Vec::new(),
                         air: Vec::new(),
                     },
                     ClothSteppedElsewhere,
@@ -498,6 +493,7 @@ pub(crate) fn clear_queued_steps(
     for mut g in &mut cloths {
         g.pending.clear();
         g.teleports.clear();
+        g.carries.clear();
     }
 }
 
@@ -563,6 +559,8 @@ pub(crate) fn queue_gpu_steps(
         cloth.count_external_steps(1);
         g.teleports
             .push(cloth.take_teleport().unwrap_or(Vec3::ZERO));
+        g.carries
+            .push(cloth.take_carry().unwrap_or(Carry::IDENTITY));
         match wind.as_deref() {
             Some(w) if !w.field.is_empty() && !cloth.simulation().params().air.is_none() => {
                 cloth.sample_air(&w.field, w.time + 0.5 * f64::from(dt), &mut g.air);

@@ -32,6 +32,7 @@ use super::kernels::GpuKernels;
 use super::layout::WorldKey;
 use super::mesh::{MeshKernel, MeshWriter};
 use super::world::{ClothFrame, GpuFrame, GpuWorld, StepColliders, sum_impulses};
+use crate::solver::Carry;
 
 /// The compiled kernels (render world).
 #[derive(Resource)]
@@ -50,6 +51,7 @@ struct ExtractedGpuCloth {
     pin_targets: Vec<Vec<Vec3>>,
     first_step: u32,
     teleports: Vec<Vec3>,
+    carries: Vec<Carry>,
     air: Vec<Vec4>,
     transform: bevy::math::Affine3A,
     /// Read positions and velocities back this frame.
@@ -93,6 +95,7 @@ pub(crate) fn extract_gpu_cloths(
             pin_targets: g.pending.clone(),
             first_step: g.first_step,
             teleports: g.teleports.clone(),
+            carries: g.carries.clone(),
             air: g.air.clone(),
             transform: transform.affine(),
             readback,
@@ -107,6 +110,7 @@ pub(crate) fn extract_gpu_cloths(
             pin_targets: Vec::new(),
             first_step: 0,
             teleports: Vec::new(),
+            carries: Vec::new(),
             air: Vec::new(),
             transform: transform.affine(),
             readback: true,
@@ -294,6 +298,7 @@ pub(crate) fn prepare_gpu_worlds(
                         first_step: x.first_step,
                         pin_targets: &x.pin_targets,
                         teleports: &x.teleports,
+                        carries: &x.carries,
                         air_velocities: &x.air,
                     },
                     // Leaving: not stepped.

@@ -2,10 +2,10 @@
 //! one set of GPU buffers and stepped by a few dispatches per substep for all of them.
 //!
 //! A frame records, per step: `step_begin` (pins' starts, area vectors, the self-collision
-//! hash; `teleport` first in a step where a cloth teleports), `sc_query` with self-collision;
-//! per substep and iteration: `solve` over every cloth's parts (their vertices integrated
-//! first), then over the even seams, the odd seams and the boundaries (each only if some
-//! cloth has one); `sc_collide` with self-collision; `finish_substep` (tethers, the
+//! hash; `teleport` first in a step where a cloth is carried or teleports), `sc_query` with
+//! self-collision; per substep and iteration: `solve` over every cloth's parts (their
+//! vertices integrated first), then over the even seams, the odd seams and the boundaries
+//! (each only if some cloth has one); `sc_collide` with self-collision; `finish_substep` (tethers, the
 //! self-collision correction, colliders) when any of those acts; per step `step_end`
 //! (velocities, the NaN guard) and `tear_check` with tearing. That is at most 6 dispatches a
 //! substep however many colours, parts or cloths there are ([`GpuWorld::dispatches`] counts
@@ -25,7 +25,7 @@ use super::kernels::{GpuKernels, GpuUnsupported, TABLE_STRIDE, WORKGROUP};
 use super::layout::{ClothLayout, WorldKey, WorldLayout};
 use crate::solver::collision::substep_poses;
 use crate::solver::{
-    Collider, ContactImpulse, MAX_SELF_NEIGHBOURS, Pose, SdfGrid, Shape, Simulation,
+    Carry, Collider, ContactImpulse, MAX_SELF_NEIGHBOURS, Pose, SdfGrid, Shape, Simulation,
 };
 
 #[repr(C)]
@@ -222,6 +222,10 @@ pub struct ClothFrame<'a> {
     /// Per step it takes, how far the whole cloth jumps at the step's start (the teleport
     /// rule); empty or zero for none.
     pub teleports: &'a [Vec3],
+    /// Per step it takes, the rigid motion carried at the step's start, before the teleport
+    /// (the part of its `ClothInertia` anchor's motion the cloth does not feel); empty or
+    /// [`Carry::IDENTITY`] for none.
+    pub carries: &'a [Carry],
     /// The air's velocity at each vertex (`w` ignored); empty for still air.
     pub air_velocities: &'a [Vec4],
 }
@@ -306,6 +310,10 @@ fn empty(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsage
         mapped_at_creation: false,
     })
 }
+
+/// `vec4`s of a cloth's record per step in `frame`: flags and teleport, then the carried
+/// motion (`shaders/common.wgsl`'s `CLOTH_STEP_VEC4S`).
+const CLOTH_STEP_VEC4S: u32 = 4;
 
 const RW: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
     .union(wgpu::BufferUsages::COPY_DST)
@@ -780,9 +788,11 @@ impl GpuWorld {
             );
             rebind = true;
         }
-        // `frame`: pin targets per step, then cloth records per step.
+        // `frame`: pin targets per step, then cloth records per step (`CLOTH_STEP_VEC4S`
+        // each: flags and teleport, then the carried motion's matrix columns with its offset
+        // in their `w`).
         let pins = self.layout.pins;
-        let frame_vec4s = u64::from(steps) * u64::from(pins + cloths as u32);
+        let frame_vec4s = u64::from(steps) * u64::from(pins + CLOTH_STEP_VEC4S * cloths as u32);
         if frame_vec4s.max(1) > self.frame_capacity {
             self.frame_capacity = frame_vec4s.next_power_of_two();
             self.frame = empty(device, "cloth_frame", self.frame_capacity * 16, RO);
@@ -875,7 +885,7 @@ impl GpuWorld {
                     pose_at,
                     colliders: sc.colliders.len() as u32,
                     pin_at: k * pins,
-                    cloth_step_at: cloth_step_at + k * cloths as u32,
+                    cloth_step_at: cloth_step_at + k * CLOTH_STEP_VEC4S * cloths as u32,
                     _pad: 0,
                 };
                 let at = ((k * substeps + sub) as u64 * TABLE_STRIDE) as usize;
@@ -938,17 +948,30 @@ impl GpuWorld {
                     .get(local)
                     .copied()
                     .filter(|o| *o != Vec3::ZERO && o.is_finite());
-                teleport_steps[k as usize] |= jump.is_some();
+                let carry = f.carries.get(local).copied().filter(|c| {
+                    *c != Carry::IDENTITY
+                        && c.rotation.is_finite()
+                        && c.pivot.is_finite()
+                        && c.translation.is_finite()
+                });
+                teleport_steps[k as usize] |= jump.is_some() || carry.is_some();
+                // Flags: 1 takes the step, + 2 teleports, + 4 is carried; 0 sits it out (no
+                // targets for this step).
                 let flag = if targets.is_none() && c.pins > 0 {
-                    // No targets for this step: the cloth sits it out.
                     0.0
-                } else if jump.is_some() {
-                    3.0
                 } else {
-                    1.0
+                    1.0 + if jump.is_some() { 2.0 } else { 0.0 }
+                        + if carry.is_some() { 4.0 } else { 0.0 }
                 };
-                data[(cloth_step_at + k * cloths as u32) as usize + ci] =
-                    jump.unwrap_or(Vec3::ZERO).extend(flag);
+                let at =
+                    (cloth_step_at + (k * cloths as u32 + ci as u32) * CLOTH_STEP_VEC4S) as usize;
+                data[at] = jump.unwrap_or(Vec3::ZERO).extend(flag);
+                if let Some(carry) = carry {
+                    let (m, b) = carry.affine();
+                    data[at + 1] = m.x_axis.extend(b.x);
+                    data[at + 2] = m.y_axis.extend(b.y);
+                    data[at + 3] = m.z_axis.extend(b.z);
+                }
             }
         }
         if !data.is_empty() {

@@ -187,9 +187,19 @@ fn vertex_pin(i: u32) -> u32 {
     return topo[P.vertex_pin_at + i];
 }
 
+// `vec4`s of a cloth's record per step in `frame` (`world.rs`'s `CLOTH_STEP_VEC4S`): flags
+// (w: 1 takes the step, + 2 teleports, + 4 is carried; 0 sits it out) with the teleport
+// offset (xyz), then the carried motion's matrix columns with its offset in their w.
+const CLOTH_STEP_VEC4S: u32 = 4u;
+
+// Cloth `c`'s record in this step.
+fn cloth_step(c: u32) -> u32 {
+    return S.cloth_step_at + CLOTH_STEP_VEC4S * c;
+}
+
 // Whether cloth `c` takes part in this step.
 fn cloth_active(c: u32) -> bool {
-    return frame[S.cloth_step_at + c].w > 0.5;
+    return frame[cloth_step(c)].w > 0.5;
 }
 
 const MIN_LENGTH: f32 = 1e-9;

@@ -1,8 +1,15 @@
 // Once per step, before its substeps.
 
-// The teleport rule at the start of a step, for the cloths that teleport in it: every vertex
-// moves by the cloth's offset and the pins land on their targets at rest (CPU twin:
-// `ClothState::teleport`). Dispatched only in steps where a cloth teleports.
+// `m·p` column by column, in the order of the CPU twin (`solver::Carry`).
+fn carried(at: u32, p: vec3<f32>) -> vec3<f32> {
+    return frame[at + 1u].xyz * p.x + frame[at + 2u].xyz * p.y + frame[at + 3u].xyz * p.z;
+}
+
+// The start of a step for the cloths carried or teleporting in it. Carried (`ClothInertia`):
+// every vertex moves by the rigid motion `m·x + b` and its velocity turns with it (CPU twin:
+// `ClothState::carry`). Then the teleport rule: every vertex moves by the cloth's offset and
+// the pins land on their targets at rest (CPU twin: `ClothState::teleport`). Dispatched only
+// in steps where a cloth is carried or teleports.
 @compute @workgroup_size(64)
 fn teleport(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -10,8 +17,19 @@ fn teleport(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let c = vertex_cloth(i);
-    let rec = frame[S.cloth_step_at + c];
-    if rec.w < 2.5 {
+    let at = cloth_step(c);
+    let rec = frame[at];
+    let flags = u32(rec.w + 0.5);
+    if (flags & 4u) != 0u {
+        let b = vec3<f32>(frame[at + 1u].w, frame[at + 2u].w, frame[at + 3u].w);
+        let x = state[i];
+        let q = state[P.prev_at + i];
+        let v = state[P.vel_at + i];
+        state[i] = vec4<f32>(carried(at, x.xyz) + b, x.w);
+        state[P.prev_at + i] = vec4<f32>(carried(at, q.xyz) + b, q.w);
+        state[P.vel_at + i] = vec4<f32>(carried(at, v.xyz), v.w);
+    }
+    if (flags & 2u) == 0u {
         return;
     }
     let p = vertex_pin(i);

@@ -8,7 +8,7 @@
 //! vertex as a rigid motion ([`Carry`]), so that part moves the cloth as if it were glued to
 //! its anchor and only the rest drives its dynamics.
 
-use glam::{Quat, Vec3, Vec4};
+use glam::{Mat3, Quat, Vec3, Vec4};
 
 use super::state::ClothState;
 
@@ -24,10 +24,26 @@ pub struct Carry {
 }
 
 impl Carry {
+    /// No motion.
+    pub const IDENTITY: Self = Self {
+        rotation: Quat::IDENTITY,
+        pivot: Vec3::ZERO,
+        translation: Vec3::ZERO,
+    };
+
+    /// The motion as `x ↦ m·x + b`: the rotation's matrix and the offset, the form both the
+    /// CPU ([`ClothState::carry`]) and the GPU's `teleport` kernel apply, in the same order.
+    #[must_use]
+    pub fn affine(&self) -> (Mat3, Vec3) {
+        let m = Mat3::from_quat(self.rotation);
+        (m, self.pivot + self.translation - m * self.pivot)
+    }
+
     /// Where `p` goes.
     #[must_use]
     pub fn apply(&self, p: Vec3) -> Vec3 {
-        self.rotation * (p - self.pivot) + self.pivot + self.translation
+        let (m, b) = self.affine();
+        rotate(&m, p) + b
     }
 
     /// The part of an anchor's motion from `(from, from_rotation)` to `(to, to_rotation)` a
@@ -65,6 +81,13 @@ impl Carry {
     }
 }
 
+/// `m·p` summed column by column in a fixed order (`m.x_axis·p.x + m.y_axis·p.y +
+/// m.z_axis·p.z`), as the GPU twin writes it.
+#[inline]
+fn rotate(m: &Mat3, p: Vec3) -> Vec3 {
+    m.x_axis * p.x + m.y_axis * p.y + m.z_axis * p.z
+}
+
 impl ClothState {
     /// Moves every vertex rigidly by `carry` (positions and substep starts; velocities turn
     /// with the rotation), leaving pin targets where they are: the motion a cloth does not
@@ -75,13 +98,14 @@ impl ClothState {
         if !finite {
             return;
         }
-        let moved = |p: Vec4| carry.apply(p.truncate()).extend(p.w);
+        let (m, b) = carry.affine();
+        let moved = |p: Vec4| (rotate(&m, p.truncate()) + b).extend(p.w);
         for (p, q) in self.positions.iter_mut().zip(&mut self.prev) {
             *p = moved(*p);
             *q = moved(*q);
         }
         for v in &mut self.velocities {
-            *v = (carry.rotation * v.truncate()).extend(v.w);
+            *v = rotate(&m, v.truncate()).extend(v.w);
         }
     }
 }
