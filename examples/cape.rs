@@ -124,9 +124,18 @@ fn walk(time: Res<Time>, mut walkers: Query<(&Walker, &mut Transform)>) {
 fn report(world: &mut World) -> support::Json {
     let mut walkers = world.query_filtered::<&GlobalTransform, With<Walker>>();
     let body = *walkers.iter(world).next().expect("a walker");
-    let mut q = world.query::<(&ClothSim, &ClothPins)>();
+    let mut q = world.query::<(
+        &ClothSim,
+        &ClothPins,
+        Option<&ClothBackendInUse>,
+        Has<ClothReadback>,
+    )>();
     let mut pin_error = 0.0f32;
-    for (sim, pins) in q.iter(world) {
+    for (sim, pins, backend, read_back) in q.iter(world) {
+        if backend.is_some_and(|b| b.gpu) && !read_back {
+            // Its state stays on the GPU (a windowed run reads none back).
+            continue;
+        }
         for pin in &pins.0 {
             if let PinAnchor::Entity { offset, .. } = pin.anchor {
                 let at = body.transform_point(offset);
