@@ -37,16 +37,14 @@ pub(super) fn carry_unfelt_motion(
         }
     };
     let anchor = inertia.anchor.unwrap_or(who.entity);
-    let pose = {
-        poses
-            .get(anchor)
-            .map(|at| {
-                let (_, rotation, translation) = at.to_scale_rotation_translation();
-                (translation, rotation)
-            })
-            .filter(|(t, r)| t.is_finite() && r.is_finite())
-            .ok_or(ClothError::InertiaAnchorMissing(anchor))
-    };
+    let pose = poses
+        .get(anchor)
+        .map(|at| {
+            let (_, rotation, translation) = at.to_scale_rotation_translation();
+            (translation, rotation)
+        })
+        .filter(|(t, r)| t.is_finite() && r.is_finite())
+        .ok_or(ClothError::InertiaAnchorMissing(anchor));
     let now = match pose {
         Ok(now) => now,
         Err(e) => {
