@@ -481,6 +481,7 @@ fn scene_files_round_trip_exactly() {
                 friction: 0.3,
             },
             ClothBackend::Cpu,
+            ClothInertia::new(0.4).relative_to(ball),
         ))
         .id();
     actions::add_wind_zone(app.world_mut());
@@ -512,6 +513,13 @@ fn scene_files_round_trip_exactly() {
         "a pin on the ball: {text}"
     );
     assert!(text.contains("Asset(\"rock.obj\")"), "the rock by its path");
+    assert!(
+        text.split("SavedInertia(").nth(1).is_some_and(|rest| rest
+            .split("anchor: ")
+            .nth(1)
+            .is_some_and(|a| a.starts_with("Collider("))),
+        "the inertia relative to the ball: {text}"
+    );
     assert!(
         text.contains("Inline("),
         "the user's mesh, vertex by vertex"
@@ -606,7 +614,18 @@ fn a_scene_file_that_cannot_be_built_changes_nothing() {
     assert_eq!((before.0.len(), before.1), (3, 0));
 
     type Break = fn(&mut scene::ClothScene);
-    let cases: [(&str, Break, &str); 9] = [
+    let cases: [(&str, Break, &str); 10] = [
+        (
+            "an inertia over 1",
+            |s| {
+                s.cloths[0].inertia = Some(scene::SavedInertia {
+                    linear: 2.0,
+                    angular: 1.0,
+                    anchor: scene::SavedInertiaAnchor::Own,
+                })
+            },
+            "inertia",
+        ),
         (
             "a mesh asset that does not exist",
             |s| s.cloths[0].mesh = scene::SavedMesh::Asset("no_such_cloth.obj".into()),
@@ -701,6 +720,7 @@ fn a_scene_file_naming_a_gltf_mesh_loads_it_before_replacing_the_scene() {
         tethers: None,
         tearing: None,
         backend: None,
+        inertia: None,
     };
     let file = scene::ClothScene {
         cloths: vec![cloth],

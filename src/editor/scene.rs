@@ -21,8 +21,8 @@ use serde::{Deserialize, Serialize};
 use super::actions::{dress_cloth, say, spawn_collider};
 use super::state::{ClothEditor, EditorGrid};
 use crate::cloth::{
-    Cloth, ClothConfig, ClothParts, ClothPin, ClothPins, ClothSelfCollision, ClothSim, ClothSource,
-    ClothTearing, ClothTethers, PinAnchor, check_cloth,
+    Cloth, ClothConfig, ClothInertia, ClothParts, ClothPin, ClothPins, ClothSelfCollision,
+    ClothSim, ClothSource, ClothTearing, ClothTethers, PinAnchor, check_cloth,
 };
 use crate::collider::{ClothCollider, ColliderMesh, ColliderShape};
 use crate::foundation::{EntityName, grid_mesh};
@@ -151,6 +151,32 @@ pub struct SavedCloth {
     pub tearing: Option<ClothTearing>,
     /// The backend asked for, if set on the entity.
     pub backend: Option<ClothBackend>,
+    /// Its [`ClothInertia`], if it has one (absent in files from before it existed).
+    #[serde(default)]
+    pub inertia: Option<SavedInertia>,
+}
+
+/// A cloth's [`ClothInertia`] in a file.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+pub struct SavedInertia {
+    /// Share of its anchor's linear motion the cloth feels.
+    pub linear: f32,
+    /// Share of its anchor's rotation the cloth feels.
+    pub angular: f32,
+    /// Whose motion.
+    pub anchor: SavedInertiaAnchor,
+}
+
+/// The anchor of a saved [`ClothInertia`]. An anchor that is not in the file (a character's
+/// bone) is saved as the cloth itself, with a warning.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+pub enum SavedInertiaAnchor {
+    /// The cloth's own entity.
+    Own,
+    /// The saved collider of this index.
+    Collider(usize),
+    /// The saved cloth of this index.
+    Cloth(usize),
 }
 
 /// How finely a mesh collider in a file is baked (its mesh is [`SavedCollider::mesh`]).
@@ -404,6 +430,28 @@ pub fn save_scene(world: &mut World) -> ClothScene {
             tethers: world.get::<ClothTethers>(e).copied(),
             tearing: world.get::<ClothTearing>(e).copied(),
             backend: world.get::<ClothBackend>(e).copied(),
+            inertia: world.get::<ClothInertia>(e).map(|i| SavedInertia {
+                linear: i.linear,
+                angular: i.angular,
+                anchor: match i.anchor {
+                    None => SavedInertiaAnchor::Own,
+                    Some(a) if a == e => SavedInertiaAnchor::Own,
+                    Some(a) => {
+                        if let Some(k) = saved_colliders.iter().position(|&c| c == a) {
+                            SavedInertiaAnchor::Collider(k)
+                        } else if let Some(k) = cloth_list.iter().position(|&c| c == a) {
+                            SavedInertiaAnchor::Cloth(k)
+                        } else {
+                            let who = EntityName::in_world(world, e);
+                            warn!(
+                                "cloth editor: cloth {who}'s inertia anchor is not in the \
+                                 file; it is saved relative to the cloth itself"
+                            );
+                            SavedInertiaAnchor::Own
+                        }
+                    }
+                },
+            }),
         });
     }
     for &e in &zone_list {
@@ -574,6 +622,18 @@ pub fn load_scene(world: &mut World, scene: &ClothScene) -> Result<(), String> {
             })
             .collect();
         world.entity_mut(e).insert(ClothPins(pins));
+        if let Some(i) = c.inertia {
+            let anchor = match i.anchor {
+                SavedInertiaAnchor::Own => None,
+                SavedInertiaAnchor::Collider(k) => Some(colliders[k]),
+                SavedInertiaAnchor::Cloth(k) => Some(cloths[k]),
+            };
+            world.entity_mut(e).insert(ClothInertia {
+                linear: i.linear,
+                angular: i.angular,
+                anchor,
+            });
+        }
     }
     for z in &scene.zones {
         let e = world.spawn((z.zone, Transform::from(z.transform))).id();
@@ -631,6 +691,25 @@ fn check_scene(
                     p.vertex
                 ));
             }
+        }
+        if let Some(i) = &c.inertia {
+            let (kind, k, len) = match i.anchor {
+                SavedInertiaAnchor::Own => ("", 0, 1),
+                SavedInertiaAnchor::Collider(k) => ("collider", k, scene.colliders.len()),
+                SavedInertiaAnchor::Cloth(k) => ("cloth", k, scene.cloths.len()),
+            };
+            if k >= len {
+                return Err(format!(
+                    "{who}: its inertia names {kind} {k}, which is not in the file"
+                ));
+            }
+            ClothInertia {
+                linear: i.linear,
+                angular: i.angular,
+                anchor: None,
+            }
+            .validate()
+            .map_err(|e| format!("{who}: {e}"))?;
         }
         let mesh = check_mesh(world, &c.mesh).map_err(|e| format!("{who}: {e}"))?;
         // Pins are checked for their vertex here; their anchors above.
