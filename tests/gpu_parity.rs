@@ -97,8 +97,10 @@ fn sliding(start: Vec<Vec3>, per_step: Vec3) -> Box<dyn Fn(usize) -> Vec<Vec3>> 
 
 /// The most f32 rounding can part two correct implementations of `frames` steps of `sim`
 /// from the same state (see the module docs): ε × the largest coordinate × the rewrites of a
-/// vertex's position (substeps × iterations × (its constraints + integration + contacts)) ×
-/// 4 for the spread to neighbours.
+/// vertex's position (substeps × iterations × (its constraints + integration + contacts),
+/// plus 4 at the start of each step for a carried or teleported cloth: the carry's three
+/// products and three sums round each coordinate at most about four times its ε) × 4 for
+/// the spread to neighbours.
 fn rounding_bound(sim: &Simulation, steps: usize, positions: &[Vec4]) -> f32 {
     let t = sim.topology();
     let mut degree = vec![0u32; t.vertex_count()];
@@ -118,7 +120,7 @@ fn rounding_bound(sim: &Simulation, steps: usize, positions: &[Vec4]) -> f32 {
         .map(|p| p.truncate().abs().max_element())
         .fold(1.0f32, f32::max);
     let p = sim.params();
-    let rewrites = steps as f32 * (p.substeps * p.iterations) as f32 * (deg + 4.0);
+    let rewrites = steps as f32 * ((p.substeps * p.iterations) as f32 * (deg + 4.0) + 4.0);
     f32::EPSILON * scale * rewrites * 4.0
 }
 
@@ -928,6 +930,27 @@ fn a_substep_takes_a_few_dispatches_for_every_cloth() {
         "{:?}",
         counts[0]
     );
+    // A step in which a cloth is carried (`ClothInertia`) adds one dispatch (the `teleport`
+    // kernel at the step's start), not one a substep.
+    let sims: Vec<Simulation> = (0..8).map(|_| cloth(64, BendingModel::Isometric)).collect();
+    let refs: Vec<&Simulation> = sims.iter().collect();
+    let mut world = GpuWorld::new(&g.device, &g.queue, &g.kernels, &refs).unwrap();
+    let targets: Vec<Vec<Vec<Vec3>>> = sims
+        .iter()
+        .map(|s| vec![s.state().pins().iter().map(|p| p.target).collect()])
+        .collect();
+    let carry = [Carry {
+        rotation: Quat::from_rotation_y(0.1),
+        pivot: Vec3::ZERO,
+        translation: Vec3::X * 0.05,
+    }];
+    let mut frame = GpuFrame::uniform(DT, 1, &ball, &targets);
+    frame.cloths[3].carries = &carry;
+    world.prepare(&g.device, &g.queue, &g.kernels, &frame);
+    let carried = world.dispatches(&g.kernels);
+    eprintln!("8 × 64², one carried: {carried:?}");
+    assert_eq!(carried.per_frame, counts[1].per_frame + 1, "{carried:?}");
+    assert_eq!(carried.per_substep, counts[1].per_substep);
 }
 
 /// The standard scene (1 m², 1 kg, two corner pins, XPBD 10 × 1) stretches on the GPU no more
