@@ -5,11 +5,11 @@
 //! hash; `teleport` first in a step where a cloth is carried or teleports), `sc_query` with
 //! self-collision; per substep and iteration: `solve` over every cloth's parts (their
 //! vertices integrated first), then over the even seams, the odd seams and the boundaries
-//! (each only if some cloth has one); `sc_collide` with self-collision; `finish_substep` (tethers, the
-//! self-collision correction, colliders) when any of those acts; per step `step_end`
-//! (velocities, the NaN guard) and `tear_check` with tearing. That is at most 6 dispatches a
-//! substep however many colours, parts or cloths there are ([`GpuWorld::dispatches`] counts
-//! them). The lab solver has kernels of its own.
+//! (each only if some cloth has one); `sc_collide` with self-collision; `finish_substep`
+//! (tethers, the self-collision correction, colliders) when any of those acts; per step
+//! `step_end` (velocities, the NaN guard) and `tear_check` with tearing. That is at most 6
+//! dispatches a substep however many colours, parts or cloths there are
+//! ([`GpuWorld::dispatches`] counts them). The lab solver has kernels of its own.
 //!
 //! Its CPU twin is `solver::step` with the same batches (`Simulation::set_part_count` with
 //! [`GpuWorld::part_count`]) and `StepInput::parallel_self_collision`; `tests/gpu_parity.rs`
@@ -948,12 +948,11 @@ impl GpuWorld {
                     .get(local)
                     .copied()
                     .filter(|o| *o != Vec3::ZERO && o.is_finite());
-                let carry = f.carries.get(local).copied().filter(|c| {
-                    *c != Carry::IDENTITY
-                        && c.rotation.is_finite()
-                        && c.pivot.is_finite()
-                        && c.translation.is_finite()
-                });
+                let carry = f
+                    .carries
+                    .get(local)
+                    .copied()
+                    .filter(|c| *c != Carry::IDENTITY && c.is_finite());
                 teleport_steps[k as usize] |= jump.is_some() || carry.is_some();
                 // Flags: 1 takes the step, + 2 teleports, + 4 is carried; 0 sits it out (no
                 // targets for this step).

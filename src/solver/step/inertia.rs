@@ -39,6 +39,12 @@ impl Carry {
         (m, self.pivot + self.translation - m * self.pivot)
     }
 
+    /// Whether every part of the motion is finite (a carry that is not is never applied).
+    #[must_use]
+    pub fn is_finite(&self) -> bool {
+        self.rotation.is_finite() && self.pivot.is_finite() && self.translation.is_finite()
+    }
+
     /// Where `p` goes.
     #[must_use]
     pub fn apply(&self, p: Vec3) -> Vec3 {
@@ -93,9 +99,7 @@ impl ClothState {
     /// with the rotation), leaving pin targets where they are: the motion a cloth does not
     /// feel. A non-finite carry is ignored.
     pub fn carry(&mut self, carry: &Carry) {
-        let finite =
-            carry.rotation.is_finite() && carry.pivot.is_finite() && carry.translation.is_finite();
-        if !finite {
+        if !carry.is_finite() {
             return;
         }
         let (m, b) = carry.affine();
