@@ -194,7 +194,6 @@ impl Twin {
                 air_velocities: air,
                 tethers: self.tethers.as_ref(),
                 self_collision: self.sim.features().self_collision,
-                parallel_self_collision: true,
             },
             &mut self.scratch,
             &Serial,
@@ -721,10 +720,11 @@ fn a_non_finite_state_is_flagged() {
     );
 }
 
-/// A cloth dropped onto a small sphere folds onto itself on the ground: self-collision's
+/// A cloth folded in two dropped onto a small sphere folds onto itself on the ground: self-collision's
 /// parallel hash build, the sorted neighbour lists and the per-substep pairs against the CPU
-/// twin, with a sphere and the ground. Bit for bit on llvmpipe: both sides keep the same 32
-/// lowest-numbered neighbours in the same order.
+/// twin (vertex–vertex and vertex–triangle, with each triangle's side), with a sphere and the
+/// ground. Bit for bit on llvmpipe: both sides keep the same lowest-numbered neighbours and
+/// triangles in the same order.
 #[test]
 fn self_collision_matches_the_cpu_twin() {
     let Some(g) = gpu("self_collision_matches_the_cpu_twin") else {
@@ -754,8 +754,57 @@ fn self_collision_matches_the_cpu_twin() {
         ),
         Collider::fixed(Shape::Plane, Pose::at(Vec3::ZERO), 0.005, 0.6),
     ];
+    let thickness = 1.2 / (n - 1) as f32;
+    // Folded in two (the half at x > 0 laid over the other, 1.5 thicknesses up), so that
+    // layers touch from the first frame.
+    let folded: Vec<Vec3> = s
+        .topology()
+        .rest_positions()
+        .iter()
+        .map(|p| {
+            if p.x > 0.0 {
+                Vec3::new(-p.x, p.y + 1.5 * thickness, p.z)
+            } else {
+                *p
+            }
+        })
+        .collect();
+    s.reset_to(&folded);
+    let rest = s.topology().rest_positions().to_vec();
+    let tris = s.topology().triangles().to_vec();
     let out = compare(&g, &[Case::new(s)], 45, 1, |_| shapes.clone(), true);
     check(&g, "self-collision", &out, true);
+    // The cloth ends folded layer on layer: vertices lie over triangles of other layers, so
+    // the vertex–triangle contacts were compared, not only the vertex–vertex ones.
+    let over = layered_contacts(&out.cpu[0], &rest, &tris, thickness);
+    println!("self-collision: {over} vertices over a triangle of another layer");
+    assert!(over > 20, "{over}");
+}
+
+/// Vertices within 1.5 `thickness` of a triangle they are over whose corners all rest more
+/// than 2.5 thicknesses away (another layer of the cloth), by brute force.
+fn layered_contacts(pos: &[Vec4], rest: &[Vec3], tris: &[[u32; 3]], thickness: f32) -> usize {
+    (0..pos.len())
+        .filter(|&i| {
+            let p = pos[i].truncate();
+            tris.iter().any(|t| {
+                if t.iter()
+                    .any(|&k| rest[k as usize].distance(rest[i]) <= 2.5 * thickness)
+                {
+                    return false;
+                }
+                let [a, b, c] = t.map(|k| pos[k as usize].truncate());
+                let n = (b - a).cross(c - a).normalize();
+                let d = (p - a).dot(n);
+                let q = p - n * d;
+                // Inside: q on the inner side of all three edges.
+                let inside = [(a, b), (b, c), (c, a)]
+                    .iter()
+                    .all(|&(u, v)| (v - u).cross(q - u).dot(n) >= 0.0);
+                inside && d.abs() < 1.5 * thickness
+            })
+        })
+        .count()
 }
 
 /// The teleport rule on the GPU: at step 12 the pins' anchors jump 5 m and the whole cloth

@@ -13,7 +13,7 @@ use glam::{Vec3, Vec4};
 use super::append_lists;
 use super::kernels::TILE;
 use crate::solver::constraints::{ConstraintBatches, Part};
-use crate::solver::{Simulation, Solver, Tethers};
+use crate::solver::{Simulation, Solver, Tethers, triangle_reach};
 
 /// Words of a cloth's record in `topo` (`common.wgsl`'s `CLOTH_WORDS`).
 pub(crate) const CLOTH_WORDS: usize = 20;
@@ -330,6 +330,10 @@ impl WorldLayout {
             rec[15] = features.tear_threshold.unwrap_or(0.0).to_bits();
             rec[16] = c;
             rec[17] = if sc.is_some() { out.head_words } else { 0 };
+            if let Some(sc) = sc {
+                let (rest, tris) = (sim.topology().rest_positions(), sim.topology().triangles());
+                rec[18] = triangle_reach(rest, tris, sc.thickness).to_bits();
+            }
             if sc.is_some() {
                 out.head_words += 2 * n;
             }

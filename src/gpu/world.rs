@@ -12,7 +12,7 @@
 //! ([`GpuWorld::dispatches`] counts them). The lab solver has kernels of its own.
 //!
 //! Its CPU twin is `solver::step` with the same batches (`Simulation::set_part_count` with
-//! [`GpuWorld::part_count`]) and `StepInput::parallel_self_collision`; `tests/gpu_parity.rs`
+//! [`GpuWorld::part_count`]) and the self-collision pass (`solver::collision::self_collide`, one form on both backends); `tests/gpu_parity.rs`
 //! compares the two.
 
 use std::sync::Arc;
@@ -25,7 +25,8 @@ use super::kernels::{GpuKernels, GpuUnsupported, TABLE_STRIDE, WORKGROUP};
 use super::layout::{ClothLayout, WorldKey, WorldLayout};
 use crate::solver::collision::substep_poses;
 use crate::solver::{
-    Carry, Collider, ContactImpulse, MAX_SELF_NEIGHBOURS, Pose, SdfGrid, Shape, Simulation,
+    Carry, Collider, ContactImpulse, MAX_SELF_NEIGHBOURS, MAX_SELF_TRIANGLES, Pose, SdfGrid, Shape,
+    Simulation,
 };
 
 #[repr(C)]
@@ -69,7 +70,8 @@ pub(crate) struct WorldUniform {
     impulse_slots: u32,
     collider_slots: u32,
     cloth_step_at: u32,
-    _pad: [u32; 2],
+    tcount_at: u32,
+    tlist_at: u32,
 }
 
 #[repr(C)]
@@ -289,6 +291,8 @@ struct ScratchRegions {
     next: u32,
     ncount: u32,
     nlist: u32,
+    tcount: u32,
+    tlist: u32,
     impulse: u32,
 }
 
@@ -469,7 +473,9 @@ impl GpuWorld {
             s.next = s.head + layout.head_words;
             s.ncount = s.next + n;
             s.nlist = s.ncount + n;
-            words = s.nlist + n * MAX_SELF_NEIGHBOURS as u32;
+            s.tcount = s.nlist + n * MAX_SELF_NEIGHBOURS as u32;
+            s.tlist = s.tcount + n;
+            words = s.tlist + n * MAX_SELF_TRIANGLES as u32;
         }
         s.impulse = words;
         let limit = device.limits().max_storage_buffer_binding_size;
@@ -844,7 +850,8 @@ impl GpuWorld {
             impulse_slots: impulse_words,
             collider_slots: slots,
             cloth_step_at,
-            _pad: [0; 2],
+            tcount_at: s.tcount,
+            tlist_at: s.tlist,
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         // The per-frame words of every cloth's record: gravity·h and the damping factor (the

@@ -62,8 +62,9 @@ pub use air::{
     vertex_area_vectors,
 };
 pub use collision::{
-    Collider, ContactImpulse, MAX_SELF_NEIGHBOURS, Pose, RayHit, SdfError, SdfGrid, SelfCollision,
-    SelfCollisionScratch, Shape, count_self_crossings, point_triangle_distance, ray_hit, ray_shape,
+    Collider, ContactImpulse, MAX_SELF_NEIGHBOURS, MAX_SELF_TRIANGLES, Pose, RayHit, SdfError,
+    SdfGrid, SelfCollision, SelfCollisionScratch, Shape, count_self_crossings,
+    point_triangle_distance, ray_hit, ray_shape, triangle_reach,
 };
 pub use constraints::{
     BendingSolve, ConstraintBatches, DEFAULT_BENDING_COMPLIANCE, IMPLICIT_BENDING_AUTO_WORK,

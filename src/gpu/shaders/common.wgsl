@@ -24,7 +24,8 @@
 //
 // `scratch` (atomic u32): per cloth the fastest squared speed of the step's start (bits) |
 // self-collision: hash heads (2 per vertex of the cloth), the next vertex in each bucket, per
-// vertex its neighbour count and `SC_MAX` neighbours | the colliders' impulse slots.
+// vertex its neighbour count and `SC_MAX` neighbours, per vertex its triangle count and
+// `SC_TRI_MAX` triangles (`triangle << 2 | side`) | the colliders' impulse slots.
 //
 // `frame` (vec4): per step every pin's target | per step and cloth a record (xyz: teleport
 // offset; w: 1 active, 3 active and teleporting, 0 not stepped).
@@ -68,8 +69,8 @@ struct World {
     impulse_slots: u32,
     collider_slots: u32,
     cloth_step_at: u32,
-    _pad0: u32,
-    _pad1: u32,
+    tcount_at: u32,
+    tlist_at: u32,
 }
 
 // One substep of one step (binding 1, a dynamic offset per substep).
@@ -130,12 +131,18 @@ struct Cloth {
     tear: f32,
     status: u32,
     head_base: u32,
+    sc_tri_reach: f32,
 }
 
 const CLOTH_WORDS: u32 = 20u;
 const GROUP_WORDS: u32 = 16u;
 const NO_PIN: u32 = 0xffffffffu;
 const SC_MAX: u32 = 32u;
+const SC_TRI_MAX: u32 = 64u;
+const SIDE_FRONT: u32 = 0u;
+const SIDE_BACK: u32 = 1u;
+const SIDE_FREE: u32 = 2u;
+const BESIDE: u32 = 0x80000000u;
 
 const FLAG_AIR: u32 = 1u;
 const FLAG_XPBD: u32 = 2u;
@@ -176,6 +183,7 @@ fn cloth_of(c: u32) -> Cloth {
     r.tear = f32_at(b + 15u);
     r.status = topo[b + 16u];
     r.head_base = topo[b + 17u];
+    r.sc_tri_reach = f32_at(b + 18u);
     return r;
 }
 

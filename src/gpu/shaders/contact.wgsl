@@ -32,9 +32,104 @@ fn sc_reach(c: u32, cl: Cloth) -> f32 {
     return cl.sc_thickness + min(2.0 * fastest * P.dt, 1.5 * cl.sc_thickness);
 }
 
-// Once per step, from the step's start: every other vertex of the same cloth closer than the
-// reach that rests farther than 2.5 thicknesses away, the `SC_MAX` lowest-numbered ones in
-// increasing order (CPU twin: `self_collision::find_neighbours`, the same rule).
+// `sdf::closest_point_on_triangle` (Ericson 5.1.5).
+fn sc_closest(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> vec3<f32> {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = dot(ab, ap);
+    let d2 = dot(ac, ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = p - b;
+    let d3 = dot(ab, bp);
+    let d4 = dot(ac, bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let cp = p - c;
+    let d5 = dot(ab, cp);
+    let d6 = dot(ac, cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denom = va + vb + vc;
+    if abs(denom) < 1.17549435e-38 {
+        // Degenerate: the nearest corner, the first of equals.
+        var best = a;
+        if dot(b - p, b - p) < dot(best - p, best - p) {
+            best = b;
+        }
+        if dot(c - p, c - p) < dot(best - p, best - p) {
+            best = c;
+        }
+        return best;
+    }
+    return a + ab * (vb / denom) + ac * (vc / denom);
+}
+
+// `self_collision::project`: the unit normal (xyz) and signed distance (w) of `p` from the
+// triangle's plane, with the projection's barycentric weights in `bary`; w of the result NaN
+// for a degenerate triangle.
+struct Projection {
+    n: vec3<f32>,
+    d: f32,
+    bary: vec3<f32>,
+    ok: bool,
+}
+
+fn sc_project(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> Projection {
+    var r: Projection;
+    r.ok = false;
+    let e1 = b - a;
+    let e2 = c - a;
+    let nn = cross(e1, e2);
+    let len = length(nn);
+    if !(len > 1e-12) {
+        return r;
+    }
+    r.n = nn / len;
+    let ap = p - a;
+    r.d = dot(ap, r.n);
+    let d00 = dot(e1, e1);
+    let d01 = dot(e1, e2);
+    let d11 = dot(e2, e2);
+    let d20 = dot(ap, e1);
+    let d21 = dot(ap, e2);
+    let denom = d00 * d11 - d01 * d01;
+    if !(denom > 0.0) {
+        return r;
+    }
+    let v = (d11 * d20 - d01 * d21) / denom;
+    let w = (d00 * d21 - d01 * d20) / denom;
+    r.bary = vec3<f32>(1.0 - v - w, v, w);
+    r.ok = true;
+    return r;
+}
+
+fn sc_min3(v: vec3<f32>) -> f32 {
+    return min(v.x, min(v.y, v.z));
+}
+
+// Once per step, from the step's start (CPU twin: `self_collision::Query::vertex`, the same
+// rules): every other vertex of the same cloth closer than the reach that rests farther than
+// 2.5 thicknesses away, the `SC_MAX` lowest-numbered ones in increasing order; and every
+// triangle within the reach none of whose corners rests within half a thickness, that the
+// vertex is over or can slide over in the step, found through its first corner, the
+// `SC_TRI_MAX` lowest-numbered ones with their side codes.
 @compute @workgroup_size(64)
 fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -48,17 +143,25 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     var list: array<u32, 32>;
     var count = 0u;
+    var tlist: array<u32, 64>;
+    var tcount = 0u;
     let p = state[i].xyz;
     if finite3(p) {
         let reach = sc_reach(c, cl);
+        let radius = reach + cl.sc_tri_reach;
         let inv = 1.0 / sc_cell_size(cl);
         let r2 = reach * reach;
+        let big2 = radius * radius;
         let skip = 2.5 * cl.sc_thickness;
         let skip2 = skip * skip;
+        let tri_skip = 0.5 * cl.sc_thickness;
+        let tri_skip2 = tri_skip * tri_skip;
+        let margin = reach - cl.sc_thickness;
+        let margin2 = margin * margin;
         let rest_i = state[P.rest_at + i].xyz;
         let size = 2u * cl.n;
-        let lo = sc_cell(p - vec3<f32>(reach), inv);
-        let hi = sc_cell(p + vec3<f32>(reach), inv);
+        let lo = sc_cell(p - vec3<f32>(radius), inv);
+        let hi = sc_cell(p + vec3<f32>(radius), inv);
         for (var z = lo.z; z <= hi.z; z++) {
             for (var y = lo.y; y <= hi.y; y++) {
                 for (var x = lo.x; x <= hi.x; x++) {
@@ -68,19 +171,71 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
                         let j = e - 1u;
                         e = atomicLoad(&scratch[P.next_at + j]);
                         let q = state[j].xyz;
-                        let d = q - p;
                         let r = state[P.rest_at + j].xyz - rest_i;
-                        if j != i && all(sc_cell(q, inv) == cell) && dot(d, d) < r2
-                            && dot(r, r) > skip2 {
-                            // Keep the SC_MAX smallest indices, sorted.
-                            if count < SC_MAX || j < list[SC_MAX - 1u] {
-                                var k = min(count, SC_MAX - 1u);
-                                while k > 0u && list[k - 1u] > j {
-                                    list[k] = list[k - 1u];
+                        let rest2 = dot(r, r);
+                        if j == i || any(sc_cell(q, inv) != cell) || !(rest2 > tri_skip2) {
+                            continue;
+                        }
+                        let d = q - p;
+                        let d2 = dot(d, d);
+                        // Keep the SC_MAX smallest indices, sorted.
+                        if d2 < r2 && rest2 > skip2 && (count < SC_MAX || j < list[SC_MAX - 1u]) {
+                            var k = min(count, SC_MAX - 1u);
+                            while k > 0u && list[k - 1u] > j {
+                                list[k] = list[k - 1u];
+                                k -= 1u;
+                            }
+                            list[k] = j;
+                            count = min(count + 1u, SC_MAX);
+                        }
+                        if !(d2 < big2) {
+                            continue;
+                        }
+                        // The triangles whose first corner is j.
+                        for (var m = topo[P.tri_offsets_at + j]; m < topo[P.tri_offsets_at + j + 1u]; m++) {
+                            let t = topo[m];
+                            let tb = P.tri_at + 3u * t;
+                            if topo[tb] != j {
+                                continue;
+                            }
+                            let k1 = topo[tb + 1u];
+                            let k2 = topo[tb + 2u];
+                            let r1 = state[P.rest_at + k1].xyz - rest_i;
+                            let r2b = state[P.rest_at + k2].xyz - rest_i;
+                            if !(dot(r1, r1) > tri_skip2 && dot(r2b, r2b) > tri_skip2) {
+                                continue;
+                            }
+                            let b = state[k1].xyz;
+                            let cc = state[k2].xyz;
+                            if !(finite3(b) && finite3(cc)) {
+                                continue;
+                            }
+                            // Over the triangle, or beside it by no more than it can slide
+                            // over in the step.
+                            let pr = sc_project(p, q, b, cc);
+                            if !pr.ok || !(abs(pr.d) < reach) {
+                                continue;
+                            }
+                            var code = SIDE_FREE;
+                            if sc_min3(pr.bary) >= 0.0 {
+                                code = select(SIDE_BACK, SIDE_FRONT, pr.d >= 0.0);
+                            } else {
+                                let near = sc_closest(p, q, b, cc) - p;
+                                let near2 = dot(near, near);
+                                if !(near2 < r2 && near2 - pr.d * pr.d <= margin2) {
+                                    continue;
+                                }
+                            }
+                            // `self_collision::slot`: triangles it is over sort first.
+                            let slot = select(0u, BESIDE, code == SIDE_FREE) | (t << 2u) | code;
+                            if tcount < SC_TRI_MAX || slot < tlist[SC_TRI_MAX - 1u] {
+                                var k = min(tcount, SC_TRI_MAX - 1u);
+                                while k > 0u && tlist[k - 1u] > slot {
+                                    tlist[k] = tlist[k - 1u];
                                     k -= 1u;
                                 }
-                                list[k] = j;
-                                count = min(count + 1u, SC_MAX);
+                                tlist[k] = slot;
+                                tcount = min(tcount + 1u, SC_TRI_MAX);
                             }
                         }
                     }
@@ -92,6 +247,10 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
         atomicStore(&scratch[P.nlist_at + i * SC_MAX + k], list[k]);
     }
     atomicStore(&scratch[P.ncount_at + i], count);
+    for (var k = 0u; k < tcount; k++) {
+        atomicStore(&scratch[P.tlist_at + i * SC_TRI_MAX + k], tlist[k]);
+    }
+    atomicStore(&scratch[P.tcount_at + i], tcount);
 }
 
 // `self_collision::pair_correction`: vertex a's share; w = 0 when the pair does not touch.
@@ -111,24 +270,71 @@ fn sc_pair(a: vec4<f32>, prev_a: vec3<f32>, b: vec4<f32>, prev_b: vec3<f32>, thi
     let nrm = d / len;
     let push = limit - len;
     var da = nrm * (push * wa / w);
-    var db = -nrm * (push * wb / w);
+    let db = -nrm * (push * wb / w);
     let slide = (a.xyz + da - prev_a) - (b.xyz + db - prev_b);
     let tangential = slide - nrm * dot(nrm, slide);
     let t_len = length(tangential);
     if t_len > 0.0 {
         let keep = min(friction * push / t_len, 1.0);
         da -= tangential * (keep * wa / w);
-        db += tangential * (keep * wb / w);
     }
-    if !(finite3(da) && finite3(db)) {
+    if !finite3(da) {
         return vec4<f32>(0.0);
     }
     return vec4<f32>(da, 1.0);
 }
 
-// Self-collision (Jacobi, CPU twin: `self_collision::self_collide_parallel`): vertex `i`'s
-// correction, the mean of its touching pairs' corrections against the tethered positions
-// (each vertex tethers itself and its neighbours on the fly, so no pass has to come between).
+// `self_collision::triangle_correction`: vertex a's correction from a triangle it keeps to
+// the side `code` of; w = 0 when it does not touch.
+fn sc_triangle(a: vec4<f32>, prev_a: vec3<f32>, x0: vec4<f32>, x1: vec4<f32>, x2: vec4<f32>, p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, code: u32, thickness: f32, friction: f32) -> vec4<f32> {
+    let wa = a.w;
+    if !(wa > 0.0) {
+        return vec4<f32>(0.0);
+    }
+    let r = sc_project(a.xyz, x0.xyz, x1.xyz, x2.xyz);
+    if !r.ok || sc_min3(r.bary) < 0.0 {
+        return vec4<f32>(0.0);
+    }
+    var side = 1.0;
+    if code == SIDE_BACK || (code == SIDE_FREE && !(r.d >= 0.0)) {
+        side = -1.0;
+    }
+    let ds = side * r.d;
+    if ds >= thickness || ds <= -2.5 * thickness {
+        return vec4<f32>(0.0);
+    }
+    let bary = r.bary;
+    let wt = bary.x * x0.w + bary.y * x1.w + bary.z * x2.w;
+    let share = wa / (wa + wt);
+    let push = thickness - ds;
+    var da = r.n * (side * push * share);
+    let q = x0.xyz * bary.x + x1.xyz * bary.y + x2.xyz * bary.z;
+    let q_prev = p0 * bary.x + p1 * bary.y + p2 * bary.z;
+    let slide = (a.xyz + da - prev_a) - (q - q_prev);
+    let tangential = slide - r.n * dot(r.n, slide);
+    let t_len = length(tangential);
+    if t_len > 0.0 {
+        let keep = min(friction * push / t_len, 1.0);
+        da -= tangential * (keep * share);
+    }
+    if !finite3(da) {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(da, 1.0);
+}
+
+// A vertex as the self-collision pass reads it: tethered first when the cloth has tethers.
+fn sc_read(i: u32, tethers: bool) -> vec4<f32> {
+    if tethers {
+        return tethered(i, state[i]);
+    }
+    return state[i];
+}
+
+// Self-collision (Jacobi, CPU twin: `self_collision::self_collide`): vertex `i`'s
+// correction, the mean of its touching pairs' and triangles' corrections against the tethered
+// positions (each vertex tethers itself and the vertices it reads on the fly, so no pass has
+// to come between).
 @compute @workgroup_size(64)
 fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -141,21 +347,31 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let tethers = (cl.flags & FLAG_TETHERS) != 0u;
-    var a = state[i];
-    if tethers {
-        a = tethered(i, a);
-    }
+    let a = sc_read(i, tethers);
     let prev_a = state[P.prev_at + i].xyz;
     var sum = vec3<f32>(0.0);
     var touching = 0.0;
     let count = atomicLoad(&scratch[P.ncount_at + i]);
     for (var k = 0u; k < count; k++) {
         let j = atomicLoad(&scratch[P.nlist_at + i * SC_MAX + k]);
-        var b = state[j];
-        if tethers {
-            b = tethered(j, b);
-        }
+        let b = sc_read(j, tethers);
         let r = sc_pair(a, prev_a, b, state[P.prev_at + j].xyz, cl.sc_thickness, cl.sc_friction);
+        sum += r.xyz;
+        touching += r.w;
+    }
+    let tcount = atomicLoad(&scratch[P.tcount_at + i]);
+    for (var k = 0u; k < tcount; k++) {
+        let slot = atomicLoad(&scratch[P.tlist_at + i * SC_TRI_MAX + k]);
+        let tb = P.tri_at + 3u * ((slot & ~BESIDE) >> 2u);
+        let k0 = topo[tb];
+        let k1 = topo[tb + 1u];
+        let k2 = topo[tb + 2u];
+        let r = sc_triangle(
+            a, prev_a,
+            sc_read(k0, tethers), sc_read(k1, tethers), sc_read(k2, tethers),
+            state[P.prev_at + k0].xyz, state[P.prev_at + k1].xyz, state[P.prev_at + k2].xyz,
+            slot & 3u, cl.sc_thickness, cl.sc_friction,
+        );
         sum += r.xyz;
         touching += r.w;
     }

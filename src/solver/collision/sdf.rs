@@ -384,7 +384,7 @@ pub fn point_triangle_distance(p: Vec3, t: &[Vec3; 3]) -> f32 {
     (p - closest_point_on_triangle(p, t)).length()
 }
 
-fn closest_point_on_triangle(p: Vec3, [a, b, c]: &[Vec3; 3]) -> Vec3 {
+pub(crate) fn closest_point_on_triangle(p: Vec3, [a, b, c]: &[Vec3; 3]) -> Vec3 {
     let (ab, ac, ap) = (*b - *a, *c - *a, p - *a);
     let (d1, d2) = (ab.dot(ap), ac.dot(ap));
     if d1 <= 0.0 && d2 <= 0.0 {

@@ -243,7 +243,6 @@ impl Simulation {
                     &[]
                 },
                 self_collision: self.features.self_collision,
-                parallel_self_collision: false,
                 tethers: self.tethers.as_ref().map(|(_, t)| t),
             },
             &mut self.scratch,

@@ -37,7 +37,7 @@ use super::state::ClothState;
 use crate::solver::air::{Aerodynamics, air_velocity_change, vertex_area_vectors};
 use crate::solver::collision::{
     Collider, ContactImpulse, SelfCollision, SelfCollisionScratch, SubstepPose, collide_vertex,
-    find_self_collision_candidates, self_collide, self_collide_parallel, substep_poses,
+    find_self_collision_candidates, self_collide, substep_poses,
 };
 use crate::solver::constraints::{ConstraintBatches, ImplicitBending, Mode, Part, Solver, Tethers};
 use crate::solver::mesh::{BendingModel, Topology};
@@ -54,10 +54,6 @@ pub struct StepInput<'a> {
     pub air_velocities: &'a [Vec4],
     /// Self-collision, if on.
     pub self_collision: Option<SelfCollision>,
-    /// Self-collision in its parallel (Jacobi) form, as the GPU backend runs it: per-vertex
-    /// neighbour lists, each vertex moved by the mean of its pairs' corrections. `false`
-    /// (the CPU backend) projects the pairs one by one.
-    pub parallel_self_collision: bool,
     /// Long-range attachments to the pins, if any.
     pub tethers: Option<&'a Tethers>,
 }
@@ -364,10 +360,11 @@ pub fn step(
             &state.positions,
             &state.velocities,
             topology.rest_positions(),
+            topology.triangles(),
             sc,
             dt,
-            input.parallel_self_collision,
             &mut scratch.self_collision,
+            par,
         );
     }
     let colliders = input.colliders;
@@ -466,21 +463,14 @@ pub fn step(
                 };
                 run_parts(&mut batches.parts, state, scratch, phase);
             }
-            if input.parallel_self_collision {
-                self_collide_parallel(
-                    &mut state.positions,
-                    &state.prev,
-                    sc,
-                    &mut scratch.self_collision,
-                );
-            } else {
-                self_collide(
-                    &mut state.positions,
-                    &state.prev,
-                    sc,
-                    &scratch.self_collision,
-                );
-            }
+            self_collide(
+                &mut state.positions,
+                &state.prev,
+                topology.triangles(),
+                sc,
+                &mut scratch.self_collision,
+                par,
+            );
         }
         if !colliders.is_empty() {
             let phase = Phase {

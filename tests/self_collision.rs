@@ -1,0 +1,186 @@
+//! Self-collision that holds: cloth piled, crumpled and folded over a bar never ends up
+//! passing through itself (no edge of it crosses a triangle of it), on any thread count.
+
+use bevy::math::{Quat, Vec3, Vec4Swizzles};
+use bevy_cloth::solver::{
+    Collider, Environment, Features, Grid, HangingCloth, Parallel, Pose, SelfCollision, Serial,
+    Shape, Simulation, Workers, count_self_crossings,
+};
+
+/// A free cloth (no pins) on `grid` with self-collision one edge thick.
+fn free_cloth(grid: Grid, friction: f32) -> Simulation {
+    let edge = grid.width / (grid.columns - 1) as f32;
+    let mut scene = HangingCloth::on(grid);
+    scene.pins.clear();
+    scene.mass = 0.3;
+    scene.params.substeps = 12;
+    scene.features = Features {
+        self_collision: Some(SelfCollision {
+            thickness: edge,
+            friction,
+        }),
+        ..Features::default()
+    };
+    scene.build().expect("a valid cloth")
+}
+
+fn crossings(sim: &Simulation) -> usize {
+    let edges: Vec<[u32; 2]> = sim.topology().edges().iter().map(|e| e.v).collect();
+    count_self_crossings(&sim.state().positions, sim.topology().triangles(), &edges)
+}
+
+/// Steps `sim` among `colliders` for `steps` steps; returns the crossings at the end and the
+/// most seen after any step.
+fn run(
+    sim: &mut Simulation,
+    colliders: &[Collider],
+    steps: usize,
+    par: &impl Parallel,
+) -> (usize, usize) {
+    let mut most = 0;
+    for k in 0..steps {
+        let env = Environment {
+            colliders,
+            wind: None,
+            time: k as f64 / 60.0,
+        };
+        sim.step_in(1.0 / 60.0, &env, par);
+        most = most.max(crossings(sim));
+    }
+    assert!(
+        sim.state().positions.iter().all(|p| p.is_finite()),
+        "positions stay finite"
+    );
+    (crossings(sim), most)
+}
+
+fn floor() -> Collider {
+    Collider {
+        shape: Shape::Plane,
+        start: Pose::at(Vec3::ZERO),
+        end: Pose::at(Vec3::ZERO),
+        thickness: 0.005,
+        friction: 0.6,
+    }
+}
+
+/// A 1 m square stood on its edge and spun about the vertical: it twists as it collapses and
+/// crumples onto the floor in overlapping folds.
+fn crumpled() -> Simulation {
+    let mut sim = free_cloth(Grid::new(30, 30, 1.0, 1.0), 0.3);
+    let stood: Vec<Vec3> = sim
+        .topology()
+        .rest_positions()
+        .iter()
+        .map(|p| Vec3::new(p.x, 0.52 - p.z, 0.0))
+        .collect();
+    sim.reset_to(&stood);
+    for (v, p) in sim
+        .state_mut()
+        .velocities
+        .iter_mut()
+        .zip(stood.iter().copied())
+    {
+        // 5 rad/s about the vertical, faster higher up.
+        let spin = Vec3::Y.cross(p) * 5.0 * (0.5 + p.y);
+        *v = spin.extend(v.w);
+    }
+    sim
+}
+
+/// A 0.4 × 3.6 m strip folded into three 1.2 m layers, 1.5 thicknesses apart, dropped across
+/// a bar: the layers fall onto each other over the bar and hang on both sides.
+fn folded_over_a_bar() -> (Simulation, Collider) {
+    let grid = Grid::new(10, 91, 0.4, 3.6);
+    let edge = 0.4 / 9.0;
+    let mut sim = free_cloth(grid, 0.3);
+    let layer = 1.2;
+    let folded: Vec<Vec3> = sim
+        .topology()
+        .rest_positions()
+        .iter()
+        .map(|p| {
+            let u = (p.z + 1.8).clamp(0.0, 3.6);
+            let k = ((u / layer) as u32).min(2);
+            let s = u - layer * k as f32;
+            let x = if k.is_multiple_of(2) { s } else { layer - s };
+            Vec3::new(x - 0.6, 1.0 + k as f32 * 1.5 * edge, p.x)
+        })
+        .collect();
+    sim.reset_to(&folded);
+    let at = Pose {
+        translation: Vec3::new(0.0, 0.8, 0.0),
+        rotation: Quat::from_rotation_x(core::f32::consts::FRAC_PI_2),
+        scale: 1.0,
+    };
+    let bar = Collider {
+        shape: Shape::Capsule {
+            radius: 0.05,
+            half_length: 0.5,
+        },
+        start: at,
+        end: at,
+        thickness: 0.005,
+        friction: 0.5,
+    };
+    (sim, bar)
+}
+
+#[test]
+fn a_crumpled_cloth_never_passes_through_itself() {
+    let mut sim = crumpled();
+    assert_eq!(crossings(&sim), 0, "starts clean");
+    let (end, most) = run(&mut sim, &[floor()], 240, &Workers::new(1));
+    println!("crumpled: {end} crossings at the end, at most {most}");
+    assert_eq!(
+        end, 0,
+        "{end} edge–triangle pairs cross at the end (at most {most})"
+    );
+}
+
+#[test]
+fn a_cloth_folded_three_times_over_a_bar_keeps_its_layers_apart() {
+    let (mut sim, bar) = folded_over_a_bar();
+    assert_eq!(crossings(&sim), 0, "starts clean");
+    let (end, most) = run(&mut sim, &[bar, floor()], 300, &Workers::new(1));
+    println!("folded: {end} crossings at the end, at most {most}");
+    assert_eq!(
+        end, 0,
+        "{end} edge–triangle pairs cross at the end (at most {most})"
+    );
+}
+
+/// Without self-collision the same scenes do pass through themselves: the tests above can
+/// fail.
+#[test]
+fn without_self_collision_the_same_scenes_cross() {
+    let mut sim = crumpled();
+    sim.set_features(Features::default()).unwrap();
+    let (_, most_crumpled) = run(&mut sim, &[floor()], 240, &Serial);
+    let (mut sim, bar) = folded_over_a_bar();
+    sim.set_features(Features::default()).unwrap();
+    let (_, most_folded) = run(&mut sim, &[bar, floor()], 300, &Serial);
+    println!("off: crumpled at most {most_crumpled}, folded at most {most_folded}");
+    assert!(most_crumpled > 0 && most_folded > 0);
+}
+
+/// The parallel self-collision gives the same bits on one thread and on several.
+#[test]
+fn self_collision_is_the_same_on_any_thread_count() {
+    let run_on = |par: &dyn Fn(&mut Simulation)| {
+        let mut sim = crumpled();
+        par(&mut sim);
+        sim.state()
+            .positions
+            .iter()
+            .flat_map(|p| p.xyz().to_array().map(f32::to_bits))
+            .collect::<Vec<_>>()
+    };
+    let one = run_on(&|sim| {
+        run(sim, &[floor()], 60, &Serial);
+    });
+    let four = run_on(&|sim| {
+        run(sim, &[floor()], 60, &Workers::new(3));
+    });
+    assert!(one == four, "positions differ between 1 and 4 threads");
+}
