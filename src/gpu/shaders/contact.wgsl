@@ -171,13 +171,16 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
                         let j = e - 1u;
                         e = atomicLoad(&scratch[P.next_at + j]);
                         let q = state[j].xyz;
-                        let r = state[P.rest_at + j].xyz - rest_i;
-                        let rest2 = dot(r, r);
-                        if j == i || any(sc_cell(q, inv) != cell) || !(rest2 > tri_skip2) {
-                            continue;
-                        }
                         let d = q - p;
                         let d2 = dot(d, d);
+                        if !(d2 < big2) || j == i || any(sc_cell(q, inv) != cell) {
+                            continue;
+                        }
+                        let r = state[P.rest_at + j].xyz - rest_i;
+                        let rest2 = dot(r, r);
+                        if !(rest2 > tri_skip2) {
+                            continue;
+                        }
                         // Keep the SC_MAX smallest indices, sorted.
                         if d2 < r2 && rest2 > skip2 && (count < SC_MAX || j < list[SC_MAX - 1u]) {
                             var k = min(count, SC_MAX - 1u);
@@ -188,7 +191,9 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
                             list[k] = j;
                             count = min(count + 1u, SC_MAX);
                         }
-                        if !(d2 < big2) {
+                        // Beyond 2.5 thicknesses at rest, only where the cloth came closer to
+                        // itself than at rest.
+                        if rest2 > skip2 && !(d2 < 0.9 * 0.9 * rest2) {
                             continue;
                         }
                         // The triangles whose first corner is j.

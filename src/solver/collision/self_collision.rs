@@ -11,7 +11,9 @@
 //!   with the side of it the vertex is on when the step begins (when the vertex is over the
 //!   triangle; otherwise the side is decided when it gets over it). A triangle is found
 //!   through its first corner, which lies within the reach plus [`triangle_reach`] of the
-//!   vertex.
+//!   vertex; where that corner rests more than 2.5 thicknesses away, only when it is now at
+//!   least 10 % closer to the vertex than at rest: the cloth has folded or piled up between
+//!   them (a flat or stretched sheet's own distant triangles are never looked at).
 //!
 //! Parts of the cloth that rest close together (a vertex and a vertex or triangle corner
 //! closer than 2.5 thicknesses in the rest shape) are left to the distance and bending
@@ -45,6 +47,9 @@ pub struct SelfCollision {
 pub struct SelfCollisionScratch {
     start: Vec<u32>,
     entries: Vec<u32>,
+    /// Each entry's position and cell, in bucket order (read in sequence by the queries).
+    entry_pos: Vec<Vec3>,
+    entry_cells: Vec<IVec3>,
     /// Cell of each vertex, to tell it from other cells sharing its bucket.
     cells: Vec<IVec3>,
     /// Triangles by their first corner (offsets per vertex, then triangle indices).
@@ -83,6 +88,11 @@ const SKIP: f32 = 2.5;
 /// itself within an edge or two, which is what the triangle test is for.
 const TRIANGLE_SKIP: f32 = 0.5;
 
+/// A triangle whose first corner rests more than 2.5 thicknesses from the vertex is only looked
+/// at when that corner is now closer to it than this share of their rest distance: the cloth
+/// has folded or piled up between them.
+const FOLDED: f32 = 0.9;
+
 /// Vertices handled by one parallel work item.
 const CHUNK: usize = 512;
 
@@ -93,6 +103,15 @@ fn cell_of(p: Vec3, inv_cell: f32) -> IVec3 {
     let v = p * inv_cell;
     let t = v.as_ivec3();
     t - IVec3::select(t.as_vec3().cmpgt(v), IVec3::ONE, IVec3::ZERO)
+}
+
+/// The query's bucket of cell `c` in a table of `mask + 1` (a power of two) buckets.
+#[inline]
+fn bucket(c: IVec3, mask: usize) -> usize {
+    let h = (c.x.wrapping_mul(92_837_111))
+        ^ (c.y.wrapping_mul(689_287_499))
+        ^ (c.z.wrapping_mul(283_923_481));
+    h.unsigned_abs() as usize & mask
 }
 
 #[inline]
@@ -189,7 +208,8 @@ struct Query<'a> {
     triangles: &'a [[u32; 3]],
     start: &'a [u32],
     entries: &'a [u32],
-    cells: &'a [IVec3],
+    entry_pos: &'a [Vec3],
+    entry_cells: &'a [IVec3],
     first_start: &'a [u32],
     first_tris: &'a [u32],
     thickness: f32,
@@ -208,7 +228,7 @@ impl Query<'_> {
             return (0, 0);
         }
         let inv = 1.0 / self.cell;
-        let size = self.start.len() - 1;
+        let mask = self.start.len() - 2;
         let (r2, big2, skip2) = (
             self.reach * self.reach,
             self.radius * self.radius,
@@ -225,23 +245,27 @@ impl Query<'_> {
             for y in lo.y..=hi.y {
                 for x in lo.x..=hi.x {
                     let cell = IVec3::new(x, y, z);
-                    let h = hash(cell, size);
-                    for &j in &self.entries[self.start[h] as usize..self.start[h + 1] as usize] {
-                        let j = j as usize;
+                    let h = bucket(cell, mask);
+                    for k in self.start[h] as usize..self.start[h + 1] as usize {
+                        let d2 = self.entry_pos[k].distance_squared(p);
+                        let j = self.entries[k] as usize;
                         // Other cells hashed into this bucket are visited through their own
                         // coordinates: each vertex is seen once.
-                        if j == i || self.cells[j] != cell {
+                        if d2.is_nan() || d2 >= big2 || j == i || self.entry_cells[k] != cell {
                             continue;
                         }
                         let rest2 = rest_i.distance_squared(self.rest[j]);
                         if rest2.is_nan() || rest2 <= tri_skip2 {
                             continue;
                         }
-                        let d2 = self.pos[j].xyz().distance_squared(p);
                         if d2 < r2 && rest2 > skip2 {
                             keep_smallest(neighbours, &mut nc, j as u32);
                         }
-                        if d2.is_nan() || d2 >= big2 {
+                        // Triangles through a `j` resting farther than 2.5 thicknesses away:
+                        // only where the cloth has come closer to itself than it is at rest (a
+                        // fold, a pile), never across a flat or stretched sheet, whose own
+                        // triangles lie beside its vertices. Nearer ones always (a sharp fold).
+                        if rest2 > skip2 && d2 >= FOLDED * FOLDED * rest2 {
                             continue;
                         }
                         let first = &self.first_tris
@@ -309,19 +333,23 @@ impl SelfCollisionScratch {
     ) {
         let skip = SKIP * thickness;
         let tri_reach = triangle_reach(rest, triangles, thickness);
-        // Cells as wide as the farthest query (the reach is at most 2.5 thicknesses).
+        // Cells as wide as the farthest query (the reach is at most 2.5 thicknesses), in a
+        // power-of-two table (a bucket is a mask).
         let cell = skip + tri_reach;
         let n = pos.len();
-        let size = (2 * n).max(1);
+        let size = (2 * n).next_power_of_two().max(2);
+        let mask = size - 1;
         let inv = 1.0 / cell;
         self.start.clear();
         self.start.resize(size + 1, 0);
         self.entries.resize(n, 0);
+        self.entry_pos.resize(n, Vec3::ZERO);
+        self.entry_cells.resize(n, IVec3::ZERO);
         self.cells.clear();
         self.cells.extend(pos.iter().map(|p| cell_of(p.xyz(), inv)));
         for (p, c) in pos.iter().zip(&self.cells) {
             if p.xyz().is_finite() {
-                self.start[hash(*c, size)] += 1;
+                self.start[bucket(*c, mask)] += 1;
             }
         }
         let mut acc = 0;
@@ -331,9 +359,12 @@ impl SelfCollisionScratch {
         }
         for (i, p) in pos.iter().enumerate() {
             if p.xyz().is_finite() {
-                let h = hash(self.cells[i], size);
+                let h = bucket(self.cells[i], mask);
                 self.start[h] -= 1;
-                self.entries[self.start[h] as usize] = i as u32;
+                let k = self.start[h] as usize;
+                self.entries[k] = i as u32;
+                self.entry_pos[k] = p.xyz();
+                self.entry_cells[k] = self.cells[i];
             }
         }
         // Triangles by first corner, in triangle order.
@@ -366,7 +397,8 @@ impl SelfCollisionScratch {
             triangles,
             start: &self.start,
             entries: &self.entries,
-            cells: &self.cells,
+            entry_pos: &self.entry_pos,
+            entry_cells: &self.entry_cells,
             first_start: &self.first_start,
             first_tris: &self.first_tris,
             thickness,
