@@ -81,13 +81,14 @@ fn sc_closest(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> vec3<f3
     return a + ab * (vb / denom) + ac * (vc / denom);
 }
 
-// `self_collision::project`: the unit normal (xyz) and signed distance (w) of `p` from the
-// triangle's plane, with the projection's barycentric weights in `bary`; w of the result NaN
-// for a degenerate triangle.
+// `self_collision::project`: the unit normal and signed distance of `p` from the triangle's
+// plane, the projection's barycentric weights and twice the area; `ok` false for a degenerate
+// triangle.
 struct Projection {
     n: vec3<f32>,
     d: f32,
     bary: vec3<f32>,
+    area2: f32,
     ok: bool,
 }
 
@@ -116,6 +117,7 @@ fn sc_project(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> Project
     let v = (d11 * d20 - d01 * d21) / denom;
     let w = (d00 * d21 - d01 * d20) / denom;
     r.bary = vec3<f32>(1.0 - v - w, v, w);
+    r.area2 = len;
     r.ok = true;
     return r;
 }
@@ -157,7 +159,7 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
         let tri_skip = 0.5 * cl.sc_thickness;
         let tri_skip2 = tri_skip * tri_skip;
         let margin = reach - cl.sc_thickness;
-        let margin2 = margin * margin;
+        let vel_i = state[P.vel_at + i].xyz;
         let rest_i = state[P.rest_at + i].xyz;
         let size = 2u * cl.n;
         let lo = sc_cell(p - vec3<f32>(radius), inv);
@@ -225,9 +227,25 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
                             if sc_min3(pr.bary) >= 0.0 {
                                 code = select(SIDE_BACK, SIDE_FRONT, pr.d >= 0.0);
                             } else {
+                                // How far it can slide over the triangle in the step (CPU twin:
+                                // the same rule).
+                                var slide = margin;
+                                if !(rest2 > skip2) {
+                                    let v0 = state[P.vel_at + j].xyz - vel_i;
+                                    let v1 = state[P.vel_at + k1].xyz - vel_i;
+                                    let v2 = state[P.vel_at + k2].xyz - vel_i;
+                                    let rel = max(max(max(0.0, dot(v0, v0)), dot(v1, v1)), dot(v2, v2));
+                                    slide = min(2.0 * P.dt * sqrt(rel) + 0.25 * cl.sc_thickness, margin);
+                                }
+                                // At least −(the negative weight) altitudes away.
+                                let longest2 = max(max(dot(b - q, b - q), dot(cc - b, cc - b)), dot(q - cc, q - cc));
+                                let below = -sc_min3(pr.bary) * pr.area2 / sqrt(longest2);
+                                if below > slide {
+                                    continue;
+                                }
                                 let near = sc_closest(p, q, b, cc) - p;
                                 let near2 = dot(near, near);
-                                if !(near2 < r2 && near2 - pr.d * pr.d <= margin2) {
+                                if !(near2 < r2 && near2 - pr.d * pr.d <= slide * slide) {
                                     continue;
                                 }
                             }

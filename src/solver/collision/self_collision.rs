@@ -146,10 +146,10 @@ pub fn triangle_reach(rest: &[Vec3], triangles: &[[u32; 3]], thickness: f32) -> 
 }
 
 /// Where `p`'s projection onto the plane of `[a, b, c]` falls: the unit normal, `p`'s signed
-/// distance along it, and the projection's barycentric weights (all ≥ 0 when it is inside);
-/// `None` for a degenerate triangle. The GPU's `sc_project` does the same operations.
+/// distance along it, the projection's barycentric weights (all ≥ 0 when it is inside) and
+/// twice the triangle's area; `None` for a degenerate triangle. The GPU's `sc_project` does the same operations.
 #[inline]
-fn project(p: Vec3, [a, b, c]: [Vec3; 3]) -> Option<(Vec3, f32, Vec3)> {
+fn project(p: Vec3, [a, b, c]: [Vec3; 3]) -> Option<(Vec3, f32, Vec3, f32)> {
     let e1 = b - a;
     let e2 = c - a;
     let nn = e1.cross(e2);
@@ -171,7 +171,7 @@ fn project(p: Vec3, [a, b, c]: [Vec3; 3]) -> Option<(Vec3, f32, Vec3)> {
     }
     let v = (d11 * d20 - d01 * d21) / denom;
     let w = (d00 * d21 - d01 * d20) / denom;
-    Some((n, d, Vec3::new(1.0 - v - w, v, w)))
+    Some((n, d, Vec3::new(1.0 - v - w, v, w), len))
 }
 
 /// A triangle's slot: `triangle << 2 | side`, with [`BESIDE`] set for a triangle the vertex is
@@ -204,6 +204,8 @@ fn keep_smallest(list: &mut [u32], count: &mut usize, value: u32) {
 /// What a step's query reads.
 struct Query<'a> {
     pos: &'a [Vec4],
+    vel: &'a [Vec4],
+    dt: f32,
     rest: &'a [Vec3],
     triangles: &'a [[u32; 3]],
     start: &'a [u32],
@@ -238,7 +240,7 @@ impl Query<'_> {
         let tri_skip = TRIANGLE_SKIP * self.thickness;
         let tri_skip2 = tri_skip * tri_skip;
         let margin = self.reach - self.thickness;
-        let margin2 = margin * margin;
+        let v = self.vel[i];
         let lo = cell_of(p - Vec3::splat(self.radius), inv);
         let hi = cell_of(p + Vec3::splat(self.radius), inv);
         for z in lo.z..=hi.z {
@@ -284,7 +286,7 @@ impl Query<'_> {
                             // Over the triangle, or beside it by no more than it can slide
                             // over in the step (the sheet's own triangles around the vertex
                             // are beside it, in its plane).
-                            let Some((_, d, bary)) = project(p, corners) else {
+                            let Some((_, d, bary, area2)) = project(p, corners) else {
                                 continue;
                             };
                             if d.is_nan() || d.abs() >= self.reach {
@@ -293,9 +295,33 @@ impl Query<'_> {
                             let code = if bary.min_element() >= 0.0 {
                                 if d >= 0.0 { SIDE_FRONT } else { SIDE_BACK }
                             } else {
+                                // How far it can slide over the triangle in the step: the margin;
+                                // over its own neighbourhood (which moves with it) twice its
+                                // fastest speed relative to a corner and a quarter thickness.
+                                let slide = if rest2 > skip2 {
+                                    margin
+                                } else {
+                                    let rel = tri
+                                        .iter()
+                                        .map(|&k| (self.vel[k as usize] - v).xyz().length_squared())
+                                        .fold(0.0f32, f32::max);
+                                    (2.0 * self.dt * rel.sqrt() + 0.25 * self.thickness).min(margin)
+                                };
+                                // At least −(the negative weight) altitudes from the triangle
+                                // (an altitude is at least twice the area over the longest
+                                // edge): most of a sheet's own triangles end here.
+                                let [a, b, c] = corners;
+                                let longest2 = a
+                                    .distance_squared(b)
+                                    .max(b.distance_squared(c))
+                                    .max(c.distance_squared(a));
+                                let below = -bary.min_element() * area2 / longest2.sqrt();
+                                if below > slide {
+                                    continue;
+                                }
                                 let q = super::sdf::closest_point_on_triangle(p, &corners);
                                 let near2 = q.distance_squared(p);
-                                if !(near2 < r2 && near2 - d * d <= margin2) {
+                                if !(near2 < r2 && near2 - d * d <= slide * slide) {
                                     continue;
                                 }
                                 SIDE_FREE
@@ -322,9 +348,12 @@ struct QueryChunk<'a> {
 impl SelfCollisionScratch {
     /// Fills the hash with the current positions and every vertex's lists (see the module
     /// docs), the vertices in parallel.
+    #[expect(clippy::too_many_arguments)]
     fn find(
         &mut self,
         pos: &[Vec4],
+        vel: &[Vec4],
+        dt: f32,
         rest: &[Vec3],
         triangles: &[[u32; 3]],
         thickness: f32,
@@ -393,6 +422,8 @@ impl SelfCollisionScratch {
         self.triangles.resize(n * MAX_SELF_TRIANGLES, 0);
         let query = Query {
             pos,
+            vel,
+            dt,
             rest,
             triangles,
             start: &self.start,
@@ -507,7 +538,7 @@ fn triangle_correction(
     if wa.is_nan() || wa <= 0.0 {
         return None;
     }
-    let (n, d, bary) = project(a.xyz(), x.map(|v| v.xyz()))?;
+    let (n, d, bary, _) = project(a.xyz(), x.map(|v| v.xyz()))?;
     if bary.min_element() < 0.0 {
         return None;
     }
@@ -631,7 +662,7 @@ pub(crate) fn find_self_collision_candidates(
     par: &impl Parallel,
 ) {
     if let Some(reach) = reach(vel, params, dt) {
-        scratch.find(pos, rest, triangles, params.thickness, reach, par);
+        scratch.find(pos, vel, dt, rest, triangles, params.thickness, reach, par);
     } else {
         scratch.neighbour_count.clear();
         scratch.neighbour_count.resize(pos.len(), 0);
