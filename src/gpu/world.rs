@@ -12,7 +12,7 @@
 //! ([`GpuWorld::dispatches`] counts them). The lab solver has kernels of its own.
 //!
 //! Its CPU twin is `solver::step` with the same batches (`Simulation::set_part_count` with
-//! [`GpuWorld::part_count`]) and the self-collision pass (`solver::collision::self_collide`, one form on both backends); `tests/gpu_parity.rs`
+//! [`GpuWorld::part_count`]); self-collision has one form on both backends. `tests/gpu_parity.rs`
 //! compares the two.
 
 use std::sync::Arc;
