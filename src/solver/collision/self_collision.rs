@@ -108,18 +108,21 @@ fn cell_of(p: Vec3, inv_cell: f32) -> IVec3 {
 /// The query's bucket of cell `c` in a table of `mask + 1` (a power of two) buckets.
 #[inline]
 fn bucket(c: IVec3, mask: usize) -> usize {
+    mix(c) & mask
+}
+
+/// The cell hash both tables use (the GPU's `sc_hash` mixes the same way).
+#[inline]
+fn mix(c: IVec3) -> usize {
     let h = (c.x.wrapping_mul(92_837_111))
         ^ (c.y.wrapping_mul(689_287_499))
         ^ (c.z.wrapping_mul(283_923_481));
-    h.unsigned_abs() as usize & mask
+    h.unsigned_abs() as usize
 }
 
 #[inline]
 fn hash(c: IVec3, size: usize) -> usize {
-    let h = (c.x.wrapping_mul(92_837_111))
-        ^ (c.y.wrapping_mul(689_287_499))
-        ^ (c.z.wrapping_mul(283_923_481));
-    (h.unsigned_abs() as usize) % size
+    mix(c) % size
 }
 
 /// How far past a triangle's nearest point its first corner may lie: the longest rest edge
@@ -483,6 +486,15 @@ fn reach(vel: &[Vec4], params: SelfCollision, dt: f32) -> Option<f32> {
     Some(thickness + margin)
 }
 
+/// Coulomb friction on a contact pushed `push` along `n`: the tangential part of `slide` and
+/// the share of it to take back (at most all of it); `None` when nothing slides.
+#[inline]
+fn sliding(slide: Vec3, n: Vec3, push: f32, friction: f32) -> Option<(Vec3, f32)> {
+    let tangential = slide - n * n.dot(slide);
+    let t_len = tangential.length();
+    (t_len > 0.0).then(|| (tangential, (friction * push / t_len).min(1.0)))
+}
+
 /// The correction of vertex `a` (with `prev_a`) from its pair with `b`: pushed apart to
 /// `thickness`, mass-weighted, with friction on the pair's sliding. `None` when the pair does
 /// not touch or the result is not finite.
@@ -511,10 +523,7 @@ fn pair_correction(
     let db = -n * (push * wb / w);
     // Friction on the relative sliding of the pair during the substep.
     let slide = (a.xyz() + da - prev_a.xyz()) - (b.xyz() + db - prev_b.xyz());
-    let tangential = slide - n * n.dot(slide);
-    let t_len = tangential.length();
-    if t_len > 0.0 {
-        let keep = (params.friction * push / t_len).min(1.0);
+    if let Some((tangential, keep)) = sliding(slide, n, push, params.friction) {
         da -= tangential * (keep * wa / w);
     }
     da.is_finite().then_some(da)
@@ -565,10 +574,7 @@ fn triangle_correction(
     let q = x[0].xyz() * bary.x + x[1].xyz() * bary.y + x[2].xyz() * bary.z;
     let q_prev = prev_x[0].xyz() * bary.x + prev_x[1].xyz() * bary.y + prev_x[2].xyz() * bary.z;
     let slide = (a.xyz() + da - prev_a.xyz()) - (q - q_prev);
-    let tangential = slide - n * n.dot(slide);
-    let t_len = tangential.length();
-    if t_len > 0.0 {
-        let keep = (params.friction * push / t_len).min(1.0);
+    if let Some((tangential, keep)) = sliding(slide, n, push, params.friction) {
         da -= tangential * (keep * share);
     }
     da.is_finite().then_some(da)
