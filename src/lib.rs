@@ -3,8 +3,8 @@
 //!
 //! Add [`ClothPlugins`], put a [`Cloth`](cloth::Cloth) on an entity with a
 //! [`Mesh3d`], pin a few vertices, and the mesh hangs, swings and folds:
-//! flags, capes, curtains and banners, with colliders (shapes, meshes, rapier bodies, the cloth
-//! itself), wind, tearing and a two-sided velvet material.
+//! flags, capes, curtains and banners, with colliders (shapes, meshes, rapier and avian bodies, the
+//! cloth itself), wind, tearing and a two-sided velvet material.
 //!
 //! ```no_run
 //! use bevy::prelude::*;
@@ -33,8 +33,8 @@
 //!   the step, shading data.
 //! - [`foundation`]: what every plugin shares: the schedule and [`ClothSystems`](foundation::ClothSystems)
 //!   phases, poses at the fixed step, mesh reading.
-//! - [`collider`]: shapes cloth collides with; with the `rapier` feature, the bevy_rapier3d
-//!   bridge and two-way coupling. [`wind`]: global and local wind. [`render`]: the velvet
+//! - [`collider`]: shapes cloth collides with; with the `rapier` and `avian` features, the
+//!   bevy_rapier3d and avian3d bridges and two-way coupling. [`wind`]: global and local wind. [`render`]: the velvet
 //!   material (two-sided) and its CPU reference BRDF.
 //! - [`cloth`]: components, the CPU plugin and its systems, mesh write-back.
 //! - [`gpu`]: the GPU backend: the step as WGSL compute kernels in the render graph.
@@ -75,8 +75,9 @@ use wind::ClothWindPlugin;
 /// | [`ClothPlugin`] | creates, steps and writes back every [`Cloth`](cloth::Cloth) on the CPU |
 /// | [`ClothGpuPlugin`] | cloths that ask for it ([`ClothBackend`](gpu::ClothBackend)) stepped by GPU kernels in the render graph |
 ///
-/// The rapier bridge (`ClothRapierPlugin`, cargo feature `rapier`) is not in the group: add it
-/// to opt in; it runs in the group's schedule.
+/// The physics-engine bridges (`ClothRapierPlugin`, cargo feature `rapier`; `ClothAvianPlugin`,
+/// cargo feature `avian`) are not in the group: add one (or both) to opt in; they run in the
+/// group's schedule.
 ///
 /// Replace a part with `ClothPlugins::default().build().disable::<X>().add(Custom)`; simulate
 /// in another schedule with [`ClothPlugins::new`].
@@ -122,6 +123,8 @@ pub mod prelude {
         ClothPin, ClothPins, ClothPlugin, ClothSelfCollision, ClothSim, ClothTearing, ClothTethers,
         ClothTorn, PinAnchor,
     };
+    #[cfg(feature = "avian")]
+    pub use crate::collider::avian::ClothAvianPlugin;
     #[cfg(feature = "rapier")]
     pub use crate::collider::rapier::ClothRapierPlugin;
     pub use crate::collider::{ClothCollider, ClothContactImpulse, ColliderMesh, ColliderShape};

@@ -204,6 +204,75 @@ fn teleporting_the_anchor_moves_the_cloth_instead_of_tearing_it_apart() {
     assert!(fastest < 20.0, "{fastest} m/s");
 }
 
+/// A 1.2 m hammock of 20 × 20 vertices at y = 1, held along its two x edges.
+#[cfg(any(feature = "avian", feature = "rapier"))]
+fn hammock(app: &mut App) -> Entity {
+    let grid = Grid::new(20, 20, 1.2, 1.2);
+    let edges: Vec<_> = (0..20)
+        .flat_map(|j| [grid.index(0, j), grid.index(19, j)])
+        .collect();
+    spawn_sheet(
+        app,
+        20,
+        Transform::from_xyz(0.0, 1.0, 0.0),
+        ClothPins::rest(edges),
+    )
+}
+
+/// How deep the deepest cloth vertex is inside the 0.3 × 0.1 × 0.3 box `body` (0 if none is).
+#[cfg(any(feature = "avian", feature = "rapier"))]
+fn deepest_in_box(app: &App, cloth: Entity, body: Entity) -> f32 {
+    let to_local = app
+        .world()
+        .get::<Transform>(body)
+        .unwrap()
+        .to_matrix()
+        .inverse();
+    let s = sim(app, cloth).simulation().state();
+    let half = Vec3::new(0.15, 0.05, 0.15);
+    (0..s.len())
+        .map(|i| half - to_local.transform_point3(s.position(i)).abs())
+        .filter(|d| d.min_element() > 0.0)
+        .map(|d| d.min_element())
+        .fold(0.0, f32::max)
+}
+
+#[cfg(any(feature = "avian", feature = "rapier"))]
+fn lowest(app: &App, cloth: Entity) -> f32 {
+    let s = sim(app, cloth).simulation().state();
+    (0..s.len())
+        .map(|i| s.position(i).y)
+        .fold(f32::MAX, f32::min)
+}
+
+/// The box `body`, dropped from 0.3 m above the `hammock`, lies in it: after two seconds to
+/// land, over the next two (free fall would take it 20 m down) it stays above 0.6 m with no
+/// cloth vertex inside it, does not sink, and is not thrown about (it may still sway).
+#[cfg(any(feature = "avian", feature = "rapier"))]
+fn assert_lies_in_the_hammock(app: &mut App, hammock: Entity, body: Entity) {
+    let y_of = |app: &App| app.world().get::<Transform>(body).unwrap().translation;
+    run(app, 120);
+    let start = y_of(app);
+    let (mut lowest_box, mut fastest, mut last) = (f32::MAX, 0.0f32, start);
+    for _ in 0..120 {
+        app.update();
+        let p = y_of(app);
+        lowest_box = lowest_box.min(p.y);
+        fastest = fastest.max((p - last).length() * 60.0);
+        last = p;
+        let depth = deepest_in_box(app, hammock, body);
+        assert!(depth < 0.02, "cloth {depth} m inside the box");
+    }
+    assert!(lowest_box > 0.6, "the box sank through: y = {lowest_box}");
+    assert!(fastest < 0.5, "the box is thrown about: {fastest} m/s");
+    assert!(
+        (last.y - start.y).abs() < 0.03,
+        "the box moved from {start} to {last}"
+    );
+    let low = lowest(app, hammock);
+    assert!(low < 0.97, "the hammock does not sag: {low}");
+}
+
 #[cfg(feature = "rapier")]
 mod rapier {
     use super::*;
@@ -266,6 +335,66 @@ mod rapier {
         );
     }
 
+    #[test]
+    fn a_rapier_body_lying_on_cloth_is_held_up() {
+        let mut app = app();
+        // On the cloth's clock, as the README says: rapier steps in FixedUpdate, the cloth
+        // after it, so both see the box where this step left it.
+        app.insert_resource(TimestepMode::Fixed {
+            dt: 1.0 / 60.0,
+            substeps: 1,
+        })
+        .add_plugins((
+            RapierPhysicsPlugin::<NoUserData>::default().in_fixed_schedule(),
+            ClothRapierPlugin::default(),
+        ));
+        let hammock = hammock(&mut app);
+        let body = app
+            .world_mut()
+            .spawn((
+                RigidBody::Dynamic,
+                Collider::cuboid(0.15, 0.05, 0.15),
+                ColliderMassProperties::Mass(0.5),
+                Velocity::zero(),
+                Transform::from_xyz(0.0, 1.3, 0.0),
+            ))
+            .id();
+        assert_lies_in_the_hammock(&mut app, hammock, body);
+    }
+
+    /// Removing a rapier collider (or despawning its entity) removes the cloth collider the
+    /// bridge mirrored from it: nothing keeps pushing cloth where the body was.
+    #[test]
+    fn a_removed_rapier_collider_leaves_no_cloth_collider() {
+        let mut app = app();
+        app.add_plugins((
+            RapierPhysicsPlugin::<NoUserData>::default(),
+            ClothRapierPlugin::default(),
+        ));
+        let kept = app
+            .world_mut()
+            .spawn((RigidBody::Fixed, Collider::ball(0.2), Transform::default()))
+            .id();
+        let gone = app
+            .world_mut()
+            .spawn((RigidBody::Fixed, Collider::ball(0.2), Transform::default()))
+            .id();
+        run(&mut app, 2);
+        assert!(app.world().get::<ClothCollider>(kept).is_some());
+        let colliders = app
+            .world()
+            .resource::<bevy_cloth::collider::ClothColliders>();
+        assert_eq!(colliders.entities.len(), 2);
+        app.world_mut().entity_mut(kept).remove::<Collider>();
+        app.world_mut().entity_mut(gone).despawn();
+        run(&mut app, 2);
+        assert!(app.world().get::<ClothCollider>(kept).is_none());
+        let colliders = app
+            .world()
+            .resource::<bevy_cloth::collider::ClothColliders>();
+        assert!(colliders.entities.is_empty(), "{:?}", colliders.entities);
+    }
+
     /// `ClothPlugins::new(schedule)` reaches the rapier bridge whichever was added first: here
     /// the bridge comes first and cloth runs in `FixedLast`, finished as `App::run` does.
     #[test]
@@ -319,4 +448,228 @@ mod rapier {
         let v = app.world().get::<Velocity>(ball).unwrap().linear;
         assert!(v.z > -5.0 * 0.95, "ball not slowed: {v}");
     }
+}
+
+/// The avian bridge: the same scenes as the rapier bridge, plus a body lying on cloth and one
+/// removed while it touches cloth.
+#[cfg(feature = "avian")]
+mod avian {
+    use super::*;
+    use avian3d::prelude::*;
+    use bevy_cloth::collider::avian::FromAvianCollider;
+    use bevy_cloth::collider::{ClothColliders, NoClothCollision};
+
+    fn avian_app() -> App {
+        let mut app = app();
+        app.add_plugins((PhysicsPlugins::default(), ClothAvianPlugin::default()));
+        // Avian sets up part of itself in `Plugin::finish` (as `App::run` calls it).
+        app.finish();
+        app.cleanup();
+        app
+    }
+
+    /// A 20 × 20 curtain, 2 m wide, hanging in the XY plane from a rail at y = 2.
+    fn curtain(app: &mut App) -> Entity {
+        let grid = Grid::new(20, 20, 2.0, 2.0);
+        let upright = Transform::from_xyz(0.0, 1.0, 0.0)
+            .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
+        spawn_sheet(
+            app,
+            20,
+            upright,
+            ClothPins::rest((0..20).map(|i| grid.index(i, 0))),
+        )
+    }
+
+    /// The hammock scene with a 0.5 kg, 0.3 × 0.1 × 0.3 m avian box (avian's cuboid takes
+    /// full lengths).
+    fn box_on_hammock(app: &mut App) -> (Entity, Entity) {
+        let hammock = hammock(app);
+        let body = app
+            .world_mut()
+            .spawn((
+                RigidBody::Dynamic,
+                Collider::cuboid(0.3, 0.1, 0.3),
+                Mass(0.5),
+                Transform::from_xyz(0.0, 1.3, 0.0),
+            ))
+            .id();
+        (hammock, body)
+    }
+
+    #[test]
+    fn cloth_pushes_an_avian_ball_back_with_the_opposite_impulse() {
+        let mut app = avian_app();
+        let curtain = curtain(&mut app);
+        let speed = 5.0;
+        let ball = app
+            .world_mut()
+            .spawn((
+                RigidBody::Dynamic,
+                Collider::sphere(0.2),
+                Mass(0.5),
+                GravityScale(0.0),
+                LinearVelocity(Vec3::new(0.0, 0.0, -speed)),
+                Transform::from_xyz(0.0, 1.0, 1.0),
+            ))
+            .id();
+        let mut total = Vec3::ZERO;
+        let mut bulge = 0.0f32;
+        for _ in 0..60 {
+            app.update();
+            if let Some(i) = app.world().get::<ClothContactImpulse>(ball) {
+                total += i.linear;
+            }
+            if let Some(c) = app.world().get::<ClothSim>(curtain) {
+                let s = c.simulation().state();
+                bulge = (0..s.len()).map(|i| s.position(i).z).fold(bulge, f32::min);
+            }
+        }
+        // Mirrored without a marker, as the bridge's own collider.
+        assert!(app.world().get::<ClothCollider>(ball).is_some());
+        assert!(app.world().get::<FromAvianCollider>(ball).is_some());
+        // The curtain bulged, and the ball slowed down.
+        assert!(bulge < -0.2, "curtain did not bulge: {bulge}");
+        let v = app.world().get::<LinearVelocity>(ball).unwrap().0;
+        assert!(v.z > -speed * 0.95, "ball not slowed: {v}");
+        // Equal and opposite: the cloth's push on the ball (+z, against the motion) is the
+        // ball's momentum change (avian applies impulses to the velocity at once; the last
+        // step's impulse may not be applied yet when the loop ends).
+        assert!(total.z > 0.0, "{total}");
+        let dp = 0.5 * (v.z - (-speed));
+        assert!(
+            (dp - total.z).abs() < 0.25 * total.z.abs().max(0.05),
+            "Δp {dp} vs impulse {total}"
+        );
+    }
+
+    #[test]
+    fn an_avian_body_lying_on_cloth_is_held_up() {
+        let mut app = avian_app();
+        let (hammock, body) = box_on_hammock(&mut app);
+        assert_lies_in_the_hammock(&mut app, hammock, body);
+    }
+
+    #[test]
+    fn a_body_removed_mid_contact_leaves_nothing_behind() {
+        let mut app = avian_app();
+        let (hammock, body) = box_on_hammock(&mut app);
+        run(&mut app, 120);
+        let sagging = lowest(&app, hammock);
+        assert!(
+            sagging < 0.97,
+            "the box does not weigh on the hammock: {sagging}"
+        );
+        app.world_mut().entity_mut(body).despawn();
+        run(&mut app, 120);
+        // No collider is left where the box was, and the hammock springs back.
+        let colliders = app.world().resource::<ClothColliders>();
+        assert!(colliders.entities.is_empty(), "{:?}", colliders.entities);
+        let mut mirrors = app
+            .world_mut()
+            .query_filtered::<Entity, With<FromAvianCollider>>();
+        assert_eq!(mirrors.iter(app.world()).count(), 0);
+        let after = lowest(&app, hammock);
+        assert!(
+            after > sagging + 0.02,
+            "still pressed down: {sagging} → {after}"
+        );
+
+        // Removing only the avian collider (the body stays) removes its mirror too.
+        let (_, body) = box_on_hammock(&mut app);
+        run(&mut app, 60);
+        assert!(app.world().get::<ClothCollider>(body).is_some());
+        app.world_mut().entity_mut(body).remove::<Collider>();
+        run(&mut app, 2);
+        assert!(app.world().get::<ClothCollider>(body).is_none());
+        assert!(app.world().resource::<ClothColliders>().entities.is_empty());
+    }
+
+    #[test]
+    fn no_cloth_collision_and_the_users_own_collider_are_left_alone() {
+        let mut app = avian_app();
+        let ignored = app
+            .world_mut()
+            .spawn((Collider::sphere(0.2), NoClothCollision))
+            .id();
+        let own = app
+            .world_mut()
+            .spawn((Collider::sphere(0.2), ClothCollider::sphere(0.5)))
+            .id();
+        run(&mut app, 3);
+        assert!(app.world().get::<ClothCollider>(ignored).is_none());
+        let c = app.world().get::<ClothCollider>(own).unwrap();
+        assert_eq!(c.shape, ColliderShape::Sphere { radius: 0.5 });
+        assert!(app.world().get::<FromAvianCollider>(own).is_none());
+    }
+}
+
+/// Both bridges in one app: each mirrors and pushes only its own engine's bodies.
+#[cfg(all(feature = "avian", feature = "rapier"))]
+#[test]
+fn rapier_and_avian_bridges_work_side_by_side() {
+    use bevy_cloth::collider::avian::FromAvianCollider;
+    use bevy_cloth::collider::rapier::FromRapierCollider;
+    let mut app = app();
+    app.add_plugins((
+        avian3d::prelude::PhysicsPlugins::default(),
+        ClothAvianPlugin::default(),
+        bevy_rapier3d::prelude::RapierPhysicsPlugin::<bevy_rapier3d::prelude::NoUserData>::default(
+        ),
+        ClothRapierPlugin::default(),
+    ));
+    app.finish();
+    app.cleanup();
+    let grid = Grid::new(20, 20, 2.0, 2.0);
+    let upright = Transform::from_xyz(0.0, 1.0, 0.0)
+        .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
+    spawn_sheet(
+        &mut app,
+        20,
+        upright,
+        ClothPins::rest((0..20).map(|i| grid.index(i, 0))),
+    );
+    let speed = 5.0;
+    let avian_ball = {
+        use avian3d::prelude::*;
+        app.world_mut()
+            .spawn((
+                RigidBody::Dynamic,
+                Collider::sphere(0.2),
+                Mass(0.5),
+                GravityScale(0.0),
+                LinearVelocity(Vec3::new(0.0, 0.0, -speed)),
+                Transform::from_xyz(-0.5, 1.0, 1.0),
+            ))
+            .id()
+    };
+    let rapier_ball = {
+        use bevy_rapier3d::prelude::*;
+        app.world_mut()
+            .spawn((
+                RigidBody::Dynamic,
+                Collider::ball(0.2),
+                ColliderMassProperties::Mass(0.5),
+                GravityScale(0.0),
+                Velocity::linear(Vec3::new(0.0, 0.0, -speed)),
+                Transform::from_xyz(0.5, 1.0, 1.0),
+            ))
+            .id()
+    };
+    run(&mut app, 60);
+    let w = app.world();
+    assert!(w.get::<FromAvianCollider>(avian_ball).is_some());
+    assert!(w.get::<FromRapierCollider>(avian_ball).is_none());
+    assert!(w.get::<FromRapierCollider>(rapier_ball).is_some());
+    assert!(w.get::<FromAvianCollider>(rapier_ball).is_none());
+    let va = w
+        .get::<avian3d::prelude::LinearVelocity>(avian_ball)
+        .unwrap()
+        .0;
+    let vr = w
+        .get::<bevy_rapier3d::prelude::Velocity>(rapier_ball)
+        .unwrap()
+        .linear;
+    assert!(va.z > -speed * 0.95, "avian ball not slowed: {va}");
+    assert!(vr.z > -speed * 0.95, "rapier ball not slowed: {vr}");
 }

@@ -17,8 +17,15 @@
 //! Removing [`ClothCollider`] forgets its last pose and impulse: put back elsewhere, it
 //! appears there.
 
+#[cfg(feature = "avian")]
+pub mod avian;
+#[cfg(any(feature = "rapier", feature = "avian"))]
+mod bridge;
 #[cfg(feature = "rapier")]
 pub mod rapier;
+
+#[cfg(any(feature = "rapier", feature = "avian"))]
+pub use bridge::NoClothCollision;
 
 use std::sync::Arc;
 

@@ -9,16 +9,27 @@
 //! cloth gave each mirrored collider ([`ClothContactImpulse`]) is added, opposite to what the
 //! cloth received, to the [`ExternalImpulse`] of its dynamic rigid body (the collider's entity
 //! or its nearest ancestor with a [`RigidBody`]), which rapier applies on its next step.
+//!
+//! The cloth solves its contacts as if the body could not yield, and the body feels them a
+//! step later, so a body landing on taut cloth would be thrown back by the whole stretch it
+//! made in that step (a trampoline gaining energy each bounce). The reaction is therefore
+//! capped where it would send the body away from the cloth faster than
+//! [`max_push_speed`](ClothRapierPlugin::max_push_speed) (the body's mass and velocity are
+//! read from rapier's own body): the cloth still stops what moves into it and holds up what
+//! lies on it.
 
-use std::sync::Arc;
-
+use bevy::ecs::intern::Interned;
+use bevy::ecs::schedule::ScheduleLabel;
 use bevy::prelude::*;
 use bevy_rapier3d::geometry::ColliderView;
-use bevy_rapier3d::prelude::{Collider, ExternalImpulse, RigidBody};
+use bevy_rapier3d::prelude::{
+    Collider, ExternalImpulse, RapierRigidBodyHandle, ReadRapierContext, RigidBody,
+};
 
-use super::{ClothCollider, ClothContactImpulse, ColliderMesh, ColliderShape};
-use crate::foundation::{ClothSchedule, ClothSystems};
-use crate::solver::SdfGrid;
+pub use super::NoClothCollision;
+use super::bridge::{self, Mirroring};
+use super::{ClothCollider, ClothContactImpulse, ColliderShape};
+use crate::foundation::ClothSystems;
 
 /// Mirrors rapier colliders into cloth colliders and couples cloth to rapier bodies.
 #[derive(Clone, Copy, Debug)]
@@ -31,6 +42,10 @@ pub struct ClothRapierPlugin {
     pub resolution: u32,
     /// Whether cloth pushes dynamic bodies back (two-way coupling).
     pub two_way: bool,
+    /// The fastest the cloth's reaction may send a body away from it (m/s along the
+    /// reaction). The cloth stops whatever moves into it and holds up what lies on it; this
+    /// caps only how hard taut cloth throws a body back (see the module docs).
+    pub max_push_speed: f32,
 }
 
 impl Default for ClothRapierPlugin {
@@ -40,47 +55,42 @@ impl Default for ClothRapierPlugin {
             friction: 0.4,
             resolution: 40,
             two_way: true,
+            max_push_speed: 0.25,
         }
     }
 }
 
 /// Settings of the bridge, from [`ClothRapierPlugin`].
 #[derive(Resource, Clone, Copy, Debug)]
-struct Settings(ClothRapierPlugin);
-
-/// On a rapier collider: cloth ignores it.
-#[derive(Component, Clone, Copy, Debug, Default)]
-pub struct NoClothCollision;
+struct Settings(Mirroring);
 
 /// Marks a [`ClothCollider`] the bridge made from a rapier collider (and keeps in sync).
 #[derive(Component, Clone, Copy, Debug, Default)]
 pub struct FromRapierCollider;
 
-/// Present once the bridge's systems are in the cloth schedule.
-#[derive(Resource)]
-struct BridgeScheduled;
-
 impl Plugin for ClothRapierPlugin {
-    /// The bridge runs in the cloth plugins' schedule ([`ClothSchedule`]): added after
-    /// `ClothPlugins`, its systems go in here; added before, in [`Plugin::finish`], once
-    /// every plugin is built.
+    /// The bridge runs in the cloth plugins' schedule ([`ClothSchedule`](crate::foundation::ClothSchedule)):
+    /// added after `ClothPlugins`, its systems go in here; added before, in [`Plugin::finish`],
+    /// once every plugin is built.
     fn build(&self, app: &mut App) {
-        app.insert_resource(Settings(*self));
-        if app.world().contains_resource::<ClothSchedule>() {
-            schedule_bridge(app);
-        }
+        app.insert_resource(Settings(Mirroring {
+            thickness: self.thickness,
+            friction: self.friction,
+            resolution: self.resolution,
+            two_way: self.two_way,
+            max_push_speed: self.max_push_speed,
+        }))
+        .add_observer(bridge::forget_removed::<Collider, FromRapierCollider>);
+        bridge::schedule_once::<Self>(app, false, schedule_bridge);
     }
 
     fn finish(&self, app: &mut App) {
-        if !app.world().contains_resource::<BridgeScheduled>() {
-            schedule_bridge(app);
-        }
+        bridge::schedule_once::<Self>(app, true, schedule_bridge);
     }
 }
 
-fn schedule_bridge(app: &mut App) {
-    let schedule = ClothSchedule::of(app);
-    app.insert_resource(BridgeScheduled).add_systems(
+fn schedule_bridge(app: &mut App, schedule: Interned<dyn ScheduleLabel>) {
+    app.add_systems(
         schedule,
         (
             mirror_colliders.in_set(ClothSystems::Prepare),
@@ -90,14 +100,7 @@ fn schedule_bridge(app: &mut App) {
 }
 
 fn bake(vertices: &[Vec3], indices: &[[u32; 3]], resolution: u32) -> Option<ColliderShape> {
-    let flat: Vec<u32> = indices.iter().flatten().copied().collect();
-    match SdfGrid::from_mesh(vertices, &flat, resolution) {
-        Ok(grid) => Some(ColliderShape::Mesh(ColliderMesh::Baked(Arc::new(grid)))),
-        Err(e) => {
-            warn!("rapier collider: cannot bake its triangles into an SDF: {e}");
-            None
-        }
-    }
+    bridge::bake("rapier", vertices, indices, resolution)
 }
 
 /// The cloth shape of a rapier collider (unscaled: the entity's transform scales both).
@@ -152,7 +155,7 @@ fn mirror_colliders(
         (
             Entity,
             &Collider,
-            Option<&ClothCollider>,
+            Has<ClothCollider>,
             Has<FromRapierCollider>,
         ),
         (
@@ -161,27 +164,13 @@ fn mirror_colliders(
         ),
     >,
 ) {
-    let s = settings.0;
-    for (entity, collider, existing, mirrored) in &changed {
-        if existing.is_some() && !mirrored {
+    let m = settings.0;
+    for (entity, collider, has_cloth_collider, mirrored) in &changed {
+        if has_cloth_collider && !mirrored {
             continue; // the user's own cloth collider wins
         }
-        match shape_of(collider, s.resolution) {
-            Some(shape) => {
-                commands.entity(entity).insert((
-                    ClothCollider {
-                        shape,
-                        thickness: s.thickness,
-                        friction: s.friction,
-                        ..ClothCollider::new(ColliderShape::Plane)
-                    },
-                    FromRapierCollider,
-                ));
-            }
-            None => {
-                debug!("rapier collider {entity}: shape not supported for cloth, ignored");
-            }
-        }
+        let shape = shape_of(collider, m.resolution);
+        bridge::mirror::<FromRapierCollider>(&mut commands, "rapier", entity, shape, m);
     }
 }
 
@@ -190,7 +179,8 @@ fn push_bodies(
     settings: Res<Settings>,
     contacts: Query<(Entity, &ClothContactImpulse, &GlobalTransform), With<FromRapierCollider>>,
     parents: Query<&ChildOf>,
-    bodies: Query<(&RigidBody, &GlobalTransform)>,
+    bodies: Query<(&RigidBody, &GlobalTransform, Option<&RapierRigidBodyHandle>)>,
+    rapier: ReadRapierContext,
     mut impulses: Query<&mut ExternalImpulse>,
     mut commands: Commands,
 ) {
@@ -209,23 +199,34 @@ fn push_bodies(
                 Err(_) => break,
             }
         }
-        let Ok((kind, body_gt)) = bodies.get(body) else {
+        let Ok((kind, body_gt, handle)) = bodies.get(body) else {
             continue;
         };
         if *kind != RigidBody::Dynamic {
             continue;
         }
+        let at = collider_gt.translation();
+        // The body's mass and the velocity of the contact point, from rapier's own body (a
+        // body rapier has not created yet gets all of the reaction).
+        let rapier_body = rapier.single().ok().and_then(|context| {
+            let rb = context.rigidbody_set.bodies.get(handle?.0)?;
+            Some((rb.mass(), rb.velocity_at_point(at)))
+        });
+        let share = rapier_body.map_or(1.0, |(mass, v_at)| {
+            bridge::reaction_share(contact.linear, mass, v_at, settings.0.max_push_speed)
+        });
+        let (linear, angular) = (share * contact.linear, share * contact.angular);
         // The cloth's angular impulse is about the collider's origin: move it to the body's.
-        let lever = collider_gt.translation() - body_gt.translation();
-        let torque = contact.angular + lever.cross(contact.linear);
+        let lever = at - body_gt.translation();
+        let torque = angular + lever.cross(linear);
         match impulses.get_mut(body) {
             Ok(mut i) => {
-                i.impulse += contact.linear;
+                i.impulse += linear;
                 i.torque_impulse += torque;
             }
             Err(_) => {
                 commands.entity(body).insert(ExternalImpulse {
-                    impulse: contact.linear,
+                    impulse: linear,
                     torque_impulse: torque,
                 });
             }

@@ -1,0 +1,169 @@
+//! What the physics-engine bridges (`rapier`, `avian`) share: the opt-out marker, the settings
+//! every bridge takes, baking an engine's triangles, mirroring a collider, forgetting a removed
+//! one, and scheduling a bridge's systems in the cloth schedule whichever plugin came first.
+//!
+//! Each bridge keeps only what differs between engines: how its shapes map to
+//! [`ColliderShape`], and how an impulse reaches its bodies.
+
+use std::marker::PhantomData;
+use std::sync::Arc;
+
+use bevy::prelude::*;
+
+use super::{ClothCollider, ColliderMesh, ColliderShape};
+use crate::foundation::ClothSchedule;
+use crate::solver::SdfGrid;
+
+/// On a physics-engine collider (rapier or avian): cloth ignores it.
+#[derive(Component, Clone, Copy, Debug, Default)]
+pub struct NoClothCollision;
+
+/// How a bridge mirrors colliders and whether it pushes bodies back (each bridge plugin's
+/// fields).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Mirroring {
+    pub thickness: f32,
+    pub friction: f32,
+    pub resolution: u32,
+    pub two_way: bool,
+    pub max_push_speed: f32,
+}
+
+/// The share (`0..=1`) of the cloth's reaction impulse `j` a body of `mass` gets when its
+/// contact point moves at `velocity`: all of it, unless that would send the body away from
+/// the cloth (along `j`) faster than `max_push_speed`.
+///
+/// The cloth solves its contacts as if the body could not yield, and the body feels them one
+/// step later: a heavy body landing on taut cloth stretches it for a whole step, and the
+/// whole of that stretch, given back, throws it off again higher than it fell, a trampoline
+/// that gains energy. Capped, the reaction still stops what moves into the cloth (a ball in
+/// a net, a box landing in a hammock, the weight of a body lying on cloth) and lets the cloth
+/// push a body it moves into, only not faster than `max_push_speed`.
+pub(crate) fn reaction_share(j: Vec3, mass: f32, velocity: Vec3, max_push_speed: f32) -> f32 {
+    let len = j.length();
+    if !(len.is_finite() && len > 0.0 && mass.is_finite() && mass > 0.0) {
+        return 0.0;
+    }
+    let along = velocity.dot(j / len);
+    let allowed = mass * (max_push_speed - along).max(0.0);
+    (allowed / len).clamp(0.0, 1.0)
+}
+
+/// Bakes an engine shape's triangles into an SDF collider shape; `None` (with a warning naming
+/// `engine`) when they cannot be baked.
+pub(crate) fn bake(
+    engine: &str,
+    vertices: &[Vec3],
+    indices: &[[u32; 3]],
+    resolution: u32,
+) -> Option<ColliderShape> {
+    let flat: Vec<u32> = indices.iter().flatten().copied().collect();
+    match SdfGrid::from_mesh(vertices, &flat, resolution) {
+        Ok(grid) => Some(ColliderShape::Mesh(ColliderMesh::Baked(Arc::new(grid)))),
+        Err(e) => {
+            warn!("{engine} collider: cannot bake its triangles into an SDF: {e}");
+            None
+        }
+    }
+}
+
+/// Gives `entity` the cloth collider mirroring its engine collider (`shape`), with the marker
+/// `M` that says the bridge made it (the caller leaves alone a cloth collider the user put
+/// there). A shape cloth cannot use is ignored, and a mirror made earlier from another shape
+/// removed.
+pub(crate) fn mirror<M: Component + Default>(
+    commands: &mut Commands,
+    engine: &str,
+    entity: Entity,
+    shape: Option<ColliderShape>,
+    m: Mirroring,
+) {
+    match shape {
+        Some(shape) => {
+            commands.entity(entity).insert((
+                ClothCollider {
+                    shape,
+                    thickness: m.thickness,
+                    friction: m.friction,
+                    ..ClothCollider::new(ColliderShape::Plane)
+                },
+                M::default(),
+            ));
+        }
+        None => {
+            debug!("{engine} collider {entity}: shape not supported for cloth, ignored");
+            commands.entity(entity).try_remove::<(ClothCollider, M)>();
+        }
+    }
+}
+
+/// When an engine collider `C` goes (removed, or its entity despawned), the cloth collider the
+/// bridge mirrored from it (marked `M`) goes too: nothing keeps pushing cloth where the body was.
+pub(crate) fn forget_removed<C: Component, M: Component>(
+    removed: On<Remove, C>,
+    mirrored: Query<(), With<M>>,
+    mut commands: Commands,
+) {
+    if mirrored.contains(removed.entity) {
+        commands
+            .entity(removed.entity)
+            .try_remove::<(ClothCollider, M)>();
+    }
+}
+
+/// Present once the bridge marked `B` has its systems in the cloth schedule.
+#[derive(Resource)]
+struct Scheduled<B>(PhantomData<fn() -> B>);
+
+/// Adds a bridge's systems (`add`) to the cloth schedule once: from the bridge plugin's
+/// `build` when `ClothPlugins` came first (the [`ClothSchedule`] is known), otherwise from its
+/// `finish`, once every plugin is built.
+pub(crate) fn schedule_once<B: 'static>(
+    app: &mut App,
+    in_finish: bool,
+    add: fn(&mut App, bevy::ecs::intern::Interned<dyn bevy::ecs::schedule::ScheduleLabel>),
+) {
+    if app.world().contains_resource::<Scheduled<B>>()
+        || (!in_finish && !app.world().contains_resource::<ClothSchedule>())
+    {
+        return;
+    }
+    let schedule = ClothSchedule::of(app);
+    app.insert_resource(Scheduled::<B>(PhantomData));
+    add(app, schedule);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_reaction_stops_a_body_and_throws_it_back_no_faster_than_the_cap() {
+        let up = Vec3::new(0.0, 0.3, 0.0);
+        // Falling at 1 m/s into the cloth, 0.5 kg: 0.3 N·s would send it up at 0.6 m/s;
+        // capped at 0.25 m/s it gets 0.5 × 1.25 = 0.625 N·s worth, so all of it.
+        assert_eq!(
+            reaction_share(up, 0.5, Vec3::new(0.0, -1.0, 0.0), 0.25),
+            1.0
+        );
+        // Resting: all of 0.3 would send it up at 0.6 m/s; it gets 0.5 × 0.25 / 0.3.
+        let s = reaction_share(up, 0.5, Vec3::ZERO, 0.25);
+        assert!((s - 0.125 / 0.3).abs() < 1e-6, "{s}");
+        // Already leaving faster than the cap, or sideways motion only: nothing, and all.
+        assert_eq!(reaction_share(up, 0.5, Vec3::new(0.0, 0.4, 0.0), 0.25), 0.0);
+        assert_eq!(
+            reaction_share(up, 0.5, Vec3::new(3.0, -1.0, 0.0), 0.25),
+            1.0
+        );
+        // Bad input gives nothing, never NaN.
+        for (j, m, v) in [
+            (Vec3::ZERO, 0.5, Vec3::ZERO),
+            (Vec3::NAN, 0.5, Vec3::ZERO),
+            (up, 0.0, Vec3::ZERO),
+            (up, f32::INFINITY, Vec3::ZERO),
+            (up, 0.5, Vec3::NAN),
+        ] {
+            assert_eq!(reaction_share(j, m, v, 0.25), 0.0, "{j} {m} {v}");
+        }
+    }
+}
