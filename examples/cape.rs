@@ -1,85 +1,263 @@
-//! A cape on a character walking a loop: the cape's top edge is pinned to the character's
-//! shoulders (`PinAnchor::Entity`), tethers keep it from stretching like rubber, and the
-//! character's body (a capsule collider) keeps it from falling through.
+//! A cape on an animated, skinned character walking (or running) a loop.
+//!
+//! The character is `assets/character.gltf` (written by the `make_character` example): a
+//! skinned humanoid with 13 bones and a `Walk` and a `Run` animation, loaded through the
+//! `AssetServer` as a scene and played by Bevy's animation system. The cape's top edge is
+//! pinned to the `Chest` bone (`PinAnchor::Entity` with an offset in the bone's frame), the
+//! torso carries box colliders and the limbs capsules, each a child entity of its bone, and
+//! tethers keep the cape from stretching like rubber. `ClothAnimationPlugin` advances the
+//! animation on the cloth's fixed clock, so every fixed step's pins and colliders are that
+//! step's bone poses, at any frame rate.
 //!
 //! ```text
-//! cargo run --release --example cape
-//! cargo run --release --example cape -- --headless --frames 600
-//! cargo run --release --example cape -- --speed 8 --inertia 0.3
+//! cargo run --release --features animation --example cape
+//! cargo run --release --features animation --example cape -- --speed 4.5         # runs
+//! cargo run --release --features animation --example cape -- --headless --frames 600 --fps 30
 //! ```
-//! `--speed M/S` sets the walking speed (default 1.6); `--inertia X` gives the cape a
-//! `ClothInertia` of `X` relative to the character (1: it feels all of the motion, as without;
-//! lower: less stretch and swing when the character runs). The JSON line adds `pin_error`
-//! (largest distance between a pinned vertex and its anchor).
+//! `--speed M/S` sets the speed along the loop (default 1.4; above 2.5 the character runs);
+//! `--inertia X` gives the cape a `ClothInertia` of `X` relative to the character; `--fps N`
+//! (headless) sets the frame rate the app runs at (the cloth and the animation step at 60 Hz
+//! whatever it is); `--per-frame-animation` leaves Bevy's animation once a frame, to compare.
+//! The JSON line adds `pin_error` (largest distance, over every frame after the first second,
+//! between a pinned vertex and where its bone is drawn), `penetration` (deepest cape vertex inside a body
+//! collider over every step after the first second), `colliders`, `touching_steps` (steps in
+//! which the cape touched the body) and `gait`.
 
 #[path = "support/mod.rs"]
 mod support;
 
+use std::time::Duration;
+
+use bevy::animation::{AnimationPlayer, graph::AnimationGraph, graph::AnimationGraphHandle};
+use bevy::gltf::GltfAssetLabel;
 use bevy::prelude::*;
+use bevy::time::TimeUpdateStrategy;
+use bevy::world_serialization::{WorldAssetRoot, WorldInstanceReady};
 use bevy_cloth::prelude::*;
 use support::Args;
 
+const CHARACTER: &str = "character.gltf";
+/// Radius of the loop the character walks (metres).
+const LOOP: f32 = 3.0;
+const COLUMNS: u32 = 16;
+const ROWS: u32 = 20;
+
+/// The character's root: it walks the loop; the glTF scene hangs below it.
 #[derive(Component)]
 struct Walker {
-    radius: f32,
     speed: f32,
 }
 
-/// `--speed` and `--inertia`.
+/// `--speed`, `--inertia`.
 #[derive(Resource)]
 struct Options {
     speed: f32,
     inertia: Option<f32>,
 }
 
-const COLUMNS: u32 = 16;
-const ROWS: u32 = 22;
+impl Options {
+    /// Runs above 2.5 m/s. A walk cycle covers 1.4 m in 1 s, a run cycle 2.4 m in 0.6 s: the
+    /// animation plays faster or slower so the feet keep pace with the ground.
+    fn gait(&self) -> (&'static str, usize, f32) {
+        if self.speed > 2.5 {
+            ("run", 1, self.speed / 4.0)
+        } else {
+            ("walk", 0, self.speed / 1.4)
+        }
+    }
+}
+
+/// What the run measured, every fixed step.
+#[derive(Resource, Default)]
+struct Measured {
+    pin_error: f32,
+    penetration: f32,
+    steps: u32,
+    colliders: usize,
+    touching_steps: u32,
+}
+
+/// Marks the cape.
+#[derive(Component)]
+struct Cape;
+
+/// Where the character starts: on the loop, facing along it.
+fn start_pose(speed: f32, t: f32) -> Transform {
+    let angle = t * speed / LOOP;
+    let (s, c) = angle.sin_cos();
+    let forward = Vec3::new(-s, 0.0, c);
+    // The model faces its +z: `looking_to(-forward)` turns its +z along the path.
+    Transform::from_xyz(LOOP * c, 0.0, LOOP * s).looking_to(-forward, Vec3::Y)
+}
 
 fn setup(
     mut commands: Commands,
+    assets: Res<AssetServer>,
+    options: Res<Options>,
     mut meshes: ResMut<Assets<Mesh>>,
-    mut materials: Option<ResMut<Assets<StandardMaterial>>>,
+    materials: Option<ResMut<Assets<StandardMaterial>>>,
+) {
+    if let Some(mut m) = materials {
+        support::stage(
+            &mut commands,
+            &mut meshes,
+            &mut m,
+            Vec3::new(0.0, 1.9, 7.0),
+            Vec3::new(0.0, 0.9, 1.5),
+        );
+    }
+    commands
+        .spawn((
+            Walker {
+                speed: options.speed,
+            },
+            start_pose(options.speed, 0.0),
+            WorldAssetRoot(assets.load(GltfAssetLabel::Scene(0).from_asset(CHARACTER))),
+            Name::new("Walker"),
+        ))
+        .observe(dress);
+}
+
+/// Walks the loop on the fixed clock (the cloth's), facing along it.
+fn walk(time: Res<Time>, mut walkers: Query<(&Walker, &mut Transform)>) {
+    for (w, mut t) in &mut walkers {
+        *t = start_pose(w.speed, time.elapsed_secs());
+    }
+}
+
+/// The body's colliders: bone, centre and shape in the character's rest frame (the bones'
+/// rest rotations are the identity, so a bone's frame is the character's moved to the bone).
+fn body_colliders() -> [(&'static str, Vec3, ClothCollider); 13] {
+    let limb = |r: f32, len: f32| ClothCollider::capsule(r, len).with_thickness(0.015);
+    let block = |h: Vec3| ClothCollider::cuboid(h).with_thickness(0.015);
+    [
+        (
+            "Hips",
+            Vec3::new(0.0, 0.95, 0.0),
+            block(Vec3::new(0.17, 0.09, 0.1)),
+        ),
+        (
+            "Spine",
+            Vec3::new(0.0, 1.15, 0.0),
+            block(Vec3::new(0.15, 0.1, 0.09)),
+        ),
+        (
+            "Chest",
+            Vec3::new(0.0, 1.37, 0.0),
+            block(Vec3::new(0.19, 0.13, 0.11)),
+        ),
+        (
+            "Head",
+            Vec3::new(0.0, 1.7, 0.01),
+            ClothCollider::sphere(0.13).with_thickness(0.015),
+        ),
+        ("Neck", Vec3::new(0.0, 1.54, 0.0), limb(0.05, 0.04)),
+        ("UpperArm.L", Vec3::new(0.26, 1.33, 0.0), limb(0.05, 0.2)),
+        ("Forearm.L", Vec3::new(0.26, 1.05, 0.0), limb(0.045, 0.19)),
+        ("UpperArm.R", Vec3::new(-0.26, 1.33, 0.0), limb(0.05, 0.2)),
+        ("Forearm.R", Vec3::new(-0.26, 1.05, 0.0), limb(0.045, 0.19)),
+        ("Thigh.L", Vec3::new(0.1, 0.71, 0.0), limb(0.07, 0.28)),
+        ("Shin.L", Vec3::new(0.1, 0.27, 0.0), limb(0.06, 0.34)),
+        ("Thigh.R", Vec3::new(-0.1, 0.71, 0.0), limb(0.07, 0.28)),
+        ("Shin.R", Vec3::new(-0.1, 0.27, 0.0), limb(0.06, 0.34)),
+    ]
+}
+
+/// Rest positions of the bones the example uses (as `make_character` writes them).
+fn bone_rest(name: &str) -> Option<Vec3> {
+    Some(match name {
+        "Hips" => Vec3::new(0.0, 0.95, 0.0),
+        "Spine" => Vec3::new(0.0, 1.08, 0.0),
+        "Chest" => Vec3::new(0.0, 1.26, 0.0),
+        "Neck" => Vec3::new(0.0, 1.52, 0.0),
+        "Head" => Vec3::new(0.0, 1.6, 0.0),
+        "UpperArm.L" => Vec3::new(0.24, 1.47, 0.0),
+        "Forearm.L" => Vec3::new(0.24, 1.18, 0.0),
+        "UpperArm.R" => Vec3::new(-0.24, 1.47, 0.0),
+        "Forearm.R" => Vec3::new(-0.24, 1.18, 0.0),
+        "Thigh.L" => Vec3::new(0.1, 0.92, 0.0),
+        "Shin.L" => Vec3::new(0.1, 0.5, 0.0),
+        "Thigh.R" => Vec3::new(-0.1, 0.92, 0.0),
+        "Shin.R" => Vec3::new(-0.1, 0.5, 0.0),
+        _ => return None,
+    })
+}
+
+/// Once the character's scene is in the world: play its animation, put colliders on its
+/// bones and hang the cape from its chest.
+#[expect(clippy::too_many_arguments, reason = "a one-off setup observer")]
+fn dress(
+    ready: On<WorldInstanceReady>,
+    mut commands: Commands,
+    children: Query<&Children>,
+    names: Query<&Name>,
+    mut players: Query<&mut AnimationPlayer>,
+    walkers: Query<&Transform, With<Walker>>,
+    assets: Res<AssetServer>,
+    mut graphs: ResMut<Assets<AnimationGraph>>,
+    mut meshes: ResMut<Assets<Mesh>>,
     options: Res<Options>,
 ) {
-    // The character: a capsule 1.7 m tall walking towards its local +z; its back is −z.
-    let mut body = commands.spawn((
-        Walker {
-            radius: 3.0,
-            speed: options.speed,
-        },
-        Transform::from_xyz(3.0, 0.85, 0.0),
-        ClothCollider::capsule(0.28, 1.1).with_thickness(0.02),
-        Mesh3d(meshes.add(Capsule3d::new(0.28, 1.1).mesh().build())),
-    ));
-    if let Some(m) = materials.as_deref_mut() {
-        body.insert(MeshMaterial3d(m.add(Color::srgb(0.55, 0.5, 0.45))));
+    let root = ready.entity;
+    let bone = |name: &str| {
+        children
+            .iter_descendants(root)
+            .find(|&e| names.get(e).is_ok_and(|n| n.as_str() == name))
+    };
+    // The animation: the gait for the speed, looping.
+    let (_, clip, rate) = options.gait();
+    let (graph, node) = AnimationGraph::from_clip(
+        assets.load(GltfAssetLabel::Animation(clip).from_asset(CHARACTER)),
+    );
+    let graph = graphs.add(graph);
+    for e in children.iter_descendants(root) {
+        if let Ok(mut player) = players.get_mut(e) {
+            player.play(node).repeat().set_speed(rate);
+            commands
+                .entity(e)
+                .insert(AnimationGraphHandle(graph.clone()));
+        }
     }
-    let character = body.id();
-
-    // The cape: 0.8 m × 1.1 m hanging down the back, top row at the shoulders.
-    let grid = Grid::new(COLUMNS, ROWS, 0.8, 1.1);
-    let shoulders = Vec3::new(0.0, 0.6, -0.32);
-    // Grid in XZ; −90° about X stands it up with row 0 on top, then it goes behind the back.
-    let transform =
-        Transform::from_translation(Vec3::new(3.0, 0.85, 0.0) + shoulders - Vec3::Y * 0.55)
-            .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
+    // Colliders on the bones.
+    for (name, centre, collider) in body_colliders() {
+        let (Some(b), Some(rest)) = (bone(name), bone_rest(name)) else {
+            error!("{CHARACTER} has no bone {name}: run `cargo run --example make_character`");
+            continue;
+        };
+        let child = commands
+            .spawn((collider, Transform::from_translation(centre - rest)))
+            .id();
+        commands.entity(b).add_child(child);
+    }
+    // The cape: 0.7 m × 1.0 m down the back from the shoulders, pinned along its top edge to
+    // the chest bone.
+    let Some(chest) = bone("Chest") else {
+        error!("{CHARACTER} has no Chest bone");
+        return;
+    };
+    let Ok(&walker) = walkers.get(root) else {
+        return;
+    };
+    let grid = Grid::new(COLUMNS, ROWS, 0.7, 1.0);
+    // In the character's frame: top row along the shoulders, just behind the back (the chest
+    // box's back is at z = −0.11), hanging down; grid in XZ, −90° about X stands it up.
+    let top = Vec3::new(0.0, 1.48, -0.14);
+    let local = Transform::from_translation(top - Vec3::Y * 0.5)
+        .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
     let rest = grid.positions();
     let pins = (0..COLUMNS).map(|i| {
         let v = grid.index(i, 0);
-        // Offset in the character's frame: along its shoulders, just behind the back.
-        let world_rest = transform.transform_point(rest[v as usize]);
-        let offset = world_rest - Vec3::new(3.0, 0.85, 0.0);
         ClothPin {
             vertex: v,
             anchor: PinAnchor::Entity {
-                entity: character,
-                offset,
+                entity: chest,
+                offset: local.transform_point(rest[v as usize]) - bone_rest("Chest").unwrap(),
             },
         }
     });
     let mut cape = commands.spawn((
         Mesh3d(meshes.add(grid_mesh(&grid))),
-        transform,
+        walker * local,
         Cloth {
             mass: 0.5,
             ..default()
@@ -90,77 +268,117 @@ fn setup(
         },
         ClothPins(pins.collect()),
         ClothTethers::default(),
+        Cape,
+        support::ClothLook(Color::srgb(0.6, 0.08, 0.12)),
     ));
     if let Some(inertia) = options.inertia {
-        cape.insert(ClothInertia::new(inertia).relative_to(character));
-    }
-    if let Some(mut m) = materials {
-        cape.insert(support::ClothLook(Color::srgb(0.6, 0.08, 0.12)));
-        support::stage(
-            &mut commands,
-            &mut meshes,
-            &mut m,
-            Vec3::new(0.0, 4.0, 8.0),
-            Vec3::new(0.0, 0.8, 0.0),
-        );
+        cape.insert(ClothInertia::new(inertia).relative_to(root));
     }
 }
 
-/// Walk counter-clockwise around the origin, facing along the path (back towards −tangent).
-fn walk(time: Res<Time>, mut walkers: Query<(&Walker, &mut Transform)>) {
-    for (w, mut t) in &mut walkers {
-        let angle = time.elapsed_secs() * w.speed / w.radius;
-        let (s, c) = angle.sin_cos();
-        t.translation = Vec3::new(
-            w.radius * c,
-            0.85 + 0.03 * (angle * 12.0).sin(),
-            w.radius * s,
-        );
-        let forward = Vec3::new(-s, 0.0, c);
-        t.look_to(-forward, Vec3::Y);
+/// Every fixed step, after the cloth stepped: how deep the cape is inside the body.
+fn measure_step(
+    capes: Query<&ClothSim, With<Cape>>,
+    colliders: Res<bevy_cloth::collider::ClothColliders>,
+    impulses: Query<&ClothContactImpulse>,
+    time: Res<Time>,
+    mut measured: ResMut<Measured>,
+) {
+    if impulses.iter().any(|i| i.linear != Vec3::ZERO) {
+        measured.touching_steps += 1;
+    }
+    for sim in &capes {
+        let s = sim.simulation().state();
+        if time.elapsed_secs() > 1.0 {
+            for c in &colliders.colliders {
+                for i in 0..s.len() {
+                    let local = c.end.inverse_apply(s.position(i));
+                    let d = c.shape.distance(local).0 * c.end.scale;
+                    measured.penetration = measured.penetration.max(-d);
+                }
+            }
+        }
+        measured.steps += 1;
+        measured.colliders = colliders.colliders.len();
+    }
+}
+
+/// Every frame, as drawn (after transforms are propagated): how far each pinned vertex is
+/// from where its bone is drawn, after the first second.
+fn measure_frame(
+    capes: Query<(&ClothSim, &ClothPins), With<Cape>>,
+    bones: Query<&GlobalTransform>,
+    time: Res<Time>,
+    mut measured: ResMut<Measured>,
+) {
+    if time.elapsed_secs() < 1.0 {
+        return; // the character's scene loading, the cape hanging itself on
+    }
+    for (sim, pins) in &capes {
+        let s = sim.simulation().state();
+        for pin in &pins.0 {
+            if let PinAnchor::Entity { entity, offset } = pin.anchor
+                && let Ok(at) = bones.get(entity)
+            {
+                let error = s
+                    .position(pin.vertex as usize)
+                    .distance(at.transform_point(offset));
+                measured.pin_error = measured.pin_error.max(error);
+            }
+        }
     }
 }
 
 fn report(world: &mut World) -> support::Json {
-    let mut walkers = world.query_filtered::<&GlobalTransform, With<Walker>>();
-    let body = *walkers.iter(world).next().expect("a walker");
-    let mut q = world.query::<(
-        &ClothSim,
-        &ClothPins,
-        Option<&ClothBackendInUse>,
-        Has<ClothReadback>,
-    )>();
-    let mut pin_error = 0.0f32;
-    for (sim, pins, backend, read_back) in q.iter(world) {
-        if backend.is_some_and(|b| b.gpu) && !read_back {
-            // Its state stays on the GPU (a windowed run reads none back).
-            continue;
-        }
-        for pin in &pins.0 {
-            if let PinAnchor::Entity { offset, .. } = pin.anchor {
-                let at = body.transform_point(offset);
-                pin_error = pin_error.max(
-                    sim.simulation()
-                        .state()
-                        .position(pin.vertex as usize)
-                        .distance(at),
-                );
-            }
-        }
-    }
+    let gait = world.resource::<Options>().gait().0;
+    let m = world.resource::<Measured>();
+    let (pin_error, penetration, steps, colliders, touching) = (
+        m.pin_error,
+        m.penetration,
+        m.steps,
+        m.colliders,
+        m.touching_steps,
+    );
     support::cloth_report(world)
         .str("example", "cape")
+        .str("gait", gait)
+        .num("measured_steps", steps)
+        .num("colliders", colliders as f64)
+        .num("touching_steps", touching)
         .num("pin_error", pin_error)
+        .num("penetration", penetration)
 }
 
 fn main() {
     let args = Args::parse();
     let mut app = support::app(&args, "bevy_cloth: cape", 1.0 / 60.0);
+    if args.headless {
+        // A skinned glTF scene and its animations without a renderer.
+        app.add_plugins((
+            bevy::image::ImagePlugin::default(),
+            bevy::world_serialization::WorldSerializationPlugin,
+            bevy::gltf::GltfPlugin::default(),
+            bevy::animation::AnimationPlugin,
+        ));
+        if let Some(fps) = args.rest.get("fps").map(|_| args.get("fps", 60.0f64)) {
+            app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+                1.0 / fps,
+            )));
+        }
+    }
     app.insert_resource(Options {
-        speed: args.get("speed", 1.6),
+        speed: args.get("speed", 1.4),
         inertia: args.rest.get("inertia").map(|_| args.get("inertia", 1.0)),
     })
+    .init_resource::<Measured>()
     .add_systems(Startup, setup)
-    .add_systems(FixedUpdate, walk);
+    .add_systems(FixedUpdate, walk)
+    .add_systems(FixedPostUpdate, measure_step.after(ClothSystems::Simulate))
+    .add_systems(Last, measure_frame);
+    // `--per-frame-animation` (to compare) leaves Bevy's animation once a frame, in
+    // PostUpdate, after the frame's fixed steps.
+    if !args.rest.contains_key("per-frame-animation") {
+        app.add_plugins(ClothAnimationPlugin);
+    }
     support::run(app, &args, report);
 }

@@ -131,6 +131,8 @@ pub mod prelude {
     #[cfg(feature = "editor")]
     pub use crate::editor::ClothEditorPlugin;
     pub use crate::editor::{ClothCameraPlugin, ClothFlyCamera};
+    #[cfg(feature = "animation")]
+    pub use crate::foundation::ClothAnimationPlugin;
     pub use crate::foundation::{ClothSystems, grid_mesh};
     pub use crate::gpu::{ClothBackend, ClothBackendInUse, ClothGpuPlugin, ClothReadback};
     pub use crate::render::{

@@ -1370,3 +1370,151 @@ fn bad_inertia_is_reported_once_and_the_cloth_runs_on() {
         assert!(sim(&app, cape).steps() > 100, "the cape runs on");
     }
 }
+
+/// Bevy's animation on the cloth's fixed clock (`ClothAnimationPlugin`): a cloth pinned to an
+/// animated bone sees the bone where that fixed step's animation puts it, so the same
+/// animation gives the same cloth at any frame rate.
+#[cfg(feature = "animation")]
+mod animated_bones {
+    use super::*;
+    use bevy::animation::{
+        AnimatedBy, AnimationClip, AnimationPlayer, AnimationTargetId, animated_field,
+        graph::{AnimationGraph, AnimationGraphHandle},
+    };
+
+    /// A bone swinging 1 m to the side and back every second (a sharp turn at each end), a
+    /// 10 × 10 sheet pinned along one edge to it; frames of `1/fps` s. Returns the app, the
+    /// cloth and the bone.
+    fn scene(fps: f64, on_fixed_clock: bool) -> (App, Entity, Entity) {
+        let mut app = app_with_frame(Duration::from_secs_f64(1.0 / fps));
+        app.add_plugins(bevy::animation::AnimationPlugin);
+        if on_fixed_clock {
+            app.add_plugins(ClothAnimationPlugin);
+        }
+        let name = Name::new("Bone");
+        let target = AnimationTargetId::from_name(&name);
+        let mut clip = AnimationClip::default();
+        clip.add_curve_to_target(
+            target,
+            AnimatableCurve::new(
+                animated_field!(Transform::translation),
+                AnimatableKeyframeCurve::new([
+                    (0.0, Vec3::new(0.0, 1.0, 0.0)),
+                    (0.5, Vec3::new(1.0, 1.0, 0.0)),
+                    (1.0, Vec3::new(0.0, 1.0, 0.0)),
+                ])
+                .unwrap(),
+            ),
+        );
+        let clip = app
+            .world_mut()
+            .resource_mut::<Assets<AnimationClip>>()
+            .add(clip);
+        let (graph, node) = AnimationGraph::from_clip(clip);
+        let graph = app
+            .world_mut()
+            .resource_mut::<Assets<AnimationGraph>>()
+            .add(graph);
+        let mut player = AnimationPlayer::default();
+        player.play(node).repeat();
+        let root = app
+            .world_mut()
+            .spawn((player, AnimationGraphHandle(graph), Transform::default()))
+            .id();
+        let bone = app
+            .world_mut()
+            .spawn((
+                name,
+                target,
+                AnimatedBy(root),
+                Transform::from_xyz(0.0, 1.0, 0.0),
+                ChildOf(root),
+            ))
+            .id();
+        // The cloth comes in the third fixed step, whatever the frame rate: an animation
+        // starts a frame after its graph is ready, which is one step into it at 60 fps and
+        // none at 144.
+        let grid = Grid::new(10, 10, 0.5, 0.5);
+        let mesh = add_mesh(&mut app, grid_mesh(&grid));
+        let rest = grid.positions();
+        let pins: Vec<ClothPin> = (0..10)
+            .map(|i| {
+                let v = grid.index(i, 0);
+                ClothPin {
+                    vertex: v,
+                    anchor: PinAnchor::Entity {
+                        entity: bone,
+                        offset: rest[v as usize],
+                    },
+                }
+            })
+            .collect();
+        let cloth = app.world_mut().spawn_empty().id();
+        app.add_systems(
+            FixedUpdate,
+            move |mut commands: Commands, mut step: Local<u32>| {
+                *step += 1;
+                if *step == 3 {
+                    commands.entity(cloth).insert((
+                        Mesh3d(mesh.clone()),
+                        Transform::from_xyz(0.0, 1.0, 0.0),
+                        Cloth::default(),
+                        ClothPins(pins.clone()),
+                    ));
+                }
+            },
+        );
+        (app, cloth, bone)
+    }
+
+    /// Runs until the cloth has taken `steps` fixed steps; its positions and the largest
+    /// distance of a pinned vertex from where the bone puts it now.
+    fn run_steps(fps: f64, on_fixed_clock: bool, steps: u64) -> (Vec<Vec3>, f32) {
+        let (mut app, cloth, bone) = scene(fps, on_fixed_clock);
+        for _ in 0..10_000 {
+            app.update();
+            if app
+                .world()
+                .get::<ClothSim>(cloth)
+                .is_some_and(|c| c.steps() >= steps)
+            {
+                break;
+            }
+        }
+        let sim = app.world().get::<ClothSim>(cloth).unwrap();
+        assert_eq!(sim.steps(), steps, "{fps} fps stepped past {steps}");
+        let s = sim.simulation().state();
+        let positions: Vec<Vec3> = (0..s.len()).map(|i| s.position(i)).collect();
+        let at = *app.world().get::<GlobalTransform>(bone).unwrap();
+        let pins = app.world().get::<ClothPins>(cloth).unwrap();
+        let pin_error = pins
+            .0
+            .iter()
+            .map(|p| match p.anchor {
+                PinAnchor::Entity { offset, .. } => {
+                    positions[p.vertex as usize].distance(at.transform_point(offset))
+                }
+                _ => unreachable!(),
+            })
+            .fold(0.0, f32::max);
+        (positions, pin_error)
+    }
+
+    #[test]
+    fn a_cloth_on_an_animated_bone_is_the_same_at_any_frame_rate() {
+        let steps = 75; // through a turn of the bone at 0.5 s and on
+        let (at_60, error_60) = run_steps(60.0, true, steps);
+        for fps in [30.0, 144.0, 47.0] {
+            let (other, error) = run_steps(fps, true, steps);
+            assert_eq!(other, at_60, "{fps} fps differs from 60");
+            // The pins sit on the bone as posed in the last step (the pose drawn).
+            assert!(error < 1e-5, "{fps} fps: pins {error} m off the bone");
+        }
+        assert!(error_60 < 1e-5, "pins {error_60} m off the bone");
+        // Animated once a frame instead, the cloth sees last frame's pose: at 30 fps two
+        // steps see one pose, and the cloth differs, its pins off the drawn bone.
+        let (per_frame, error) = run_steps(30.0, false, steps);
+        assert_ne!(per_frame, at_60);
+        assert!(error > 0.01, "per-frame animation: pins only {error} m off");
+    }
+}

@@ -7,8 +7,13 @@
 //! [`ClothFoundationPlugin`] stores in [`ClothSchedule`]; `ClothPlugins` adds it first, so
 //! every plugin of the group (and the physics bridges) reads the same schedule.
 
+#[cfg(feature = "animation")]
+mod animation;
 mod mesh;
 mod pose;
+
+#[cfg(feature = "animation")]
+pub use animation::ClothAnimationPlugin;
 
 pub use mesh::{MeshData, MeshError, grid_mesh, read_mesh};
 pub use pose::FixedPoses;
