@@ -623,3 +623,88 @@ fn a_cloth_whose_state_goes_bad_is_reset_to_its_rest_pose() {
     let sim = app.world().get::<ClothSim>(e).unwrap();
     assert_eq!(sim.recoveries(), 1);
 }
+
+/// A pin on an entity that does not exist (a bone name that matched nothing, a despawned
+/// anchor) is reported once, naming the entity; the cloth runs on with those pins holding
+/// where they are, the other pins following their anchors, and the report clears when the
+/// anchor is there again.
+#[test]
+fn a_pin_on_a_missing_entity_is_reported_once_and_the_cloth_runs_on() {
+    let mut app = app();
+    let anchor = app
+        .world_mut()
+        .spawn(Transform::from_xyz(0.0, 2.0, 0.0))
+        .id();
+    let gone = app.world_mut().spawn(Transform::default()).id();
+    app.world_mut().entity_mut(gone).despawn();
+    let mesh = add_mesh(&mut app, grid_mesh(&GRID));
+    let (left, right) = (GRID.index(0, 0), GRID.index(7, 0));
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(0.0, 2.0, 0.0),
+            Cloth::default(),
+            ClothPins(vec![
+                ClothPin {
+                    vertex: left,
+                    anchor: PinAnchor::Entity {
+                        entity: anchor,
+                        offset: Vec3::new(-0.5, 0.0, -0.5),
+                    },
+                },
+                ClothPin {
+                    vertex: right,
+                    anchor: PinAnchor::Entity {
+                        entity: gone,
+                        offset: Vec3::ZERO,
+                    },
+                },
+            ]),
+        ))
+        .id();
+    run(&mut app, 10);
+    let held = app
+        .world()
+        .get::<ClothSim>(e)
+        .unwrap()
+        .simulation()
+        .state()
+        .position(right as usize);
+    // Moving the anchor that exists moves its pin; the other pin stays where it was.
+    app.world_mut()
+        .get_mut::<Transform>(anchor)
+        .unwrap()
+        .translation
+        .x += 0.3;
+    run(&mut app, 20);
+    let failures = &app.world().resource::<Failures>().0;
+    assert_eq!(failures.len(), 1, "{failures:?}");
+    assert_eq!(failures[0].cloth, e);
+    assert_eq!(failures[0].error, ClothError::PinAnchorMissing(gone));
+    assert!(app.world().get::<ClothInvalid>(e).is_none());
+    let sim = app.world().get::<ClothSim>(e).unwrap();
+    assert!(
+        sim.steps() >= 29,
+        "the cloth stopped: {} steps",
+        sim.steps()
+    );
+    let s = sim.simulation().state();
+    let (l, r) = (s.position(left as usize), s.position(right as usize));
+    assert!(l.distance(Vec3::new(-0.2, 2.0, -0.5)) < 1e-5, "{l}");
+    assert_eq!(r, held);
+    assert!((0..s.len()).all(|i| s.position(i).is_finite()));
+    // Pinned to the existing anchor instead: no new report, and the pins follow it.
+    app.world_mut().get_mut::<ClothPins>(e).unwrap().0[1].anchor = PinAnchor::Entity {
+        entity: anchor,
+        offset: Vec3::new(0.5, 0.0, -0.5),
+    };
+    run(&mut app, 3);
+    assert_eq!(app.world().resource::<Failures>().0.len(), 1);
+    let s = app.world().get::<ClothSim>(e).unwrap().simulation().state();
+    assert!(
+        s.position(right as usize)
+            .distance(Vec3::new(0.8, 2.0, -0.5))
+            < 1e-5
+    );
+}

@@ -49,6 +49,7 @@ impl Built {
             carry: None,
             inertia_from: None,
             inertia_error: None,
+            anchor_error: None,
         }
     }
 }

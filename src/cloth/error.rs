@@ -31,6 +31,11 @@ pub enum ClothError {
     /// The [`ClothInertia`](super::ClothInertia) anchor has no pose (it does not exist, or
     /// has no transform).
     InertiaAnchorMissing(Entity),
+    /// A pin's anchor entity ([`PinAnchor::Entity`](super::PinAnchor::Entity) or
+    /// [`PinAnchor::Attached`](super::PinAnchor::Attached)) has no pose: it does not exist (a
+    /// bone name that matched nothing, a despawned entity) or has no transform. Its pins hold
+    /// where they are meanwhile.
+    PinAnchorMissing(Entity),
     /// The solver rejected the mesh, masses, pins or parameters.
     Solver(SolverError),
 }
@@ -66,6 +71,9 @@ impl core::fmt::Display for ClothError {
                     f,
                     "the inertia anchor {e} does not exist or has no transform"
                 )
+            }
+            ClothError::PinAnchorMissing(e) => {
+                write!(f, "the pin anchor {e} does not exist or has no transform")
             }
             ClothError::Solver(e) => e.fmt(f),
         }

@@ -63,6 +63,8 @@ pub struct ClothSim {
     /// A refused [`ClothInertia`](super::ClothInertia) (the cloth feels all its motion
     /// meanwhile).
     pub(super) inertia_error: Option<ClothError>,
+    /// A pin anchor with no pose (its pins hold still meanwhile).
+    pub(super) anchor_error: Option<ClothError>,
 }
 
 impl ClothSim {

@@ -13,7 +13,7 @@ use super::pins::{attach, follow_anchors, pin_list, repin};
 use super::{
     Cloth, ClothConfig, ClothError, ClothFailed, ClothInertia, ClothInvalid, ClothPins,
     ClothSelfCollision, ClothSim, ClothSource, ClothSteppedElsewhere, ClothTearing, ClothTethers,
-    ClothTorn, ClothWorkers, TaskPoolParallel,
+    ClothTorn, ClothWorkers, PinAnchor, TaskPoolParallel,
 };
 use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
 use crate::foundation::{EntityName, FixedPoses};
@@ -270,6 +270,23 @@ pub(super) fn sync_cloths(
             attach(&mut list, &mut cs.attached, cs.sim.state(), &poses);
             list
         });
+        if let Ok(list) = &list {
+            let missing = list.iter().find_map(|&(_, anchor)| match anchor {
+                PinAnchor::Entity { entity, .. } | PinAnchor::Attached(entity)
+                    if poses.get(entity).is_none() =>
+                {
+                    Some(entity)
+                }
+                _ => None,
+            });
+            note_rejection(
+                &mut commands,
+                who,
+                &mut cs.anchor_error,
+                missing.map_or(Ok(()), |e| Err(ClothError::PinAnchorMissing(e))),
+                ("pin anchors", "its pins on it hold where they are"),
+            );
+        }
         cs.teleport = None;
         if pins.is_changed() || cs.pins_error.is_some() {
             let result = list.and_then(|list| {
