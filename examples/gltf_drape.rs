@@ -167,14 +167,8 @@ fn report(world: &mut World) -> support::Json {
 fn main() {
     let args = Args::parse();
     let mut app = support::app(&args, "bevy_cloth: glTF banner on a statue", 1.0 / 60.0);
-    if args.headless {
-        // Loading glTF without a renderer: its asset types and loader.
-        app.add_plugins((
-            bevy::image::ImagePlugin::default(),
-            bevy::world_serialization::WorldSerializationPlugin,
-            bevy::gltf::GltfPlugin::default(),
-        ));
-    }
+    // Loading glTF also without a renderer: its asset types and loader.
+    support::add_gltf_support(&mut app);
     app.add_systems(Startup, load)
         .add_systems(Update, spawn_when_loaded)
         .insert_resource(support::WaitUntil(|world| {

@@ -434,3 +434,20 @@ fn dress_cloths(
             .insert(MeshMaterial3d(materials.add(lined_velvet(look.0))));
     }
 }
+
+/// What loading glTF scenes (and their animations) needs that a headless CPU app, built on
+/// `MinimalPlugins`, lacks; a windowed or GPU app has it from `DefaultPlugins` already.
+pub fn add_gltf_support(app: &mut App) {
+    if !app.is_plugin_added::<bevy::image::ImagePlugin>() {
+        app.add_plugins(bevy::image::ImagePlugin::default());
+    }
+    if !app.is_plugin_added::<bevy::world_serialization::WorldSerializationPlugin>() {
+        app.add_plugins(bevy::world_serialization::WorldSerializationPlugin);
+    }
+    if !app.is_plugin_added::<bevy::gltf::GltfPlugin>() {
+        app.add_plugins(bevy::gltf::GltfPlugin::default());
+    }
+    if !app.is_plugin_added::<bevy::animation::AnimationPlugin>() {
+        app.add_plugins(bevy::animation::AnimationPlugin);
+    }
+}

@@ -6,7 +6,7 @@
 //! cuboids and y-aligned capsules map to the analytic shapes, half-spaces with a +y normal to
 //! planes, and triangle meshes, convex hulls, cylinders, cones and other capsules are
 //! triangulated and baked into signed distance fields (compound shapes, height fields and
-//! other shapes are ignored, with a debug log). Removing the avian collider, or despawning its
+//! other shapes are ignored, with a warning). Removing the avian collider, or despawning its
 //! entity, removes the mirror.
 //!
 //! After each cloth step, the impulse the cloth gave each mirrored collider

@@ -91,7 +91,11 @@ pub(crate) fn mirror<M: Component + Default>(
             ));
         }
         None => {
-            debug!("{engine} collider {entity}: shape not supported for cloth, ignored");
+            warn!(
+                "{engine} collider {entity}: its shape (a compound, height field, half-space \
+                 not facing +y, segment, polyline or voxels) is not one cloth collides with; cloth ignores it \
+                 (give the entity a ClothCollider of its own instead)"
+            );
             commands.entity(entity).try_remove::<(ClothCollider, M)>();
         }
     }

@@ -5,7 +5,8 @@
 //! [`NoClothCollision`] or its own [`ClothCollider`]) gets a mirrored [`ClothCollider`]: balls,
 //! cuboids and y-aligned capsules map to the analytic shapes, half-spaces with a +y normal to
 //! planes, and triangle meshes, convex hulls, cylinders, cones and other capsules are
-//! triangulated and baked into signed distance fields. After each cloth step, the impulse the
+//! triangulated and baked into signed distance fields (other shapes are ignored, with a
+//! warning). After each cloth step, the impulse the
 //! cloth gave each mirrored collider ([`ClothContactImpulse`]) is added, opposite to what the
 //! cloth received, to the [`ExternalImpulse`] of its dynamic rigid body (the collider's entity
 //! or its nearest ancestor with a [`RigidBody`]), which rapier applies on its next step.
