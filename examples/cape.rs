@@ -18,11 +18,12 @@
 //! `--inertia X` gives the cape a `ClothInertia` of `X` relative to the character; `--fps N`
 //! (headless) sets the frame rate the app runs at (the cloth and the animation step at 60 Hz
 //! whatever it is); `--per-frame-animation` leaves Bevy's animation once a frame, to compare.
-//! The JSON line adds `pin_error` (largest distance, over every frame after the first second,
-//! between a pinned vertex and where its bone is drawn), `penetration` (deepest cape vertex inside a body
-//! collider over every step after the first second), `colliders`, `touching_steps` (steps in
-//! which the cape touched the body) and `gait`. With `--backend gpu` the cape's state is read
-//! back a few frames late, so both figures then measure that lag, not the simulation.
+//! The JSON line adds `pin_error` (largest distance, over every frame after the first
+//! second, between a pinned vertex and where its bone is drawn), `penetration` (deepest cape
+//! vertex inside a body collider over every step after the first second), `colliders`,
+//! `touching_steps` (steps in which the cape touched the body) and `gait`. With `--backend
+//! gpu` the cape's state is read back a few frames late, so both figures then measure that
+//! lag, not the simulation.
 
 #[path = "support/mod.rs"]
 mod support;
