@@ -1391,6 +1391,11 @@ mod animated_bones {
         if on_fixed_clock {
             app.add_plugins(ClothAnimationPlugin);
         }
+        scene_in(app)
+    }
+
+    /// The scene in `app` (which has the plugins).
+    fn scene_in(mut app: App) -> (App, Entity, Entity) {
         let name = Name::new("Bone");
         let target = AnimationTargetId::from_name(&name);
         let mut clip = AnimationClip::default();
@@ -1470,7 +1475,10 @@ mod animated_bones {
     /// Runs until the cloth has taken `steps` fixed steps; its positions and the largest
     /// distance of a pinned vertex from where the bone puts it now.
     fn run_steps(fps: f64, on_fixed_clock: bool, steps: u64) -> (Vec<Vec3>, f32) {
-        let (mut app, cloth, bone) = scene(fps, on_fixed_clock);
+        run_scene(scene(fps, on_fixed_clock), steps)
+    }
+
+    fn run_scene((mut app, cloth, bone): (App, Entity, Entity), steps: u64) -> (Vec<Vec3>, f32) {
         for _ in 0..10_000 {
             app.update();
             if app
@@ -1482,7 +1490,7 @@ mod animated_bones {
             }
         }
         let sim = app.world().get::<ClothSim>(cloth).unwrap();
-        assert_eq!(sim.steps(), steps, "{fps} fps stepped past {steps}");
+        assert_eq!(sim.steps(), steps, "stepped past {steps}");
         let s = sim.simulation().state();
         let positions: Vec<Vec3> = (0..s.len()).map(|i| s.position(i)).collect();
         let at = *app.world().get::<GlobalTransform>(bone).unwrap();
@@ -1516,5 +1524,30 @@ mod animated_bones {
         let (per_frame, error) = run_steps(30.0, false, steps);
         assert_ne!(per_frame, at_60);
         assert!(error > 0.01, "per-frame animation: pins only {error} m off");
+    }
+
+    /// Added before `ClothPlugins` (its schedule not known yet), the plugin still puts the
+    /// animation on the cloth's clock, as `App::run` finishes the plugins.
+    #[test]
+    fn the_plugin_works_added_before_the_cloth_plugins() {
+        let mut app = App::new();
+        app.add_plugins((
+            MinimalPlugins,
+            TransformPlugin,
+            AssetPlugin::default(),
+            bevy::mesh::MeshPlugin,
+            bevy::animation::AnimationPlugin,
+            ClothAnimationPlugin,
+            ClothPlugins::default(),
+        ))
+        .insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
+            Duration::from_secs_f64(1.0 / 30.0),
+        ))
+        .insert_resource(Time::<Fixed>::from_hz(60.0));
+        app.finish();
+        app.cleanup();
+        let (positions, error) = run_scene(scene_in(app), 75);
+        assert_eq!(positions, run_steps(60.0, true, 75).0);
+        assert!(error < 1e-5, "pins {error} m off the bone");
     }
 }

@@ -110,11 +110,11 @@ impl Plugin for ClothAvianPlugin {
             max_push_speed: self.max_push_speed,
         }))
         .add_observer(bridge::forget_removed::<Collider, FromAvianCollider>);
-        bridge::schedule_once::<Self>(app, false, schedule_bridge);
+        crate::foundation::schedule_once::<Self>(app, false, schedule_bridge);
     }
 
     fn finish(&self, app: &mut App) {
-        bridge::schedule_once::<Self>(app, true, schedule_bridge);
+        crate::foundation::schedule_once::<Self>(app, true, schedule_bridge);
     }
 }
 

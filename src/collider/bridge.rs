@@ -1,17 +1,16 @@
 //! What the physics-engine bridges (`rapier`, `avian`) share: the opt-out marker, the settings
 //! every bridge takes, baking an engine's triangles, mirroring a collider, forgetting a removed
-//! one, and scheduling a bridge's systems in the cloth schedule whichever plugin came first.
+//! one (scheduling in the cloth schedule, whichever plugin came first, is
+//! [`schedule_once`](crate::foundation::schedule_once)).
 //!
 //! Each bridge keeps only what differs between engines: how its shapes map to
 //! [`ColliderShape`], and how an impulse reaches its bodies.
 
-use std::marker::PhantomData;
 use std::sync::Arc;
 
 use bevy::prelude::*;
 
 use super::{ClothCollider, ColliderMesh, ColliderShape};
-use crate::foundation::ClothSchedule;
 use crate::solver::SdfGrid;
 
 /// On a physics-engine collider (rapier or avian): cloth ignores it.
@@ -113,28 +112,6 @@ pub(crate) fn forget_removed<C: Component, M: Component>(
             .entity(removed.entity)
             .try_remove::<(ClothCollider, M)>();
     }
-}
-
-/// Present once the bridge marked `B` has its systems in the cloth schedule.
-#[derive(Resource)]
-struct Scheduled<B>(PhantomData<fn() -> B>);
-
-/// Adds a bridge's systems (`add`) to the cloth schedule once: from the bridge plugin's
-/// `build` when `ClothPlugins` came first (the [`ClothSchedule`] is known), otherwise from its
-/// `finish`, once every plugin is built.
-pub(crate) fn schedule_once<B: 'static>(
-    app: &mut App,
-    in_finish: bool,
-    add: fn(&mut App, bevy::ecs::intern::Interned<dyn bevy::ecs::schedule::ScheduleLabel>),
-) {
-    if app.world().contains_resource::<Scheduled<B>>()
-        || (!in_finish && !app.world().contains_resource::<ClothSchedule>())
-    {
-        return;
-    }
-    let schedule = ClothSchedule::of(app);
-    app.insert_resource(Scheduled::<B>(PhantomData));
-    add(app, schedule);
 }
 
 #[cfg(test)]

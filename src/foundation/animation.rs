@@ -6,7 +6,9 @@ use bevy::animation::{AnimationPlayer, advance_animations, animate_targets};
 use bevy::app::AnimationSystems;
 use bevy::prelude::*;
 
-use super::{ClothSchedule, ClothSystems};
+use bevy::ecs::schedule::InternedScheduleLabel;
+
+use super::{ClothSystems, schedule_once};
 
 /// Advances Bevy's animations on the cloth's fixed clock.
 ///
@@ -41,15 +43,11 @@ use super::{ClothSchedule, ClothSystems};
 pub struct ClothAnimationPlugin;
 
 impl Plugin for ClothAnimationPlugin {
+    /// Added after `ClothPlugins`, its systems go into the cloth schedule here; added
+    /// before, in [`Plugin::finish`], once every plugin is built.
     fn build(&self, app: &mut App) {
-        let schedule = ClothSchedule::of(app);
+        schedule_once::<Self>(app, false, schedule_advance);
         app.init_resource::<Held>()
-            .add_systems(
-                schedule,
-                (advance_animations, animate_targets)
-                    .chain()
-                    .before(ClothSystems::Prepare),
-            )
             .add_systems(PostUpdate, hold.before(AnimationSystems))
             .add_systems(
                 PostUpdate,
@@ -58,6 +56,19 @@ impl Plugin for ClothAnimationPlugin {
                     .before(bevy::transform::TransformSystems::Propagate),
             );
     }
+
+    fn finish(&self, app: &mut App) {
+        schedule_once::<Self>(app, true, schedule_advance);
+    }
+}
+
+fn schedule_advance(app: &mut App, schedule: InternedScheduleLabel) {
+    app.add_systems(
+        schedule,
+        (advance_animations, animate_targets)
+            .chain()
+            .before(ClothSystems::Prepare),
+    );
 }
 
 /// The animations [`hold`] paused this frame, to resume.

@@ -102,6 +102,29 @@ impl Plugin for ClothFoundationPlugin {
     }
 }
 
+/// Present once the plugin marked `P` has its systems in the cloth schedule.
+#[derive(Resource)]
+struct Scheduled<P>(core::marker::PhantomData<fn() -> P>);
+
+/// Adds a plugin's systems (`add`) to the cloth schedule once, whichever of it and
+/// `ClothPlugins` was added first: from the plugin's `build` when the [`ClothSchedule`] is
+/// known (`ClothPlugins` came first), otherwise from its `finish` (`in_finish`), once every
+/// plugin is built. For plugins outside the group (the physics bridges, animation).
+pub(crate) fn schedule_once<P: 'static>(
+    app: &mut App,
+    in_finish: bool,
+    add: fn(&mut App, InternedScheduleLabel),
+) {
+    if app.world().contains_resource::<Scheduled<P>>()
+        || (!in_finish && !app.world().contains_resource::<ClothSchedule>())
+    {
+        return;
+    }
+    let schedule = ClothSchedule::of(app);
+    app.insert_resource(Scheduled::<P>(core::marker::PhantomData));
+    add(app, schedule);
+}
+
 /// An entity as messages name it: `"Cape" (12v0)` when it has a [`Name`], `12v0` otherwise.
 #[derive(Clone, Copy, Debug)]
 pub struct EntityName<'a> {
