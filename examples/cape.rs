@@ -356,12 +356,12 @@ fn main() {
     let mut app = support::app(&args, "bevy_cloth: cape", 1.0 / 60.0);
     // A skinned glTF scene and its animations, also without a renderer.
     support::add_gltf_support(&mut app);
-    if args.headless {
-        if let Some(fps) = args.rest.get("fps").map(|_| args.get("fps", 60.0f64)) {
-            app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
-                1.0 / fps,
-            )));
-        }
+    if args.headless
+        && let Some(fps) = args.rest.get("fps").map(|_| args.get("fps", 60.0f64))
+    {
+        app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+            1.0 / fps,
+        )));
     }
     app.insert_resource(Options {
         speed: args.get("speed", 1.4),
