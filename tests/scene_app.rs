@@ -204,6 +204,20 @@ fn teleporting_the_anchor_moves_the_cloth_instead_of_tearing_it_apart() {
     assert!(fastest < 20.0, "{fastest} m/s");
 }
 
+/// A 20 × 20 curtain, 2 m wide, hanging in the XY plane from a rail at y = 2.
+#[cfg(any(feature = "avian", feature = "rapier"))]
+fn curtain(app: &mut App) -> Entity {
+    let grid = Grid::new(20, 20, 2.0, 2.0);
+    let upright = Transform::from_xyz(0.0, 1.0, 0.0)
+        .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
+    spawn_sheet(
+        app,
+        20,
+        upright,
+        ClothPins::rest((0..20).map(|i| grid.index(i, 0))),
+    )
+}
+
 /// A 1.2 m hammock of 20 × 20 vertices at y = 1, held along its two x edges.
 #[cfg(any(feature = "avian", feature = "rapier"))]
 fn hammock(app: &mut App) -> Entity {
@@ -286,15 +300,7 @@ mod rapier {
             ClothRapierPlugin::default(),
         ));
         // A curtain pinned along its top, a ball flying into it with gravity off.
-        let grid = Grid::new(20, 20, 2.0, 2.0);
-        let upright = Transform::from_xyz(0.0, 1.0, 0.0)
-            .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
-        let curtain = spawn_sheet(
-            &mut app,
-            20,
-            upright,
-            ClothPins::rest((0..20).map(|i| grid.index(i, 0))),
-        );
+        let curtain = curtain(&mut app);
         let speed = 5.0;
         let ball = app
             .world_mut()
@@ -415,15 +421,7 @@ mod rapier {
         .insert_resource(Time::<Fixed>::from_hz(60.0));
         app.finish();
         app.cleanup();
-        let grid = Grid::new(20, 20, 2.0, 2.0);
-        let upright = Transform::from_xyz(0.0, 1.0, 0.0)
-            .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
-        spawn_sheet(
-            &mut app,
-            20,
-            upright,
-            ClothPins::rest((0..20).map(|i| grid.index(i, 0))),
-        );
+        curtain(&mut app);
         let ball = app
             .world_mut()
             .spawn((
@@ -466,19 +464,6 @@ mod avian {
         app.finish();
         app.cleanup();
         app
-    }
-
-    /// A 20 × 20 curtain, 2 m wide, hanging in the XY plane from a rail at y = 2.
-    fn curtain(app: &mut App) -> Entity {
-        let grid = Grid::new(20, 20, 2.0, 2.0);
-        let upright = Transform::from_xyz(0.0, 1.0, 0.0)
-            .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
-        spawn_sheet(
-            app,
-            20,
-            upright,
-            ClothPins::rest((0..20).map(|i| grid.index(i, 0))),
-        )
     }
 
     /// The hammock scene with a 0.5 kg, 0.3 × 0.1 × 0.3 m avian box (avian's cuboid takes
@@ -620,15 +605,7 @@ fn rapier_and_avian_bridges_work_side_by_side() {
     ));
     app.finish();
     app.cleanup();
-    let grid = Grid::new(20, 20, 2.0, 2.0);
-    let upright = Transform::from_xyz(0.0, 1.0, 0.0)
-        .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
-    spawn_sheet(
-        &mut app,
-        20,
-        upright,
-        ClothPins::rest((0..20).map(|i| grid.index(i, 0))),
-    );
+    curtain(&mut app);
     let speed = 5.0;
     let avian_ball = {
         use avian3d::prelude::*;

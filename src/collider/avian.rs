@@ -2,12 +2,12 @@
 //! dynamic avian bodies back.
 //!
 //! Add [`ClothAvianPlugin`] to opt in. Every entity with an avian [`Collider`] (unless it has
-//! [`NoClothCollision`] or its own [`ClothCollider`]) gets a mirrored [`ClothCollider`]: balls,
-//! cuboids and y-aligned capsules map to the analytic shapes, half-spaces with a +y normal to
-//! planes, and triangle meshes, convex hulls, cylinders, cones and other capsules are
-//! triangulated and baked into signed distance fields (compound shapes, height fields and
-//! other shapes are ignored, with a warning). Removing the avian collider, or despawning its
-//! entity, removes the mirror.
+//! [`NoClothCollision`] or its own [`ClothCollider`](super::ClothCollider)) gets a mirrored
+//! [`ClothCollider`](super::ClothCollider): balls, cuboids and y-aligned capsules map to the
+//! analytic shapes, half-spaces with a +y normal to planes, and triangle meshes, convex hulls,
+//! cylinders, cones and other capsules are triangulated and baked into signed distance fields
+//! (compound shapes, height fields and other shapes are ignored, with a warning). Removing the
+//! avian collider, or despawning its entity, removes the mirror.
 //!
 //! After each cloth step, the impulse the cloth gave each mirrored collider
 //! ([`ClothContactImpulse`]) is applied, opposite to what the cloth received, to its dynamic
@@ -40,8 +40,8 @@ use bevy::ecs::schedule::ScheduleLabel;
 use bevy::prelude::*;
 
 pub use super::NoClothCollision;
-use super::bridge::{self, Mirroring};
-use super::{ClothCollider, ClothContactImpulse, ColliderShape};
+use super::bridge::{self, EngineCollider, Mirroring, Settings};
+use super::{ClothContactImpulse, ColliderShape};
 use crate::foundation::ClothSystems;
 
 /// Mirrors avian colliders into cloth colliders and couples cloth to avian bodies.
@@ -89,11 +89,8 @@ impl Default for ClothAvianPlugin {
     }
 }
 
-/// Settings of the bridge, from [`ClothAvianPlugin`].
-#[derive(Resource, Clone, Copy, Debug)]
-struct Settings(Mirroring);
-
-/// Marks a [`ClothCollider`] the bridge made from an avian collider (and keeps in sync).
+/// Marks a [`ClothCollider`](super::ClothCollider) the bridge made from an avian
+/// collider (and keeps in sync).
 #[derive(Component, Clone, Copy, Debug, Default)]
 pub struct FromAvianCollider;
 
@@ -102,14 +99,14 @@ impl Plugin for ClothAvianPlugin {
     /// added after `ClothPlugins`, its systems go in here; added before, in [`Plugin::finish`],
     /// once every plugin is built.
     fn build(&self, app: &mut App) {
-        app.insert_resource(Settings(Mirroring {
+        let m = Mirroring {
             thickness: self.thickness,
             friction: self.friction,
             resolution: self.resolution,
             two_way: self.two_way,
             max_push_speed: self.max_push_speed,
-        }))
-        .add_observer(bridge::forget_removed::<Collider, FromAvianCollider>);
+        };
+        bridge::install::<Collider, FromAvianCollider>(app, m);
         crate::foundation::schedule_once::<Self>(app, false, schedule_bridge);
     }
 
@@ -123,14 +120,23 @@ fn schedule_bridge(app: &mut App, schedule: Interned<dyn ScheduleLabel>) {
         .add_systems(
             schedule,
             (
-                mirror_colliders.in_set(ClothSystems::Prepare),
+                bridge::mirror_colliders::<Collider, FromAvianCollider>
+                    .in_set(ClothSystems::Prepare),
                 push_bodies.after(ClothSystems::Simulate),
             ),
         );
 }
 
 fn bake(vertices: &[Vec3], indices: &[[u32; 3]], resolution: u32) -> Option<ColliderShape> {
-    bridge::bake("avian", vertices, indices, resolution)
+    bridge::bake(Collider::ENGINE, vertices, indices, resolution)
+}
+
+impl EngineCollider for Collider {
+    const ENGINE: &'static str = "avian";
+
+    fn cloth_shape(&self, resolution: u32) -> Option<ColliderShape> {
+        shape_of(self, resolution)
+    }
 }
 
 /// The cloth shape of an avian collider (unscaled: the entity's transform scales both).
@@ -170,36 +176,9 @@ fn shape_of(collider: &Collider, resolution: u32) -> Option<ColliderShape> {
     })
 }
 
-#[expect(clippy::type_complexity, reason = "a query filter, read once")]
-fn mirror_colliders(
-    mut commands: Commands,
-    settings: Res<Settings>,
-    changed: Query<
-        (
-            Entity,
-            &Collider,
-            Has<ClothCollider>,
-            Has<FromAvianCollider>,
-        ),
-        (
-            Without<NoClothCollision>,
-            Or<(Added<Collider>, Changed<Collider>)>,
-        ),
-    >,
-) {
-    let m = settings.0;
-    for (entity, collider, has_cloth_collider, mirrored) in &changed {
-        if has_cloth_collider && !mirrored {
-            continue; // the user's own cloth collider wins
-        }
-        let shape = shape_of(collider, m.resolution);
-        bridge::mirror::<FromAvianCollider>(&mut commands, "avian", entity, shape, m);
-    }
-}
-
 /// Applies the reaction of every cloth contact to the dynamic body behind the collider.
 fn push_bodies(
-    settings: Res<Settings>,
+    settings: Res<Settings<FromAvianCollider>>,
     contacts: Query<
         (
             Entity,

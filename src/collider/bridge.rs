@@ -4,8 +4,10 @@
 //! [`schedule_once`](crate::foundation::schedule_once)).
 //!
 //! Each bridge keeps only what differs between engines: how its shapes map to
-//! [`ColliderShape`], and how an impulse reaches its bodies.
+//! [`ColliderShape`] ([`EngineCollider`]), where it runs, and how an impulse reaches its
+//! bodies.
 
+use std::marker::PhantomData;
 use std::sync::Arc;
 
 use bevy::prelude::*;
@@ -66,43 +68,72 @@ pub(crate) fn bake(
     }
 }
 
-/// Gives `entity` the cloth collider mirroring its engine collider (`shape`), with the marker
-/// `M` that says the bridge made it (the caller leaves alone a cloth collider the user put
-/// there). A shape cloth cannot use is ignored, and a mirror made earlier from another shape
-/// removed.
-pub(crate) fn mirror<M: Component + Default>(
-    commands: &mut Commands,
-    engine: &str,
-    entity: Entity,
-    shape: Option<ColliderShape>,
-    m: Mirroring,
+/// An engine's collider component, as the bridge reads it.
+pub(crate) trait EngineCollider: Component {
+    /// The engine's name in messages.
+    const ENGINE: &'static str;
+    /// Its cloth shape, unscaled (the entity's transform scales both); `None` for a shape
+    /// cloth does not collide with.
+    fn cloth_shape(&self, resolution: u32) -> Option<ColliderShape>;
+}
+
+/// The settings of the bridge whose mirrors are marked `M`.
+#[derive(Resource)]
+pub(crate) struct Settings<M>(pub Mirroring, PhantomData<fn() -> M>);
+
+/// What every bridge adds when built: its settings, and the observer that forgets a mirror
+/// when its engine collider `C` goes.
+pub(crate) fn install<C: EngineCollider, M: Component>(app: &mut App, m: Mirroring) {
+    app.insert_resource(Settings::<M>(m, PhantomData))
+        .add_observer(forget_removed::<C, M>);
+}
+
+/// Gives every new or changed engine collider `C` the cloth collider mirroring it, with the
+/// marker `M` that says the bridge made it. A cloth collider the user put there is left alone;
+/// a shape cloth cannot use is ignored with a warning (and a mirror made earlier from another
+/// shape removed).
+#[expect(clippy::type_complexity, reason = "a query filter, read once")]
+pub(crate) fn mirror_colliders<C: EngineCollider, M: Component + Default>(
+    mut commands: Commands,
+    settings: Res<Settings<M>>,
+    changed: Query<
+        (Entity, &C, Has<ClothCollider>, Has<M>),
+        (Without<NoClothCollision>, Changed<C>),
+    >,
 ) {
-    match shape {
-        Some(shape) => {
-            commands.entity(entity).insert((
-                ClothCollider {
-                    shape,
-                    thickness: m.thickness,
-                    friction: m.friction,
-                    ..ClothCollider::new(ColliderShape::Plane)
-                },
-                M::default(),
-            ));
+    let m = settings.0;
+    for (entity, collider, has_cloth_collider, mirrored) in &changed {
+        if has_cloth_collider && !mirrored {
+            continue; // the user's own cloth collider wins
         }
-        None => {
-            warn!(
-                "{engine} collider {entity}: its shape (a compound, height field, half-space \
-                 not facing +y, segment, polyline or voxels) is not one cloth collides with; cloth ignores it \
-                 (give the entity a ClothCollider of its own instead)"
-            );
-            commands.entity(entity).try_remove::<(ClothCollider, M)>();
+        match collider.cloth_shape(m.resolution) {
+            Some(shape) => {
+                commands.entity(entity).insert((
+                    ClothCollider {
+                        shape,
+                        thickness: m.thickness,
+                        friction: m.friction,
+                        ..ClothCollider::new(ColliderShape::Plane)
+                    },
+                    M::default(),
+                ));
+            }
+            None => {
+                warn!(
+                    "{} collider {entity}: its shape (a compound, height field, half-space \
+                     not facing +y, segment, polyline or voxels) is not one cloth collides \
+                     with; cloth ignores it (give the entity a ClothCollider of its own instead)",
+                    C::ENGINE
+                );
+                commands.entity(entity).try_remove::<(ClothCollider, M)>();
+            }
         }
     }
 }
 
 /// When an engine collider `C` goes (removed, or its entity despawned), the cloth collider the
 /// bridge mirrored from it (marked `M`) goes too: nothing keeps pushing cloth where the body was.
-pub(crate) fn forget_removed<C: Component, M: Component>(
+fn forget_removed<C: Component, M: Component>(
     removed: On<Remove, C>,
     mirrored: Query<(), With<M>>,
     mut commands: Commands,

@@ -2,14 +2,14 @@
 //! pushes dynamic rapier bodies back.
 //!
 //! Add [`ClothRapierPlugin`] to opt in. Every entity with a rapier [`Collider`] (unless it has
-//! [`NoClothCollision`] or its own [`ClothCollider`]) gets a mirrored [`ClothCollider`]: balls,
-//! cuboids and y-aligned capsules map to the analytic shapes, half-spaces with a +y normal to
-//! planes, and triangle meshes, convex hulls, cylinders, cones and other capsules are
-//! triangulated and baked into signed distance fields (other shapes are ignored, with a
-//! warning). After each cloth step, the impulse the
-//! cloth gave each mirrored collider ([`ClothContactImpulse`]) is added, opposite to what the
-//! cloth received, to the [`ExternalImpulse`] of its dynamic rigid body (the collider's entity
-//! or its nearest ancestor with a [`RigidBody`]), which rapier applies on its next step.
+//! [`NoClothCollision`] or its own [`ClothCollider`](super::ClothCollider)) gets a mirrored
+//! [`ClothCollider`](super::ClothCollider): balls, cuboids and y-aligned capsules map to the
+//! analytic shapes, half-spaces with a +y normal to planes, and triangle meshes, convex hulls,
+//! cylinders, cones and other capsules are triangulated and baked into signed distance fields
+//! (other shapes are ignored, with a warning). After each cloth step, the impulse the cloth
+//! gave each mirrored collider ([`ClothContactImpulse`]) is added, opposite to what the cloth
+//! received, to the [`ExternalImpulse`] of its dynamic rigid body (the collider's entity or its
+//! nearest ancestor with a [`RigidBody`]), which rapier applies on its next step.
 //!
 //! The cloth solves its contacts as if the body could not yield, and the body feels them a
 //! step later, so a body landing on taut cloth would be thrown back by the whole stretch it
@@ -28,8 +28,8 @@ use bevy_rapier3d::prelude::{
 };
 
 pub use super::NoClothCollision;
-use super::bridge::{self, Mirroring};
-use super::{ClothCollider, ClothContactImpulse, ColliderShape};
+use super::bridge::{self, EngineCollider, Mirroring, Settings};
+use super::{ClothContactImpulse, ColliderShape};
 use crate::foundation::ClothSystems;
 
 /// Mirrors rapier colliders into cloth colliders and couples cloth to rapier bodies.
@@ -61,11 +61,8 @@ impl Default for ClothRapierPlugin {
     }
 }
 
-/// Settings of the bridge, from [`ClothRapierPlugin`].
-#[derive(Resource, Clone, Copy, Debug)]
-struct Settings(Mirroring);
-
-/// Marks a [`ClothCollider`] the bridge made from a rapier collider (and keeps in sync).
+/// Marks a [`ClothCollider`](super::ClothCollider) the bridge made from a rapier
+/// collider (and keeps in sync).
 #[derive(Component, Clone, Copy, Debug, Default)]
 pub struct FromRapierCollider;
 
@@ -74,14 +71,14 @@ impl Plugin for ClothRapierPlugin {
     /// added after `ClothPlugins`, its systems go in here; added before, in [`Plugin::finish`],
     /// once every plugin is built.
     fn build(&self, app: &mut App) {
-        app.insert_resource(Settings(Mirroring {
+        let m = Mirroring {
             thickness: self.thickness,
             friction: self.friction,
             resolution: self.resolution,
             two_way: self.two_way,
             max_push_speed: self.max_push_speed,
-        }))
-        .add_observer(bridge::forget_removed::<Collider, FromRapierCollider>);
+        };
+        bridge::install::<Collider, FromRapierCollider>(app, m);
         crate::foundation::schedule_once::<Self>(app, false, schedule_bridge);
     }
 
@@ -94,14 +91,22 @@ fn schedule_bridge(app: &mut App, schedule: Interned<dyn ScheduleLabel>) {
     app.add_systems(
         schedule,
         (
-            mirror_colliders.in_set(ClothSystems::Prepare),
+            bridge::mirror_colliders::<Collider, FromRapierCollider>.in_set(ClothSystems::Prepare),
             push_bodies.after(ClothSystems::Simulate),
         ),
     );
 }
 
 fn bake(vertices: &[Vec3], indices: &[[u32; 3]], resolution: u32) -> Option<ColliderShape> {
-    bridge::bake("rapier", vertices, indices, resolution)
+    bridge::bake(Collider::ENGINE, vertices, indices, resolution)
+}
+
+impl EngineCollider for Collider {
+    const ENGINE: &'static str = "rapier";
+
+    fn cloth_shape(&self, resolution: u32) -> Option<ColliderShape> {
+        shape_of(self, resolution)
+    }
 }
 
 /// The cloth shape of a rapier collider (unscaled: the entity's transform scales both).
@@ -148,36 +153,9 @@ fn to_vec3<T: Copy + Into<Vec3>>(v: &[T]) -> Vec<Vec3> {
     v.iter().map(|&p| p.into()).collect()
 }
 
-#[expect(clippy::type_complexity, reason = "a query filter, read once")]
-fn mirror_colliders(
-    mut commands: Commands,
-    settings: Res<Settings>,
-    changed: Query<
-        (
-            Entity,
-            &Collider,
-            Has<ClothCollider>,
-            Has<FromRapierCollider>,
-        ),
-        (
-            Without<NoClothCollision>,
-            Or<(Added<Collider>, Changed<Collider>)>,
-        ),
-    >,
-) {
-    let m = settings.0;
-    for (entity, collider, has_cloth_collider, mirrored) in &changed {
-        if has_cloth_collider && !mirrored {
-            continue; // the user's own cloth collider wins
-        }
-        let shape = shape_of(collider, m.resolution);
-        bridge::mirror::<FromRapierCollider>(&mut commands, "rapier", entity, shape, m);
-    }
-}
-
 /// Adds the reaction of every cloth contact to the dynamic body behind the collider.
 fn push_bodies(
-    settings: Res<Settings>,
+    settings: Res<Settings<FromRapierCollider>>,
     contacts: Query<(Entity, &ClothContactImpulse, &GlobalTransform), With<FromRapierCollider>>,
     parents: Query<&ChildOf>,
     bodies: Query<(&RigidBody, &GlobalTransform, Option<&RapierRigidBodyHandle>)>,
@@ -188,6 +166,7 @@ fn push_bodies(
     if !settings.0.two_way {
         return;
     }
+    let context = rapier.single().ok();
     for (entity, contact, collider_gt) in &contacts {
         if contact.linear == Vec3::ZERO && contact.angular == Vec3::ZERO {
             continue;
@@ -209,7 +188,7 @@ fn push_bodies(
         let at = collider_gt.translation();
         // The body's mass and the velocity of the contact point, from rapier's own body (a
         // body rapier has not created yet gets all of the reaction).
-        let rapier_body = rapier.single().ok().and_then(|context| {
+        let rapier_body = context.as_ref().and_then(|context| {
             let rb = context.rigidbody_set.bodies.get(handle?.0)?;
             Some((rb.mass(), rb.velocity_at_point(at)))
         });
