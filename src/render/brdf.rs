@@ -29,7 +29,9 @@ pub const F0_RANGE: RangeInclusive<f32> = 0.0..=1.0;
 /// Smallest `1 − (n·m)²` used in `D`.
 pub const MIN_SIN2: f32 = 1e-6;
 /// Smallest `n·v` used: views at or below the horizon count as grazing (shading normals can
-/// face slightly away from the eye at silhouettes).
+/// face slightly away from the eye at silhouettes). Such a view is also lifted along `n` to
+/// this height before the half vector is taken, so `n·h > 0` whenever light arrives: no jump
+/// of `D` where `h` would cross the tangent plane.
 pub const MIN_N_DOT_V: f32 = 1e-4;
 /// Smallest specular denominator `4(n·l + n·v − (n·l)(n·v))` used.
 pub const MIN_DENOMINATOR: f32 = 1e-6;
@@ -103,8 +105,11 @@ impl VelvetBrdf {
         if nl <= 0.0 {
             return Vec3::ZERO;
         }
-        let nv = clamp_range(n.dot(v), &(MIN_N_DOT_V..=1.0));
-        let sum = l + v;
+        let nv_raw = n.dot(v);
+        let nv = clamp_range(nv_raw, &(MIN_N_DOT_V..=1.0));
+        // A view below the horizon band is lifted into it along n (see MIN_N_DOT_V).
+        let lift = (MIN_N_DOT_V - nv_raw).max(0.0);
+        let sum = (l + v) + n * lift;
         let len = sum.length();
         let h = if len > 1e-6 { sum / len } else { n };
         let f = fresnel_schlick(p.f0, h.dot(l));
@@ -222,6 +227,34 @@ mod tests {
             mirror.eval(Vec3::Y, dir(0.4, 0.0), dir(0.7, 2.0)),
             Vec3::ZERO
         );
+    }
+
+    #[test]
+    fn continuous_as_the_half_vector_reaches_the_tangent_plane() {
+        // Light a little above the horizon, the view swept below it through the mirror image
+        // of the light (where l + v would lie in the tangent plane): the reflected light
+        // f·(n·l) must not jump there. Without lifting the view, D(n·h) jumped from 0 to its
+        // grazing peak across n·h = 0 (seen on an NVIDIA H100, rounding to the other side).
+        let brdf = VelvetBrdf::default();
+        for theta in [1e-3f32, 4e-3, 0.05] {
+            let l = dir(core::f32::consts::FRAC_PI_2 - theta, 0.0);
+            let mut last: Option<Vec3> = None;
+            for i in 0..=2000 {
+                // View elevation from −2θ to 0 (below the horizon), opposite azimuth.
+                let e = -2.0 * theta + 2.0 * theta * i as f32 / 2000.0;
+                let v = dir(core::f32::consts::FRAC_PI_2 - e, PI);
+                let out = brdf.eval(Vec3::Y, v, l) * l.y;
+                assert!(out.is_finite(), "{out}");
+                if let Some(prev) = last {
+                    let jump = (out - prev).abs().max_element();
+                    assert!(
+                        jump < 1e-3 * theta.max(0.01),
+                        "θ {theta}, step {i}: {prev} → {out}"
+                    );
+                }
+                last = Some(out);
+            }
+        }
     }
 
     #[test]

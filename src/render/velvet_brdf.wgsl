@@ -39,7 +39,8 @@ fn velvet_fresnel(f0: f32, h_dot_l: f32) -> f32 {
 
 // f(l, v) for unit n, v (towards the eye) and l (towards the light); not multiplied by n·l.
 // Zero for light from below the surface; views at or below the horizon count as grazing
-// (shading normals may face slightly away from the eye at silhouettes).
+// (shading normals may face slightly away from the eye at silhouettes) and are lifted to
+// n·v = VELVET_MIN_N_DOT_V for the half vector.
 fn velvet_brdf(
     n: vec3<f32>,
     v: vec3<f32>,
@@ -54,8 +55,12 @@ fn velvet_brdf(
     if !(nl > 0.0) {
         return vec3<f32>(0.0);
     }
-    let nv = clamp(dot(n, v), VELVET_MIN_N_DOT_V, 1.0);
-    let sum = l + v;
+    let nv_raw = dot(n, v);
+    let nv = clamp(nv_raw, VELVET_MIN_N_DOT_V, 1.0);
+    // A view below the horizon band is lifted into it along n, so n·h > 0 whenever light
+    // arrives (D would jump where h crosses the tangent plane).
+    let lift = max(VELVET_MIN_N_DOT_V - nv_raw, 0.0);
+    let sum = (l + v) + n * lift;
     let len = length(sum);
     var h = n;
     if len > 1.0e-6 {

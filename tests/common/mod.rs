@@ -52,7 +52,8 @@ pub fn placed_grid(grid: &Grid, place: impl Fn(Vec3) -> Vec3) -> Topology {
 /// A wgpu adapter and device for GPU tests, or `None` after printing why the test is skipped.
 /// With `CLOTH_REQUIRE_GPU=1` (set by CI) a missing adapter fails the test instead.
 pub fn gpu_or_skip(test: &str) -> Option<(wgpu::Adapter, wgpu::Device, wgpu::Queue)> {
-    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
     let found =
         bevy::tasks::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
             .map_err(|e| e.to_string())
