@@ -119,9 +119,9 @@ impl PluginGroup for ClothPlugins {
 pub mod prelude {
     pub use crate::ClothPlugins;
     pub use crate::cloth::{
-        Cloth, ClothConfig, ClothError, ClothFailed, ClothInertia, ClothInvalid, ClothPick,
-        ClothPin, ClothPins, ClothPlugin, ClothSelfCollision, ClothSim, ClothTearing, ClothTethers,
-        ClothTorn, PinAnchor,
+        Cloth, ClothBackstop, ClothConfig, ClothError, ClothFailed, ClothInertia, ClothInvalid,
+        ClothPick, ClothPin, ClothPins, ClothPlugin, ClothSelfCollision, ClothSim, ClothSkinning,
+        ClothTearing, ClothTethers, ClothTorn, MaxDistance, PinAnchor,
     };
     #[cfg(feature = "avian")]
     pub use crate::collider::avian::ClothAvianPlugin;

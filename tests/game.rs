@@ -1551,3 +1551,186 @@ mod animated_bones {
         assert!(error < 1e-5, "pins {error} m off the bone");
     }
 }
+
+mod skinned_clothing {
+    use super::*;
+    use bevy::mesh::skinning::{SkinnedMesh, SkinnedMeshInverseBindposes};
+
+    const N: u32 = 10;
+
+    /// A 1 m × 1 m sheet of 10 × 10 vertices standing between y = 1 and y = 2, skinned to a
+    /// joint at its top edge (0) and one at its bottom (1), blended linearly down the sheet;
+    /// the max distance grows from 0 at the top row to 0.1 m at the bottom (`max`, per vertex
+    /// of the mesh). Returns the app, the cloth, the joints and the per-vertex (position,
+    /// weight of joint 0, max distance).
+    fn scene(max: Option<Vec<f32>>) -> (App, Entity, [Entity; 2], Vec<(Vec3, f32, f32)>) {
+        let mut app = app();
+        let mut positions = Vec::new();
+        let mut joints = Vec::new();
+        let mut weights = Vec::new();
+        let mut verts = Vec::new();
+        for j in 0..N {
+            for i in 0..N {
+                let p = Vec3::new(
+                    i as f32 / (N - 1) as f32 - 0.5,
+                    2.0 - j as f32 / (N - 1) as f32,
+                    0.0,
+                );
+                let w0 = p.y - 1.0;
+                positions.push(p.to_array());
+                joints.push([0u16, 1, 0, 0]);
+                weights.push([w0, 1.0 - w0, 0.0, 0.0]);
+                verts.push((p, w0, 0.1 * j as f32 / (N - 1) as f32));
+            }
+        }
+        let mut indices = Vec::new();
+        for j in 0..N - 1 {
+            for i in 0..N - 1 {
+                let a = j * N + i;
+                indices.extend([a, a + N, a + 1, a + 1, a + N, a + N + 1]);
+            }
+        }
+        let mut mesh = Mesh::new(
+            PrimitiveTopology::TriangleList,
+            RenderAssetUsages::default(),
+        );
+        mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
+        mesh.insert_attribute(
+            Mesh::ATTRIBUTE_JOINT_INDEX,
+            VertexAttributeValues::Uint16x4(joints),
+        );
+        mesh.insert_attribute(Mesh::ATTRIBUTE_JOINT_WEIGHT, weights);
+        mesh.insert_indices(Indices::U32(indices));
+        let mesh = add_mesh(&mut app, mesh);
+        let bones = [Vec3::new(0.0, 2.0, 0.0), Vec3::new(0.0, 1.0, 0.0)];
+        let joints = bones.map(|b| app.world_mut().spawn(Transform::from_translation(b)).id());
+        let bindposes = app
+            .world_mut()
+            .resource_mut::<Assets<SkinnedMeshInverseBindposes>>()
+            .add(SkinnedMeshInverseBindposes::from(
+                bones
+                    .iter()
+                    .map(|b| Mat4::from_translation(-*b))
+                    .collect::<Vec<_>>(),
+            ));
+        let max = max.unwrap_or_else(|| verts.iter().map(|v| v.2).collect());
+        let cloth = app
+            .world_mut()
+            .spawn((
+                Mesh3d(mesh),
+                Transform::IDENTITY,
+                Cloth::default(),
+                SkinnedMesh {
+                    inverse_bindposes: bindposes,
+                    joints: joints.to_vec(),
+                },
+                ClothSkinning {
+                    max_distance: MaxDistance::PerVertex(max),
+                    backstop: None,
+                },
+            ))
+            .id();
+        (app, cloth, joints, verts)
+    }
+
+    /// Where the skin puts each vertex with the joints moved by `offsets` from their bind pose.
+    fn skinned(verts: &[(Vec3, f32, f32)], offsets: [Vec3; 2]) -> Vec<Vec3> {
+        verts
+            .iter()
+            .map(|(p, w0, _)| *p + offsets[0] * *w0 + offsets[1] * (1.0 - w0))
+            .collect()
+    }
+
+    #[test]
+    fn skinned_cloth_stays_within_its_max_distance_of_the_skin() {
+        let (mut app, cloth, joints, verts) = scene(None);
+        let mut farthest_hem = 0.0f32;
+        for frame in 0..90 {
+            // The top joint swings ±0.4 m sideways, the bottom one ±0.2 m forward.
+            let t = frame as f32 / 60.0;
+            let offsets = [
+                Vec3::new(0.4 * (6.0 * t).sin(), 0.0, 0.0),
+                Vec3::new(0.0, 0.0, 0.2 * (4.0 * t).sin()),
+            ];
+            let rest = [Vec3::new(0.0, 2.0, 0.0), Vec3::new(0.0, 1.0, 0.0)];
+            for (k, j) in joints.iter().enumerate() {
+                app.world_mut()
+                    .get_mut::<Transform>(*j)
+                    .unwrap()
+                    .translation = rest[k] + offsets[k];
+            }
+            app.update();
+            if frame < 2 {
+                continue; // the skin is taken over at the first step
+            }
+            let s = sim(&app, cloth);
+            let skin = skinned(&verts, offsets);
+            let weld = s.weld();
+            for (v, (target, (_, _, max))) in skin.iter().zip(&verts).enumerate() {
+                let p = s
+                    .simulation()
+                    .state()
+                    .position(weld.particle(v as u32) as usize);
+                let d = p.distance(*target);
+                assert!(
+                    d <= max + 1e-4,
+                    "frame {frame}, vertex {v}: {d} m from the skin, max {max}"
+                );
+                if v as u32 >= N * (N - 1) {
+                    farthest_hem = farthest_hem.max(d);
+                }
+            }
+        }
+        // The hem is simulated, not carried: it lags the skin by some of its 10 cm.
+        assert!(
+            farthest_hem > 0.01,
+            "the hem followed the skin rigidly ({farthest_hem} m)"
+        );
+        // The cloth draws itself: no SkinnedMesh on the entity, no joints in its mesh.
+        assert!(app.world().get::<SkinnedMesh>(cloth).is_none());
+        let mesh = mesh_of(&app, cloth);
+        assert!(mesh.attribute(Mesh::ATTRIBUTE_JOINT_INDEX).is_none());
+        assert!(app.world().get::<ClothInvalid>(cloth).is_none());
+    }
+
+    #[derive(Resource, Default)]
+    struct Failures(Vec<ClothFailed>);
+
+    fn collect(mut reader: MessageReader<ClothFailed>, mut out: ResMut<Failures>) {
+        out.0.extend(reader.read().cloned());
+    }
+
+    #[test]
+    fn a_weight_map_of_the_wrong_length_is_reported_and_the_cloth_runs_free() {
+        let (mut app, cloth, _, _) = scene(Some(vec![0.0; 7]));
+        app.init_resource::<Failures>()
+            .add_systems(PostUpdate, collect);
+        run(&mut app, 2);
+        let start = sim(&app, cloth).simulation().state().position(0);
+        run(&mut app, 30);
+        let failures = &app.world().resource::<Failures>().0;
+        assert_eq!(failures.len(), 1, "{failures:?}");
+        match &failures[0].error {
+            ClothError::Skinning(why) => assert!(why.contains("7 max distances"), "{why}"),
+            other => panic!("{other:?}"),
+        }
+        // Not taken over, still simulated (it falls: nothing holds it).
+        assert!(app.world().get::<SkinnedMesh>(cloth).is_some());
+        assert!(app.world().get::<ClothInvalid>(cloth).is_none());
+        let now = sim(&app, cloth).simulation().state().position(0);
+        assert!(now.y < start.y - 0.05, "{start} → {now}");
+        // Fixed: taken over, held (the top row back on the skin).
+        app.world_mut()
+            .get_mut::<ClothSkinning>(cloth)
+            .unwrap()
+            .max_distance = MaxDistance::Uniform(0.0);
+        run(&mut app, 5);
+        assert!(app.world().get::<SkinnedMesh>(cloth).is_none());
+        let s = sim(&app, cloth);
+        let p = s
+            .simulation()
+            .state()
+            .position(s.weld().particle(0) as usize);
+        assert!(p.distance(Vec3::new(-0.5, 2.0, 0.0)) < 1e-4, "{p}");
+    }
+}

@@ -194,6 +194,7 @@ impl Twin {
                 air_velocities: air,
                 tethers: self.tethers.as_ref(),
                 self_collision: self.sim.features().self_collision,
+                ..Default::default()
             },
             &mut self.scratch,
             &Serial,

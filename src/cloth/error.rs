@@ -36,6 +36,10 @@ pub enum ClothError {
     /// bone name that matched nothing, a despawned entity) or has no transform. Its pins hold
     /// where they are meanwhile.
     PinAnchorMissing(Entity),
+    /// [`ClothSkinning`](super::ClothSkinning) cannot hold the cloth to its skin (no
+    /// `SkinnedMesh` or joint attributes, a weight map of the wrong length, a bad distance, a
+    /// joint with no pose): the reason.
+    Skinning(String),
     /// The solver rejected the mesh, masses, pins or parameters.
     Solver(SolverError),
 }
@@ -75,6 +79,7 @@ impl core::fmt::Display for ClothError {
             ClothError::PinAnchorMissing(e) => {
                 write!(f, "the pin anchor {e} does not exist or has no transform")
             }
+            ClothError::Skinning(why) => write!(f, "skinned clothing: {why}"),
             ClothError::Solver(e) => e.fmt(f),
         }
     }

@@ -19,6 +19,7 @@ mod mesh;
 mod pins;
 mod plugin;
 mod sim;
+mod skinning;
 mod systems;
 mod workers;
 mod writeback;
@@ -31,4 +32,5 @@ pub use components::{
 pub use error::{ClothError, ClothFailed, ClothInvalid};
 pub use plugin::ClothPlugin;
 pub use sim::{ClothPick, ClothSim, ClothSource};
+pub use skinning::{ClothBackstop, ClothSkinning, MaxDistance};
 pub use workers::{ClothWorkers, TaskPoolParallel};

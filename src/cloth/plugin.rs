@@ -2,11 +2,12 @@
 
 use bevy::prelude::*;
 
+use super::skinning::skin_cloths;
 use super::systems::{init_cloths, on_cloth_removed, retry_cloths, step_cloths, sync_cloths};
 use super::writeback::write_back;
 use super::{
     Cloth, ClothConfig, ClothFailed, ClothInertia, ClothPin, ClothPins, ClothSelfCollision,
-    ClothTearing, ClothTethers, ClothTorn, ClothWorkers, PinAnchor,
+    ClothSkinning, ClothTearing, ClothTethers, ClothTorn, ClothWorkers, PinAnchor,
 };
 use crate::foundation::{ClothSchedule, ClothSystems};
 
@@ -19,7 +20,8 @@ use crate::foundation::{ClothSchedule, ClothSystems};
 /// Its systems, in [`ClothSystems::Prepare`]: `retry_cloths` (cloths whose settings were
 /// fixed, or whose mesh or [`Cloth`] changed, are rebuilt), `init_cloths` (new cloths are
 /// built once their mesh has loaded) and `sync_cloths` (changed settings and pins applied, pins
-/// moved to their anchors); in [`ClothSystems::Simulate`], `step_cloths` (every cloth not
+/// moved to their anchors), `skin_cloths` ([`ClothSkinning`]: the skin's targets for this
+/// step); in [`ClothSystems::Simulate`], `step_cloths` (every cloth not
 /// stepped elsewhere, in one `step_many`); in [`ClothSystems::Writeback`], `write_back`.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ClothPlugin;
@@ -36,6 +38,7 @@ impl Plugin for ClothPlugin {
             .register_type::<ClothTethers>()
             .register_type::<ClothTearing>()
             .register_type::<ClothInertia>()
+            .register_type::<ClothSkinning>()
             .init_resource::<ClothWorkers>()
             .add_message::<ClothTorn>()
             .add_message::<ClothFailed>()
@@ -43,7 +46,7 @@ impl Plugin for ClothPlugin {
             .add_systems(
                 schedule,
                 (
-                    (retry_cloths, init_cloths, sync_cloths)
+                    (retry_cloths, init_cloths, sync_cloths, skin_cloths)
                         .chain()
                         .in_set(ClothSystems::Prepare),
                     step_cloths.in_set(ClothSystems::Simulate),

@@ -22,7 +22,7 @@ use bevy::prelude::*;
 
 use super::mesh::{TangentSource, VertexLayout};
 use super::world::GpuWorld;
-use crate::cloth::{Cloth, ClothSim, ClothSteppedElsewhere, ClothTorn};
+use crate::cloth::{Cloth, ClothSim, ClothSkinning, ClothSteppedElsewhere, ClothTorn};
 use crate::collider::{ClothColliders, ClothContactImpulse};
 use crate::foundation::EntityName;
 use crate::solver::{Carry, Collider, ContactImpulse, Simulation};
@@ -237,6 +237,7 @@ pub(crate) fn choose_backends(
         Option<&mut ClothOnGpu>,
         Has<ClothLeavingGpu>,
         Has<ClothReadback>,
+        Has<ClothSkinning>,
     )>,
     fixed: Res<Time<Fixed>>,
     mut generation: Local<u64>,
@@ -245,7 +246,8 @@ pub(crate) fn choose_backends(
 ) {
     let dt = fixed.timestep().as_secs_f32();
     let mut seen = std::collections::HashSet::new();
-    for ((entity, name), cloth, backend, in_use, on_gpu, leaving, readback) in &mut cloths {
+    for ((entity, name), cloth, backend, in_use, on_gpu, leaving, readback, skinned) in &mut cloths
+    {
         let who = EntityName::new(entity, name);
         seen.insert(entity);
         if leaving {
@@ -262,6 +264,11 @@ pub(crate) fn choose_backends(
                 })
                 .map_or(Ok(()), Err)
                 .and_then(|()| {
+                    if skinned {
+                        return Err(
+                            "skinned clothing (ClothSkinning) runs on the CPU only".to_owned()
+                        );
+                    }
                     // The model check (O(n) for stiff bending) once per change of settings.
                     let key = settings_key(cloth.simulation());
                     match checked.get(&entity) {

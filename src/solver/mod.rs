@@ -69,7 +69,7 @@ pub use collision::{
 pub use constraints::{
     BendingSolve, ConstraintBatches, DEFAULT_BENDING_COMPLIANCE, IMPLICIT_BENDING_AUTO_WORK,
     IMPLICIT_BENDING_MAX_SATURATION, IMPLICIT_BENDING_MAX_WORK, IMPLICIT_BENDING_SATURATION,
-    LAB_WEIGHT, Solver, TetherParams, Tethers, default_part_count,
+    LAB_WEIGHT, MotionConstraints, Solver, TetherParams, Tethers, default_part_count,
 };
 pub use limits::{MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES, ParamError};
 pub use mesh::{

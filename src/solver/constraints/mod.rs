@@ -9,6 +9,7 @@ mod distance;
 mod implicit;
 mod isometric;
 mod lanes;
+mod motion;
 mod solver;
 mod tether;
 
@@ -19,5 +20,6 @@ pub use implicit::{
     IMPLICIT_BENDING_AUTO_WORK, IMPLICIT_BENDING_MAX_SATURATION, IMPLICIT_BENDING_MAX_WORK,
     IMPLICIT_BENDING_SATURATION,
 };
+pub use motion::MotionConstraints;
 pub use solver::{BendingSolve, DEFAULT_BENDING_COMPLIANCE, LAB_WEIGHT, Solver};
 pub use tether::{TetherParams, Tethers};

@@ -11,9 +11,9 @@ use super::tear::overstretched_edges;
 use crate::solver::air::{AirGrid, WindField};
 use crate::solver::collision::{Collider, ContactImpulse};
 use crate::solver::constraints::{
-    ConstraintBatches, ImplicitBending, Solver, Tethers, default_part_count,
+    ConstraintBatches, ImplicitBending, MotionConstraints, Solver, Tethers, default_part_count,
 };
-use crate::solver::limits::ParamError;
+use crate::solver::limits::{ParamError, within_range};
 use crate::solver::mesh::{BendingModel, Edge, Topology, TopologyError};
 use crate::solver::metrics::{StrainStats, edge_strain};
 use crate::solver::parallel::Parallel;
@@ -78,6 +78,27 @@ pub struct Simulation {
     air_grid: AirGrid,
     air_velocities: Vec<Vec4>,
     sleep: SleepState,
+    motion: Option<Motion>,
+}
+
+/// A cloth's motion targets (see [`Simulation::set_motion_targets`]).
+#[derive(Clone, Debug)]
+struct Motion {
+    start: Vec<Vec4>,
+    end: Vec<Vec4>,
+    backstop: Vec<Vec4>,
+    radius: f32,
+}
+
+impl Motion {
+    fn constraints(&self) -> MotionConstraints<'_> {
+        MotionConstraints {
+            start: &self.start,
+            end: &self.end,
+            backstop: &self.backstop,
+            backstop_radius: self.radius,
+        }
+    }
 }
 
 /// Steps over which a change of solver settings settles at least (see
@@ -169,6 +190,7 @@ impl Simulation {
             air_grid: AirGrid::default(),
             air_velocities: Vec::new(),
             sleep: SleepState::default(),
+            motion: None,
         })
     }
 
@@ -189,6 +211,10 @@ impl Simulation {
         let felt_wind = env
             .wind
             .filter(|w| !w.is_empty() && !self.params.air.is_none());
+        let held = self.motion.is_some();
+        if held {
+            self.sleep.wake();
+        }
         if self.sleep.asleep {
             let t = env.time + 0.5 * f64::from(dt);
             if !self
@@ -244,6 +270,10 @@ impl Simulation {
                 },
                 self_collision: self.features.self_collision,
                 tethers: self.tethers.as_ref().map(|(_, t)| t),
+                motion: self
+                    .motion
+                    .as_ref()
+                    .map_or_else(MotionConstraints::default, Motion::constraints),
             },
             &mut self.scratch,
             par,
@@ -288,7 +318,12 @@ impl Simulation {
             self.reset_to_rest();
             report.recovered = true;
         }
-        self.count_quiet_step(env, felt_wind, dt);
+        if let Some(m) = &mut self.motion {
+            // Targets not updated before the next step stay where they are.
+            m.start.clone_from(&m.end);
+        } else {
+            self.count_quiet_step(env, felt_wind, dt);
+        }
         report
     }
 
@@ -408,6 +443,85 @@ impl Simulation {
         }
         self.features = features;
         Ok(())
+    }
+
+    /// Holds every vertex near where something else puts it for the next step (skinned
+    /// clothing; see [`MotionConstraints`]): `targets[i]` is vertex `i`'s target at the end of
+    /// the step (xyz) and its max distance (`w`: 0 follows the target, negative is free);
+    /// `backstop` (empty, or one per vertex) the skin's outward normal there (xyz) and how
+    /// far behind the target the surface of a sphere of `backstop_radius` lies (`w`, negative:
+    /// none). Over the step each target moves linearly from where the previous call put it
+    /// (the first call, or `snap`: from where this one does). Targets not set again before a
+    /// step stay where they are. A cloth held this way does not sleep.
+    ///
+    /// # Errors
+    /// [`StateError::MotionLengthMismatch`] unless there is one target (and none or one
+    /// backstop) per vertex; [`StateError::NonFiniteMotionTarget`] for a target or normal
+    /// that is not finite or out of range, or a backstop radius that is not finite. The
+    /// previous targets stay.
+    pub fn set_motion_targets(
+        &mut self,
+        targets: &[Vec4],
+        backstop: &[Vec4],
+        backstop_radius: f32,
+        snap: bool,
+    ) -> Result<(), StateError> {
+        let n = self.state.len();
+        for len in [
+            targets.len(),
+            if backstop.is_empty() {
+                n
+            } else {
+                backstop.len()
+            },
+        ] {
+            if len != n {
+                return Err(StateError::MotionLengthMismatch {
+                    targets: len,
+                    vertex_count: n,
+                });
+            }
+        }
+        let bad = targets
+            .iter()
+            .position(|t| !within_range(t.truncate()))
+            .or_else(|| backstop.iter().position(|b| !b.truncate().is_finite()))
+            .or_else(|| (!backstop_radius.is_finite()).then_some(0));
+        if let Some(vertex) = bad {
+            return Err(StateError::NonFiniteMotionTarget { vertex });
+        }
+        match &mut self.motion {
+            Some(m) if !snap => {
+                m.end.clear();
+                m.end.extend_from_slice(targets);
+            }
+            _ => {
+                self.motion = Some(Motion {
+                    start: targets.to_vec(),
+                    end: targets.to_vec(),
+                    backstop: Vec::new(),
+                    radius: 0.0,
+                });
+            }
+        }
+        if let Some(m) = &mut self.motion {
+            m.backstop.clear();
+            m.backstop.extend_from_slice(backstop);
+            m.radius = backstop_radius;
+        }
+        self.sleep.wake();
+        Ok(())
+    }
+
+    /// Lets every vertex go: no motion targets from the next step on.
+    pub fn clear_motion_targets(&mut self) {
+        self.motion = None;
+    }
+
+    /// Whether motion targets hold the cloth (see [`Self::set_motion_targets`]).
+    #[must_use]
+    pub fn has_motion_targets(&self) -> bool {
+        self.motion.is_some()
     }
 
     /// The optional capabilities in use.

@@ -69,6 +69,20 @@ pub enum StateError {
         /// The pin's vertex index.
         vertex: u32,
     },
+    /// Motion targets (or backstop normals) not one per vertex.
+    MotionLengthMismatch {
+        /// Number given.
+        targets: usize,
+        /// Number of vertices.
+        vertex_count: usize,
+    },
+    /// A motion target or backstop normal is NaN, infinite or farther than
+    /// [`MAX_COORDINATE`](crate::solver::MAX_COORDINATE) from the origin along an axis, or
+    /// the backstop radius is not finite.
+    NonFiniteMotionTarget {
+        /// Vertex index.
+        vertex: usize,
+    },
 }
 
 impl core::fmt::Display for StateError {
@@ -102,6 +116,18 @@ impl core::fmt::Display for StateError {
                     "pin on vertex {vertex} has a NaN, infinite or too distant target (limit {MAX_COORDINATE} m)"
                 )
             }
+            StateError::MotionLengthMismatch {
+                targets,
+                vertex_count,
+            } => write!(
+                f,
+                "{targets} motion targets (or backstop normals) for a cloth of {vertex_count} vertices"
+            ),
+            StateError::NonFiniteMotionTarget { vertex } => write!(
+                f,
+                "vertex {vertex}'s motion target or backstop normal is NaN, infinite or too distant \
+                 (limit {MAX_COORDINATE} m), or the backstop radius is not finite"
+            ),
         }
     }
 }

@@ -15,7 +15,8 @@
 //!    next parallel region (before self-collision in a region of their own; otherwise in
 //!    the collider pass, the next substep's first region or the final velocity update),
 //!    which costs no extra fork–join;
-//! 5. colliders (if any), each part in parallel;
+//! 5. motion constraints (skinned clothing, if any: [`MotionConstraints`]), then colliders
+//!    (if any), each part in parallel;
 //! 6. `v ← (x − x_prev)/h` (done at the start of the next substep, or at the end).
 //!
 //! Step 2 and the parts' first iteration of step 3 share one parallel region, so a substep
@@ -39,7 +40,9 @@ use crate::solver::collision::{
     Collider, ContactImpulse, SelfCollision, SelfCollisionScratch, SubstepPose, collide_vertex,
     find_self_collision_candidates, self_collide, substep_poses,
 };
-use crate::solver::constraints::{ConstraintBatches, ImplicitBending, Mode, Part, Solver, Tethers};
+use crate::solver::constraints::{
+    ConstraintBatches, ImplicitBending, Mode, MotionConstraints, Part, Solver, Tethers,
+};
 use crate::solver::mesh::{BendingModel, Topology};
 use crate::solver::parallel::Parallel;
 
@@ -56,6 +59,9 @@ pub struct StepInput<'a> {
     pub self_collision: Option<SelfCollision>,
     /// Long-range attachments to the pins, if any.
     pub tethers: Option<&'a Tethers>,
+    /// Where the skin holds each vertex (skinned clothing), if anywhere: applied to free
+    /// vertices after self-collision, before the colliders, every substep.
+    pub motion: MotionConstraints<'a>,
 }
 
 /// Scratch memory a step reuses (no allocation per step after the first), and what a step
@@ -162,6 +168,8 @@ struct Phase {
     integrate: bool,
     /// Project the part's constraints once.
     project: bool,
+    /// Bring free vertices within their motion constraints (`Some(substep)`).
+    motion: Option<u32>,
     /// Push vertices out of the colliders.
     collide: bool,
 }
@@ -178,6 +186,7 @@ struct Consts {
     bending: bool,
     /// XPBD with several iterations: multipliers carry over between iterations.
     accumulate: bool,
+    substeps: u32,
 }
 
 /// `v` shortened to at most `max` (w stays 0).
@@ -207,6 +216,7 @@ fn run_part(
     colliders: &[Collider],
     poses: &[SubstepPose],
     tethers: Option<(&Tethers, &[Vec4])>,
+    motion: &MotionConstraints<'_>,
 ) {
     if phase.tethers
         && let Some((t, anchors)) = tethers
@@ -255,6 +265,14 @@ fn run_part(
     }
     if phase.project {
         w.part.project(w.pos, c.mode, c.bending, c.accumulate);
+    }
+    if let Some(s) = phase.motion {
+        let first = w.part.range.start;
+        for (k, x) in w.pos.iter_mut().enumerate() {
+            if x.w > 0.0 {
+                motion.constrain(first + k, x, s, c.substeps);
+            }
+        }
     }
     if phase.collide {
         for (x, p) in w.pos.iter_mut().zip(w.prev.iter()) {
@@ -344,7 +362,14 @@ pub fn step(
         mode: batches.mode(h),
         bending: batches.bending && !implicit,
         accumulate: batches.mode_is_xpbd && params.iterations > 1,
+        substeps,
     };
+    let motion = if input.motion.applies_to(state.len()) {
+        input.motion
+    } else {
+        MotionConstraints::default()
+    };
+    let has_motion = motion.applies_to(state.len());
     let air_velocities = if input.air_velocities.len() == state.len() {
         input.air_velocities
     } else {
@@ -395,7 +420,7 @@ pub fn step(
             let (poses, anchors) = (&scratch.poses[..], &scratch.anchors[..]);
             let tethers = tethers.map(|t| (t, anchors));
             par.for_each_mut(&mut work, |w| {
-                run_part(w, phase, c, colliders, poses, tethers);
+                run_part(w, phase, c, colliders, poses, tethers, &motion);
             });
         };
     for s in 0..substeps {
@@ -426,6 +451,7 @@ pub fn step(
                 finish_velocity: it == 0 && s > 0 && !implicit,
                 integrate: it == 0 && !implicit,
                 project: true,
+                motion: None,
                 collide: false,
             };
             run_parts(&mut batches.parts, state, scratch, phase);
@@ -472,10 +498,11 @@ pub fn step(
                 par,
             );
         }
-        if !colliders.is_empty() {
+        if !colliders.is_empty() || has_motion {
             let phase = Phase {
                 tethers: core::mem::take(&mut tethers_due),
-                collide: true,
+                motion: has_motion.then_some(s),
+                collide: !colliders.is_empty(),
                 ..Default::default()
             };
             run_parts(&mut batches.parts, state, scratch, phase);
