@@ -1563,7 +1563,10 @@ mod skinned_clothing {
     /// the max distance grows from 0 at the top row to 0.1 m at the bottom (`max`, per vertex
     /// of the mesh). Returns the app, the cloth, the joints and the per-vertex (position,
     /// weight of joint 0, max distance).
-    fn scene(max: Option<Vec<f32>>) -> (App, Entity, [Entity; 2], Vec<(Vec3, f32, f32)>) {
+    /// Per mesh vertex: bind position, weight of joint 0, max distance.
+    type Vertices = Vec<(Vec3, f32, f32)>;
+
+    fn scene(max: Option<Vec<f32>>) -> (App, Entity, [Entity; 2], Vertices) {
         let mut app = app();
         let mut positions = Vec::new();
         let mut joints = Vec::new();

@@ -797,3 +797,89 @@ fn a_gpu_cloth_with_inertia_moves_with_its_anchor_as_on_the_cpu() {
         drift[2]
     );
 }
+
+/// Skinned clothing on the GPU backend: a sheet skinned to one joint, its first row held to
+/// the skin (max distance 0), the rest within 0.2 m; the joint moves 1 m and stops. The cloth
+/// runs on the GPU, its first row ends on the skin and the rest within reach of it.
+#[test]
+fn a_skinned_gpu_cloth_follows_its_skin() {
+    use bevy::mesh::VertexAttributeValues;
+    use bevy::mesh::skinning::{SkinnedMesh, SkinnedMeshInverseBindposes};
+    if common::gpu_or_skip("a_skinned_gpu_cloth_follows_its_skin").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    let grid = Grid::new(12, 12, 1.0, 1.0);
+    let mut mesh = grid_mesh(&grid);
+    let n = grid.positions().len();
+    mesh.insert_attribute(
+        Mesh::ATTRIBUTE_JOINT_INDEX,
+        VertexAttributeValues::Uint16x4(vec![[0, 0, 0, 0]; n]),
+    );
+    mesh.insert_attribute(
+        Mesh::ATTRIBUTE_JOINT_WEIGHT,
+        vec![[1.0f32, 0.0, 0.0, 0.0]; n],
+    );
+    let mesh = app.world_mut().resource_mut::<Assets<Mesh>>().add(mesh);
+    let joint = app
+        .world_mut()
+        .spawn(Transform::from_xyz(0.0, 1.0, 0.0))
+        .id();
+    let bindposes = app
+        .world_mut()
+        .resource_mut::<Assets<SkinnedMeshInverseBindposes>>()
+        .add(SkinnedMeshInverseBindposes::from(vec![Mat4::IDENTITY]));
+    let max: Vec<f32> = (0..n as u32)
+        .map(|v| if v < 12 { 0.0 } else { 0.2 })
+        .collect();
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::IDENTITY,
+            Cloth::default(),
+            ClothBackend::Gpu,
+            ClothReadback,
+            SkinnedMesh {
+                inverse_bindposes: bindposes,
+                joints: vec![joint],
+            },
+            ClothSkinning {
+                max_distance: MaxDistance::PerVertex(max),
+                backstop: None,
+            },
+        ))
+        .id();
+    for frame in 0..60 {
+        let x = (frame as f32 / 20.0).min(1.0);
+        app.world_mut()
+            .get_mut::<Transform>(joint)
+            .unwrap()
+            .translation
+            .x = x;
+        app.update();
+    }
+    assert!(in_use(&app, e).gpu, "{:?}", in_use(&app, e));
+    let rest = grid.positions();
+    let sim = app.world().get::<ClothSim>(e).unwrap();
+    let (mut top, mut rest_worst) = (0.0f32, 0.0f32);
+    for (v, r) in rest.iter().enumerate() {
+        let skin = *r + Vec3::new(1.0, 1.0, 0.0);
+        let p = sim
+            .simulation()
+            .state()
+            .position(sim.particle(v as u32) as usize);
+        let d = p.distance(skin);
+        if v < 12 {
+            top = top.max(d);
+        } else {
+            rest_worst = rest_worst.max(d);
+        }
+    }
+    assert!(top < 1e-4, "the first row is {top} m off the skin");
+    assert!(
+        rest_worst <= 0.2 + 1e-4,
+        "a vertex is {rest_worst} m off the skin"
+    );
+    assert!(rest_worst > 0.01, "the sheet followed the skin rigidly");
+}

@@ -26,7 +26,9 @@ mod common;
 use std::sync::Arc;
 
 use bevy::math::{Quat, Vec3, Vec4};
-use bevy_cloth::gpu::{ClothFrame, GpuFrame, GpuKernels, GpuWorld, StepColliders, gpu_part_count};
+use bevy_cloth::gpu::{
+    ClothFrame, GpuFrame, GpuKernels, GpuWorld, MotionTargets, StepColliders, gpu_part_count,
+};
 use bevy_cloth::solver::{
     BendingModel, BendingSolve, Carry, ClothState, Collider, ConstraintBatches, ContactImpulse,
     Features, Grid, HangingCloth, Pose, SdfGrid, SelfCollision, Serial, Shape, Simulation, Solver,
@@ -99,9 +101,14 @@ fn sliding(start: Vec<Vec3>, per_step: Vec3) -> Box<dyn Fn(usize) -> Vec<Vec3>> 
 /// from the same state (see the module docs): ε × the largest coordinate × the rewrites of a
 /// vertex's position (substeps × iterations × (its constraints + integration + contacts),
 /// plus 4 at the start of each step for a carried or teleported cloth: the carry's three
-/// products and three sums round each coordinate at most about four times its ε) × 4 for
+/// products and three sums round each coordinate at most about four times its ε; plus 2 a
+/// substep for a cloth held by motion targets: the max distance and the backstop) × 4 for
 /// the spread to neighbours.
 fn rounding_bound(sim: &Simulation, steps: usize, positions: &[Vec4]) -> f32 {
+    rounding_bound_with(sim, steps, positions, 0.0)
+}
+
+fn rounding_bound_with(sim: &Simulation, steps: usize, positions: &[Vec4], extra: f32) -> f32 {
     let t = sim.topology();
     let mut degree = vec![0u32; t.vertex_count()];
     for e in t.edges() {
@@ -120,7 +127,8 @@ fn rounding_bound(sim: &Simulation, steps: usize, positions: &[Vec4]) -> f32 {
         .map(|p| p.truncate().abs().max_element())
         .fold(1.0f32, f32::max);
     let p = sim.params();
-    let rewrites = steps as f32 * ((p.substeps * p.iterations) as f32 * (deg + 4.0) + 4.0);
+    let rewrites = steps as f32
+        * ((p.substeps * p.iterations) as f32 * (deg + 4.0) + p.substeps as f32 * extra + 4.0);
     f32::EPSILON * scale * rewrites * 4.0
 }
 
@@ -162,7 +170,7 @@ impl Twin {
         colliders: &[Collider],
         air: &[Vec4],
     ) -> &[ContactImpulse] {
-        self.step_carried(&Carry::IDENTITY, targets, jump, colliders, air)
+        self.step_carried(&Carry::IDENTITY, targets, jump, colliders, air, None)
     }
 
     /// [`Twin::step`] after carrying the cloth by `carry` (as the plugin does for
@@ -174,6 +182,7 @@ impl Twin {
         jump: Vec3,
         colliders: &[Collider],
         air: &[Vec4],
+        motion: Option<&MotionTargets>,
     ) -> &[ContactImpulse] {
         if *carry != Carry::IDENTITY {
             self.state.carry(carry);
@@ -194,7 +203,7 @@ impl Twin {
                 air_velocities: air,
                 tethers: self.tethers.as_ref(),
                 self_collision: self.sim.features().self_collision,
-                ..Default::default()
+                motion: motion.map(MotionTargets::constraints).unwrap_or_default(),
             },
             &mut self.scratch,
             &Serial,
@@ -212,6 +221,8 @@ struct Case {
     teleport: Option<(usize, Vec3)>,
     /// The rigid motion carried at the start of each step (`ClothInertia`).
     carry: Box<dyn Fn(usize) -> Carry>,
+    /// Where the skin holds each vertex in each step (skinned clothing), if anywhere.
+    motion: Box<dyn Fn(usize) -> Option<MotionTargets>>,
 }
 
 impl Case {
@@ -228,6 +239,7 @@ impl Case {
             air: Box::new(|_| Vec::new()),
             teleport: None,
             carry: Box::new(|_| Carry::IDENTITY),
+            motion: Box::new(|_| None),
         }
     }
 }
@@ -287,6 +299,7 @@ fn compare(
         let mut jumps = vec![Vec::new(); cases.len()];
         let mut carries = vec![Vec::new(); cases.len()];
         let mut air = vec![Vec::new(); cases.len()];
+        let mut motions: Vec<Vec<MotionTargets>> = vec![Vec::new(); cases.len()];
         let slots = step_colliders.first().map_or(0, Vec::len);
         let mut cpu_impulses = vec![ContactImpulse::default(); slots];
         for (s, cols) in step_colliders.iter().enumerate() {
@@ -298,7 +311,9 @@ fn compare(
                     .map_or(Vec3::ZERO, |j| j.1);
                 let a = (case.air)(k + s);
                 let carry = (case.carry)(k + s);
-                let impulses = twin.step_carried(&carry, &t, jump, cols, &a);
+                let m = (case.motion)(k + s);
+                let impulses = twin.step_carried(&carry, &t, jump, cols, &a, m.as_ref());
+                motions[i].push(m.unwrap_or_default());
                 for (sum, imp) in cpu_impulses.iter_mut().zip(impulses) {
                     sum.linear += imp.linear;
                     sum.angular += imp.angular;
@@ -322,6 +337,7 @@ fn compare(
                     teleports: &jumps[i],
                     carries: &carries[i],
                     air_velocities: &air[i],
+                    motion: &motions[i],
                 })
                 .collect(),
         };
@@ -346,7 +362,13 @@ fn compare(
                 assert_eq!(a.w, b.w, "cloth {i}: inverse masses differ");
                 worst = worst.max((a.truncate() - b.truncate()).length());
             }
-            let bound = rounding_bound(&cases[i].sim, steps_per_frame, &before[i]);
+            let held = (k - steps_per_frame..k).any(|j| (cases[i].motion)(j).is_some());
+            let bound = rounding_bound_with(
+                &cases[i].sim,
+                steps_per_frame,
+                &before[i],
+                if held { 2.0 } else { 0.0 },
+            );
             out.errors[i].push(worst);
             out.ratios[i].push(worst / bound);
             if i == 0 {
@@ -435,6 +457,81 @@ fn hanging_cloth_in_wind_matches_the_cpu() {
     });
     let out = compare(&g, &[case], 30, 1, |_| Vec::new(), true);
     check(&g, "hanging cloth", &out, true);
+}
+
+/// Skinned clothing: a hanging 48² cloth (three parts) held by motion targets that sway and
+/// rise with the step (max distance 0 along the top row, growing to 8 cm at the hem, every
+/// other row with a backstop 2 cm behind a skin facing +z, radius 0.5 m), with a sphere
+/// collider in front. Bit for bit on llvmpipe.
+#[test]
+fn motion_targets_match_the_cpu() {
+    let Some(g) = gpu("motion_targets_match_the_cpu") else {
+        return;
+    };
+    let n = 48;
+    let s = sim(n, SolverParams::default(), |p| {
+        Vec3::new(p.x, 1.0 - (p.z + 0.5), 0.0)
+    });
+    assert!(gpu_part_count(&s) > 2, "parts and seams");
+    let rest: Vec<Vec3> = s.state().positions.iter().map(|p| p.truncate()).collect();
+    let skin = std::rc::Rc::new(move |k: usize| -> Vec<Vec4> {
+        let t = k as f32 / 60.0;
+        rest.iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let row = (i as u32 / n) as f32 / (n - 1) as f32;
+                let sway = Vec3::new(0.25 * (5.0 * t).sin(), 0.05 * t, 0.1 * (3.0 * t).sin());
+                (*p + sway).extend(0.08 * row)
+            })
+            .collect()
+    });
+    let mut case = Case::new(s);
+    let held = skin.clone();
+    case.motion = Box::new(move |k| {
+        let skin = &held;
+        let end = skin(k + 1);
+        let backstop = (0..end.len())
+            .map(|i| {
+                if (i as u32 / n) % 2 == 0 {
+                    Vec4::new(0.0, 0.0, 1.0, 0.02)
+                } else {
+                    Vec4::new(0.0, 0.0, 1.0, -1.0)
+                }
+            })
+            .collect();
+        Some(MotionTargets {
+            start: skin(k),
+            end,
+            backstop,
+            backstop_radius: 0.5,
+        })
+    });
+    let sphere = |k: usize| {
+        vec![Collider::fixed(
+            Shape::Sphere { radius: 0.15 },
+            Pose::at(Vec3::new(0.1 * (k as f32 * 0.1).sin(), 0.5, 0.2)),
+            0.01,
+            0.3,
+        )]
+    };
+    let out = compare(&g, &[case], 30, 1, sphere, true);
+    check(&g, "motion targets", &out, true);
+    // Held: every vertex away from the sphere (which pushes last) within its max distance of
+    // the skin, and the hem moved off it (simulated, not carried).
+    let end = skin(30);
+    let centre = Vec3::new(0.1 * (29.0f32 * 0.1).sin(), 0.5, 0.2);
+    let (mut worst, mut hem) = (0.0f32, 0.0f32);
+    for (i, (p, t)) in out.gpu[0].iter().zip(&end).enumerate() {
+        let d = p.truncate().distance(t.truncate());
+        if p.truncate().distance(centre) > 0.3 {
+            worst = worst.max(d - t.w);
+        }
+        if i as u32 >= n * (n - 1) {
+            hem = hem.max(d);
+        }
+    }
+    assert!(worst < 1e-4, "a vertex {worst} m past its max distance");
+    assert!(hem > 0.005, "the hem followed the skin rigidly ({hem} m)");
 }
 
 fn collider_shapes(k: usize) -> Vec<Collider> {
@@ -1106,6 +1203,7 @@ fn rounding_ensemble(
                     Vec3::ZERO,
                     colliders,
                     &(case.air)(k),
+                    (case.motion)(k).as_ref(),
                 );
                 series.push(twin.state.positions.clone());
             }

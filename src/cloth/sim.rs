@@ -137,6 +137,28 @@ impl ClothSim {
         self.steps += steps;
     }
 
+    /// Sets where the skin holds each particle for the next step
+    /// ([`Simulation::set_motion_targets`]); an input like pin targets, not an edit of the
+    /// state (a GPU cloth is not restarted).
+    ///
+    /// # Errors
+    /// As [`Simulation::set_motion_targets`].
+    pub fn set_motion_targets(
+        &mut self,
+        targets: &[Vec4],
+        backstop: &[Vec4],
+        backstop_radius: f32,
+        snap: bool,
+    ) -> Result<(), crate::solver::StateError> {
+        self.sim
+            .set_motion_targets(targets, backstop, backstop_radius, snap)
+    }
+
+    /// After a step taken elsewhere: see [`Simulation::motion_step_taken`].
+    pub fn motion_step_taken(&mut self) {
+        self.sim.motion_step_taken();
+    }
+
     /// Takes a state computed elsewhere: positions (`xyz`; the inverse masses stay as they are)
     /// and velocities of every particle. Ignored unless both have one entry per particle.
     pub fn receive_state(&mut self, positions: &[Vec4], velocities: &[Vec4]) {

@@ -25,8 +25,8 @@ use crate::foundation::{EntityName, FixedPoses};
 /// A `PerVertex` list of the wrong length, a mesh without joint attributes or vertex colours
 /// (where asked for), or a negative or non-finite distance is reported once as
 /// [`ClothError::Skinning`] and the cloth runs free meanwhile; a joint with no pose is
-/// reported the same way and the targets stay where they were. CPU backend only: a GPU cloth
-/// with `ClothSkinning` runs on the CPU and says why.
+/// reported the same way and the targets stay where they were. The same on the GPU backend
+/// (the targets are uploaded every step).
 #[derive(Component, Clone, Debug, PartialEq, Reflect)]
 #[reflect(Component)]
 pub struct ClothSkinning {
@@ -394,14 +394,12 @@ pub(super) fn skin_cloths(
         skin.evaluate(matrices, targets, backstop);
         let radius = skin.settings.backstop.map_or(0.0, |b| b.radius);
         let snap = core::mem::take(&mut skin.snap) || cloth.teleport.is_some();
-        let first = !cloth.simulation().has_motion_targets();
-        let sim = cloth.simulation_mut();
-        if first {
-            // Start where the skin is.
+        if !cloth.simulation().has_motion_targets() {
+            // Start where the skin is (an edit: a GPU cloth restarts from it).
             let placed: Vec<Vec3> = targets.iter().map(|t| t.truncate()).collect();
-            sim.reset_to(&placed);
+            cloth.simulation_mut().reset_to(&placed);
         }
-        if let Err(e) = sim.set_motion_targets(targets, backstop, radius, snap) {
+        if let Err(e) = cloth.set_motion_targets(targets, backstop, radius, snap) {
             note_rejection(
                 &mut commands,
                 who,

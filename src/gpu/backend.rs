@@ -21,8 +21,8 @@ use bevy::mesh::MeshVertexAttribute;
 use bevy::prelude::*;
 
 use super::mesh::{TangentSource, VertexLayout};
-use super::world::GpuWorld;
-use crate::cloth::{Cloth, ClothSim, ClothSkinning, ClothSteppedElsewhere, ClothTorn};
+use super::world::{GpuWorld, MotionTargets};
+use crate::cloth::{Cloth, ClothSim, ClothSteppedElsewhere, ClothTorn};
 use crate::collider::{ClothColliders, ClothContactImpulse};
 use crate::foundation::EntityName;
 use crate::solver::{Carry, Collider, ContactImpulse, Simulation};
@@ -170,6 +170,8 @@ pub struct ClothOnGpu {
     pub(crate) carries: Vec<Carry>,
     /// The air at each vertex, sampled at the last queued step.
     pub(crate) air: Vec<Vec4>,
+    /// Per queued step, the motion targets (skinned clothing; empty entries for none).
+    pub(crate) motion: Vec<MotionTargets>,
 }
 
 impl ClothOnGpu {
@@ -237,7 +239,6 @@ pub(crate) fn choose_backends(
         Option<&mut ClothOnGpu>,
         Has<ClothLeavingGpu>,
         Has<ClothReadback>,
-        Has<ClothSkinning>,
     )>,
     fixed: Res<Time<Fixed>>,
     mut generation: Local<u64>,
@@ -246,8 +247,7 @@ pub(crate) fn choose_backends(
 ) {
     let dt = fixed.timestep().as_secs_f32();
     let mut seen = std::collections::HashSet::new();
-    for ((entity, name), cloth, backend, in_use, on_gpu, leaving, readback, skinned) in &mut cloths
-    {
+    for ((entity, name), cloth, backend, in_use, on_gpu, leaving, readback) in &mut cloths {
         let who = EntityName::new(entity, name);
         seen.insert(entity);
         if leaving {
@@ -264,11 +264,6 @@ pub(crate) fn choose_backends(
                 })
                 .map_or(Ok(()), Err)
                 .and_then(|()| {
-                    if skinned {
-                        return Err(
-                            "skinned clothing (ClothSkinning) runs on the CPU only".to_owned()
-                        );
-                    }
                     // The model check (O(n) for stiff bending) once per change of settings.
                     let key = settings_key(cloth.simulation());
                     match checked.get(&entity) {
@@ -325,6 +320,7 @@ pub(crate) fn choose_backends(
                         teleports: Vec::new(),
                         carries: Vec::new(),
                         air: Vec::new(),
+                        motion: Vec::new(),
                     },
                     ClothSteppedElsewhere,
                     // The mesh's bounds are those of the rest shape it was made with.
@@ -501,6 +497,7 @@ pub(crate) fn clear_queued_steps(
         g.pending.clear();
         g.teleports.clear();
         g.carries.clear();
+        g.motion.clear();
     }
 }
 
@@ -568,6 +565,13 @@ pub(crate) fn queue_gpu_steps(
             .push(cloth.take_teleport().unwrap_or(Vec3::ZERO));
         g.carries
             .push(cloth.take_carry().unwrap_or(Carry::IDENTITY));
+        g.motion.push(
+            cloth
+                .simulation()
+                .motion_targets()
+                .map_or_else(MotionTargets::default, |m| MotionTargets::of(&m)),
+        );
+        cloth.motion_step_taken();
         match wind.as_deref() {
             Some(w) if !w.field.is_empty() && !cloth.simulation().params().air.is_none() => {
                 cloth.sample_air(&w.field, w.time + 0.5 * f64::from(dt), &mut g.air);

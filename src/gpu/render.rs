@@ -31,7 +31,7 @@ use super::backend::{
 use super::kernels::GpuKernels;
 use super::layout::WorldKey;
 use super::mesh::{MeshKernel, MeshWriter};
-use super::world::{ClothFrame, GpuFrame, GpuWorld, StepColliders, sum_impulses};
+use super::world::{ClothFrame, GpuFrame, GpuWorld, MotionTargets, StepColliders, sum_impulses};
 use crate::solver::Carry;
 
 /// The compiled kernels (render world).
@@ -53,6 +53,7 @@ struct ExtractedGpuCloth {
     teleports: Vec<Vec3>,
     carries: Vec<Carry>,
     air: Vec<Vec4>,
+    motion: Vec<MotionTargets>,
     transform: bevy::math::Affine3A,
     /// Read positions and velocities back this frame.
     readback: bool,
@@ -97,6 +98,7 @@ pub(crate) fn extract_gpu_cloths(
             teleports: g.teleports.clone(),
             carries: g.carries.clone(),
             air: g.air.clone(),
+            motion: g.motion.clone(),
             transform: transform.affine(),
             readback,
         });
@@ -112,6 +114,7 @@ pub(crate) fn extract_gpu_cloths(
             teleports: Vec::new(),
             carries: Vec::new(),
             air: Vec::new(),
+            motion: Vec::new(),
             transform: transform.affine(),
             readback: true,
         });
@@ -300,6 +303,7 @@ pub(crate) fn prepare_gpu_worlds(
                         teleports: &x.teleports,
                         carries: &x.carries,
                         air_velocities: &x.air,
+                        motion: &x.motion,
                     },
                     // Leaving: not stepped.
                     None => ClothFrame {

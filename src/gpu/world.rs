@@ -84,7 +84,8 @@ pub(crate) struct SubstepEntry {
     colliders: u32,
     pin_at: u32,
     cloth_step_at: u32,
-    _pad: u32,
+    /// This step's motion targets in `frame` (start, end and backstop per vertex).
+    motion_at: u32,
 }
 
 #[repr(C)]
@@ -230,6 +231,48 @@ pub struct ClothFrame<'a> {
     pub carries: &'a [Carry],
     /// The air's velocity at each vertex (`w` ignored); empty for still air.
     pub air_velocities: &'a [Vec4],
+    /// Per step it takes, where the skin holds each vertex ([`MotionTargets`]); empty for
+    /// none (or a step with an empty entry).
+    pub motion: &'a [MotionTargets],
+}
+
+/// One step's motion constraints of one cloth, owned: the GPU twin of
+/// [`MotionConstraints`](crate::solver::MotionConstraints) (one entry per vertex in `start`
+/// and `end`, none or one in `backstop`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MotionTargets {
+    /// Each vertex's target at the start of the step.
+    pub start: Vec<Vec4>,
+    /// Each vertex's target at the end of the step and its max distance (`w`).
+    pub end: Vec<Vec4>,
+    /// The skin's normal and the backstop's distance behind it per vertex; empty for none.
+    pub backstop: Vec<Vec4>,
+    /// Radius of every backstop sphere.
+    pub backstop_radius: f32,
+}
+
+impl MotionTargets {
+    /// A copy of `m`.
+    #[must_use]
+    pub fn of(m: &crate::solver::MotionConstraints<'_>) -> Self {
+        Self {
+            start: m.start.to_vec(),
+            end: m.end.to_vec(),
+            backstop: m.backstop.to_vec(),
+            backstop_radius: m.backstop_radius,
+        }
+    }
+
+    /// The borrowed form the CPU step takes.
+    #[must_use]
+    pub fn constraints(&self) -> crate::solver::MotionConstraints<'_> {
+        crate::solver::MotionConstraints {
+            start: &self.start,
+            end: &self.end,
+            backstop: &self.backstop,
+            backstop_radius: self.backstop_radius,
+        }
+    }
 }
 
 /// A frame's inputs: the step length, per step the colliders, per cloth its own.
@@ -319,6 +362,10 @@ fn empty(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsage
 /// motion (`shaders/common.wgsl`'s `CLOTH_STEP_VEC4S`).
 const CLOTH_STEP_VEC4S: u32 = 4;
 
+/// Vec4s per vertex and step of the motion targets in `frame`: start (w: backstop radius),
+/// end (w: max distance), backstop normal (w: distance behind the skin).
+const MOTION_VEC4S: u32 = 3;
+
 const RW: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
     .union(wgpu::BufferUsages::COPY_DST)
     .union(wgpu::BufferUsages::COPY_SRC);
@@ -387,6 +434,8 @@ pub struct GpuWorld {
     /// teleports and how many colliders it has; the frame's collider slots.
     steps: u32,
     teleport_steps: Vec<bool>,
+    /// Whether the prepared frame holds some cloth to motion targets.
+    any_motion: bool,
     step_colliders: Vec<u32>,
     collider_slots: u32,
     impulse_words: u32,
@@ -524,6 +573,7 @@ impl GpuWorld {
             bind_group: None,
             steps: 0,
             teleport_steps: Vec::new(),
+            any_motion: false,
             step_colliders: Vec::new(),
             collider_slots: 0,
             impulse_words: 0,
@@ -798,7 +848,19 @@ impl GpuWorld {
         // each: flags and teleport, then the carried motion's matrix columns with its offset
         // in their `w`).
         let pins = self.layout.pins;
-        let frame_vec4s = u64::from(steps) * u64::from(pins + CLOTH_STEP_VEC4S * cloths as u32);
+        // Motion targets: per step 3 vec4 for every vertex of the world (start with the
+        // backstop radius in `w`, end with the max distance, backstop normal and distance), when
+        // some cloth has them this frame (not on the lab solver, which ignores them as on the
+        // CPU).
+        let any_motion = !lab
+            && frame
+                .cloths
+                .iter()
+                .any(|f| f.motion.iter().any(|m| !m.end.is_empty()));
+        let motion_n = if any_motion { self.layout.n } else { 0 };
+        let motion_at_vec4s = u64::from(steps) * u64::from(pins + CLOTH_STEP_VEC4S * cloths as u32);
+        let frame_vec4s =
+            motion_at_vec4s + u64::from(steps) * u64::from(MOTION_VEC4S) * u64::from(motion_n);
         if frame_vec4s.max(1) > self.frame_capacity {
             self.frame_capacity = frame_vec4s.next_power_of_two();
             self.frame = empty(device, "cloth_frame", self.frame_capacity * 16, RO);
@@ -811,6 +873,7 @@ impl GpuWorld {
         let r = &self.regions;
         let s = &self.scratch_regions;
         let cloth_step_at = steps * pins;
+        let motion_at = motion_at_vec4s as u32;
         let uniform = WorldUniform {
             h,
             inv_h: 1.0 / h,
@@ -893,7 +956,7 @@ impl GpuWorld {
                     colliders: sc.colliders.len() as u32,
                     pin_at: k * pins,
                     cloth_step_at: cloth_step_at + k * CLOTH_STEP_VEC4S * cloths as u32,
-                    _pad: 0,
+                    motion_at: motion_at + k * MOTION_VEC4S * motion_n,
                 };
                 let at = ((k * substeps + sub) as u64 * TABLE_STRIDE) as usize;
                 table[at..at + size_of::<SubstepEntry>()].copy_from_slice(bytemuck::bytes_of(&e));
@@ -963,12 +1026,31 @@ impl GpuWorld {
                 teleport_steps[k as usize] |= jump.is_some() || carry.is_some();
                 // Flags: 1 takes the step, + 2 teleports, + 4 is carried; 0 sits it out (no
                 // targets for this step).
+                let motion = f
+                    .motion
+                    .get(local)
+                    .filter(|m| any_motion && m.constraints().applies_to(c.n as usize));
                 let flag = if targets.is_none() && c.pins > 0 {
                     0.0
                 } else {
                     1.0 + if jump.is_some() { 2.0 } else { 0.0 }
                         + if carry.is_some() { 4.0 } else { 0.0 }
+                        + if motion.is_some() { 8.0 } else { 0.0 }
                 };
+                if let Some(m) = motion {
+                    let base = (motion_at + k * MOTION_VEC4S * motion_n + c.vbase) as usize;
+                    let n = motion_n as usize;
+                    let radius = if m.backstop.len() == c.n as usize {
+                        m.backstop_radius
+                    } else {
+                        0.0
+                    };
+                    for v in 0..c.n as usize {
+                        data[base + v] = m.start[v].truncate().extend(radius);
+                        data[base + n + v] = m.end[v];
+                        data[base + 2 * n + v] = m.backstop.get(v).copied().unwrap_or(Vec4::ZERO);
+                    }
+                }
                 let at =
                     (cloth_step_at + (k * cloths as u32 + ci as u32) * CLOTH_STEP_VEC4S) as usize;
                 data[at] = jump.unwrap_or(Vec3::ZERO).extend(flag);
@@ -994,6 +1076,7 @@ impl GpuWorld {
         }
         self.steps = steps;
         self.teleport_steps = teleport_steps;
+        self.any_motion = any_motion;
         self.step_colliders = step_colliders
             .iter()
             .map(|s| s.colliders.len() as u32)
@@ -1277,7 +1360,7 @@ impl GpuWorld {
                     enter(&mut out, GpuStage::SelfCollision, [so, 0]);
                     out.push(Cmd::Run(&kernels.sc_collide, vertex_groups));
                 }
-                if l.any_tethers || l.any_sc || colliders > 0 {
+                if l.any_tethers || l.any_sc || colliders > 0 || self.any_motion {
                     enter(&mut out, GpuStage::Contact, [so, 0]);
                     out.push(Cmd::Run(&kernels.finish_substep, vertex_groups));
                 }

@@ -28,7 +28,8 @@
 // `SC_TRI_MAX` triangles (`triangle << 2 | side`) | the colliders' impulse slots.
 //
 // `frame` (vec4): per step every pin's target | per step and cloth a record (xyz: teleport
-// offset; w: 1 active, 3 active and teleporting, 0 not stepped).
+// offset; w: 0 not stepped, else 1 + 2 teleporting + 4 carried + 8 held by motion targets;
+// three more vec4 for a carry) | [per step the motion targets, 3 per vertex of the world].
 
 struct World {
     h: f32,
@@ -85,7 +86,9 @@ struct Substep {
     pin_at: u32,
     // this step's cloth records in `frame`
     cloth_step_at: u32,
-    _pad: u32,
+    // this step's motion targets in `frame`: per vertex of the world its start (w: backstop
+    // radius), then its end (w: max distance), then its backstop normal (w: distance)
+    motion_at: u32,
 }
 
 // The groups one `solve` dispatch projects (binding 2, a dynamic offset per level).

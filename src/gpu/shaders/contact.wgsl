@@ -446,11 +446,50 @@ fn collide_one(c: Collider, p: vec3<f32>, prev: vec3<f32>) -> vec4<f32> {
     return vec4<f32>(corrected, 1.0);
 }
 
+// `MotionConstraints::constrain` for free vertex `i` at `x` after this substep: within its max
+// distance of its target (moved linearly over the step), then out of its backstop sphere.
+fn motion_held(i: u32, x: vec4<f32>) -> vec4<f32> {
+    let a = frame[S.motion_at + i];
+    let b = frame[S.motion_at + P.n + i];
+    let target_pos = a.xyz + (b.xyz - a.xyz) * S.t;
+    if !finite3(target_pos) {
+        return x;
+    }
+    var q = x.xyz;
+    let r = b.w;
+    if finite(r) && r >= 0.0 {
+        let d = q - target_pos;
+        let l2 = dot(d, d);
+        if l2 > r * r {
+            q = target_pos + d * (r / sqrt(l2));
+        }
+    }
+    let radius = a.w;
+    let nb = frame[S.motion_at + 2u * P.n + i];
+    if finite(radius) && radius > 0.0 && finite(nb.w) && nb.w >= 0.0 && finite3(nb.xyz) {
+        let centre = target_pos - nb.xyz * (radius + nb.w);
+        let d = q - centre;
+        let l2 = dot(d, d);
+        if l2 < radius * radius {
+            let l = sqrt(l2);
+            if l > 1e-12 {
+                q = centre + d * (radius / l);
+            } else {
+                q = centre + nb.xyz * radius;
+            }
+        }
+    }
+    if finite3(q) {
+        return vec4<f32>(q, x.w);
+    }
+    return x;
+}
+
 var<workgroup> imp_lin: array<vec3<f32>, 64>;
 var<workgroup> imp_ang: array<vec3<f32>, 64>;
 
-// The end of a substep for every vertex: tethers, the self-collision correction, then the
-// colliders (`collide::collide_vertex`). Each workgroup also sums the momentum its vertices
+// The end of a substep for every vertex: tethers, the self-collision correction, the motion
+// targets (skinned clothing), then the colliders (`collide::collide_vertex`). Each workgroup also sums the momentum its vertices
 // gave each collider (−m·Δx/h, and its moment about the collider's origin) into its own slot
 // (by the collider's frame slot), over every substep and step of the frame; the host adds the
 // slots up after reading them back. Every invocation reaches every barrier.
@@ -476,6 +515,9 @@ fn finish_substep(
             }
             if (cl.flags & FLAG_SC) != 0u {
                 x = vec4<f32>(x.xyz + state[P.corr_at + i].xyz, x.w);
+            }
+            if (u32(frame[cloth_step(c)].w + 0.5) & 8u) != 0u {
+                x = motion_held(i, x);
             }
         }
     }

@@ -318,9 +318,8 @@ impl Simulation {
             self.reset_to_rest();
             report.recovered = true;
         }
-        if let Some(m) = &mut self.motion {
-            // Targets not updated before the next step stay where they are.
-            m.start.clone_from(&m.end);
+        if self.motion.is_some() {
+            self.motion_step_taken();
         } else {
             self.count_quiet_step(env, felt_wind, dt);
         }
@@ -522,6 +521,21 @@ impl Simulation {
     #[must_use]
     pub fn has_motion_targets(&self) -> bool {
         self.motion.is_some()
+    }
+
+    /// The motion constraints the next step applies, if any.
+    #[must_use]
+    pub fn motion_targets(&self) -> Option<MotionConstraints<'_>> {
+        self.motion.as_ref().map(Motion::constraints)
+    }
+
+    /// After a step taken elsewhere (the GPU): the targets' end becomes the next step's
+    /// start, as [`Self::step_in`] does.
+    pub fn motion_step_taken(&mut self) {
+        if let Some(m) = &mut self.motion {
+            // Targets not updated before the next step stay where they are.
+            m.start.clone_from(&m.end);
+        }
     }
 
     /// The optional capabilities in use.
