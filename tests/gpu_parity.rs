@@ -492,7 +492,7 @@ fn motion_targets_match_the_cpu() {
         let end = skin(k + 1);
         let backstop = (0..end.len())
             .map(|i| {
-                if (i as u32 / n) % 2 == 0 {
+                if (i as u32 / n).is_multiple_of(2) {
                     Vec4::new(0.0, 0.0, 1.0, 0.02)
                 } else {
                     Vec4::new(0.0, 0.0, 1.0, -1.0)
