@@ -1,11 +1,14 @@
-//! A cape on an animated, skinned character walking (or running) a loop.
+//! A cape and a skirt on an animated, skinned character walking (or running) a loop.
 //!
 //! The character is `assets/character.gltf` (written by the `make_character` example): a
 //! skinned humanoid with 13 bones and a `Walk` and a `Run` animation, loaded through the
 //! `AssetServer` as a scene and played by Bevy's animation system. The cape's top edge is
 //! pinned to the `Chest` bone (`PinAnchor::Entity` with an offset in the bone's frame), the
 //! torso carries box colliders and the limbs capsules, each a child entity of its bone, and
-//! tethers keep the cape from stretching like rubber. `ClothAnimationPlugin` advances the
+//! tethers keep the cape from stretching like rubber. The skirt is part of the glTF, skinned
+//! to the hips and thighs: `ClothSkinning` keeps each of its vertices within the max distance
+//! painted in its vertex colours (0 at the waist, 15 cm at the hem) of where the animated
+//! skin puts it, and the thigh capsules keep it off the legs. `ClothAnimationPlugin` advances the
 //! animation on the cloth's fixed clock, so every fixed step's pins and colliders are that
 //! step's bone poses, at any frame rate.
 //!
@@ -21,7 +24,10 @@
 //! The JSON line adds `pin_error` (largest distance, over every frame after the first
 //! second, between a pinned vertex and where its bone is drawn), `penetration` (deepest cape
 //! vertex inside a body collider over every step after the first second), `colliders`,
-//! `touching_steps` (steps in which the cape touched the body) and `gait`. With `--backend
+//! `touching_steps` (steps in which a cloth touched the body), `gait`, and for the skirt
+//! `skirt_over_max_distance` (farthest any skirt vertex got past its max distance from the
+//! skin, after the first second; a collider pushing it counts) and `skirt_penetration`
+//! (deepest skirt vertex inside a body collider after the first second). With `--backend
 //! gpu` the cape's state is read back a few frames late, so both figures then measure that
 //! lag, not the simulation.
 
@@ -77,11 +83,18 @@ struct Measured {
     steps: u32,
     colliders: usize,
     touching_steps: u32,
+    skirt_over: f32,
+    skirt_penetration: f32,
+    skirt_steps: u32,
 }
 
 /// Marks the cape.
 #[derive(Component)]
 struct Cape;
+
+/// Marks the skirt.
+#[derive(Component)]
+struct Skirt;
 
 /// Where the character starts: on the loop, facing along it.
 fn start_pose(speed: f32, t: f32) -> Transform {
@@ -154,10 +167,10 @@ fn body_colliders() -> [(&'static str, Vec3, ClothCollider); 13] {
             ClothCollider::sphere(0.13).with_thickness(0.015),
         ),
         ("Neck", Vec3::new(0.0, 1.54, 0.0), limb(0.05, 0.04)),
-        ("UpperArm.L", Vec3::new(0.26, 1.33, 0.0), limb(0.05, 0.2)),
-        ("Forearm.L", Vec3::new(0.26, 1.05, 0.0), limb(0.045, 0.19)),
-        ("UpperArm.R", Vec3::new(-0.26, 1.33, 0.0), limb(0.05, 0.2)),
-        ("Forearm.R", Vec3::new(-0.26, 1.05, 0.0), limb(0.045, 0.19)),
+        ("UpperArm.L", Vec3::new(0.32, 1.33, 0.0), limb(0.05, 0.2)),
+        ("Forearm.L", Vec3::new(0.32, 1.05, 0.0), limb(0.045, 0.19)),
+        ("UpperArm.R", Vec3::new(-0.32, 1.33, 0.0), limb(0.05, 0.2)),
+        ("Forearm.R", Vec3::new(-0.32, 1.05, 0.0), limb(0.045, 0.19)),
         ("Thigh.L", Vec3::new(0.1, 0.71, 0.0), limb(0.07, 0.28)),
         ("Shin.L", Vec3::new(0.1, 0.27, 0.0), limb(0.06, 0.34)),
         ("Thigh.R", Vec3::new(-0.1, 0.71, 0.0), limb(0.07, 0.28)),
@@ -173,10 +186,10 @@ fn bone_rest(name: &str) -> Option<Vec3> {
         "Chest" => Vec3::new(0.0, 1.26, 0.0),
         "Neck" => Vec3::new(0.0, 1.52, 0.0),
         "Head" => Vec3::new(0.0, 1.6, 0.0),
-        "UpperArm.L" => Vec3::new(0.24, 1.47, 0.0),
-        "Forearm.L" => Vec3::new(0.24, 1.18, 0.0),
-        "UpperArm.R" => Vec3::new(-0.24, 1.47, 0.0),
-        "Forearm.R" => Vec3::new(-0.24, 1.18, 0.0),
+        "UpperArm.L" => Vec3::new(0.3, 1.47, 0.0),
+        "Forearm.L" => Vec3::new(0.3, 1.18, 0.0),
+        "UpperArm.R" => Vec3::new(-0.3, 1.47, 0.0),
+        "Forearm.R" => Vec3::new(-0.3, 1.18, 0.0),
         "Thigh.L" => Vec3::new(0.1, 0.92, 0.0),
         "Shin.L" => Vec3::new(0.1, 0.5, 0.0),
         "Thigh.R" => Vec3::new(-0.1, 0.92, 0.0),
@@ -194,6 +207,7 @@ fn dress(
     children: Query<&Children>,
     names: Query<&Name>,
     mut players: Query<&mut AnimationPlayer>,
+    skinned: Query<(), With<bevy::mesh::skinning::SkinnedMesh>>,
     walkers: Query<&Transform, With<Walker>>,
     assets: Res<AssetServer>,
     mut graphs: ResMut<Assets<AnimationGraph>>,
@@ -230,6 +244,34 @@ fn dress(
             .spawn((collider, Transform::from_translation(centre - rest)))
             .id();
         commands.entity(b).add_child(child);
+    }
+    // The skirt: the glTF's skinned "Skirt" mesh becomes cloth held near its skin.
+    let skirt = bone("Skirt").and_then(|node| {
+        std::iter::once(node)
+            .chain(children.iter_descendants(node))
+            .find(|&e| skinned.contains(e))
+    });
+    match skirt {
+        Some(e) => {
+            commands.entity(e).insert((
+                Cloth {
+                    mass: 0.3,
+                    ..default()
+                },
+                ClothConfig {
+                    substeps: 10,
+                    ..default()
+                },
+                ClothSkinning {
+                    max_distance: MaxDistance::VertexColor { scale: 0.15 },
+                    backstop: None,
+                },
+                Skirt,
+            ));
+        }
+        None => {
+            error!("{CHARACTER} has no skinned Skirt: run `cargo run --example make_character`")
+        }
     }
     // The cape: 0.7 m × 1.0 m down the back from the shoulders, pinned along its top edge to
     // the chest bone.
@@ -278,9 +320,11 @@ fn dress(
     }
 }
 
-/// Every fixed step, after the cloth stepped: how deep the cape is inside the body.
+/// Every fixed step, after the cloth stepped: how deep the cape is inside the body, how far
+/// the skirt is past its max distances and how deep in the body.
 fn measure_step(
     capes: Query<&ClothSim, With<Cape>>,
+    skirts: Query<&ClothSim, With<Skirt>>,
     colliders: Res<bevy_cloth::collider::ClothColliders>,
     impulses: Query<&ClothContactImpulse>,
     time: Res<Time>,
@@ -302,6 +346,26 @@ fn measure_step(
         }
         measured.steps += 1;
         measured.colliders = colliders.colliders.len();
+    }
+    for sim in &skirts {
+        let s = sim.simulation().state();
+        if time.elapsed_secs() > 1.0
+            && let Some(m) = sim.simulation().motion_targets()
+        {
+            // The targets of the step just taken (its end is the next step's start).
+            for (i, t) in m.end.iter().enumerate() {
+                let over = s.position(i).distance(t.truncate()) - t.w;
+                measured.skirt_over = measured.skirt_over.max(over);
+            }
+            for c in &colliders.colliders {
+                for i in 0..s.len() {
+                    let local = c.end.inverse_apply(s.position(i));
+                    let d = c.shape.distance(local).0 * c.end.scale;
+                    measured.skirt_penetration = measured.skirt_penetration.max(-d);
+                }
+            }
+            measured.skirt_steps += 1;
+        }
     }
 }
 
@@ -341,6 +405,8 @@ fn report(world: &mut World) -> support::Json {
         m.colliders,
         m.touching_steps,
     );
+    let (skirt_over, skirt_penetration, skirt_steps) =
+        (m.skirt_over, m.skirt_penetration, m.skirt_steps);
     support::cloth_report(world)
         .str("example", "cape")
         .str("gait", gait)
@@ -349,6 +415,9 @@ fn report(world: &mut World) -> support::Json {
         .num("touching_steps", touching)
         .num("pin_error", pin_error)
         .num("penetration", penetration)
+        .num("skirt_steps", skirt_steps)
+        .num("skirt_over_max_distance", skirt_over)
+        .num("skirt_penetration", skirt_penetration)
 }
 
 fn main() {

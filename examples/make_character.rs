@@ -6,7 +6,8 @@
 //! (and `.R`); `Hips` → `Thigh.L` → `Shin.L` (and `.R`). Every bone's rest rotation is the
 //! identity, so a bone's local frame is the character's. Two looping, in-place animations:
 //! `Walk` (1 s a cycle) and `Run` (0.6 s), rotations of the limbs and spine and a bob of the
-//! hips, sampled at 17 keys a cycle (linear).
+//! hips, sampled at 17 keys a cycle (linear). A skirt, a second skinned mesh, is skinned to
+//! the hips and thighs, its max distances painted in its vertex colours (see [`skirt`]).
 //!
 //! ```text
 //! cargo run --release --example make_character            # writes assets/character.gltf + .bin
@@ -48,10 +49,10 @@ const BONES: [Bone; 13] = [
     bone("Chest", Some(SPINE), [0.0, 1.26, 0.0]),
     bone("Neck", Some(CHEST), [0.0, 1.52, 0.0]),
     bone("Head", Some(NECK), [0.0, 1.60, 0.0]),
-    bone("UpperArm.L", Some(CHEST), [0.24, 1.47, 0.0]),
-    bone("Forearm.L", Some(UPPER_ARM_L), [0.24, 1.18, 0.0]),
-    bone("UpperArm.R", Some(CHEST), [-0.24, 1.47, 0.0]),
-    bone("Forearm.R", Some(UPPER_ARM_R), [-0.24, 1.18, 0.0]),
+    bone("UpperArm.L", Some(CHEST), [0.3, 1.47, 0.0]),
+    bone("Forearm.L", Some(UPPER_ARM_L), [0.3, 1.18, 0.0]),
+    bone("UpperArm.R", Some(CHEST), [-0.3, 1.47, 0.0]),
+    bone("Forearm.R", Some(UPPER_ARM_R), [-0.3, 1.18, 0.0]),
     bone("Thigh.L", Some(HIPS), [0.1, 0.92, 0.0]),
     bone("Shin.L", Some(THIGH_L), [0.1, 0.5, 0.0]),
     bone("Thigh.R", Some(HIPS), [-0.1, 0.92, 0.0]),
@@ -62,13 +63,13 @@ const BONES: [Bone; 13] = [
 const BOXES: &[(usize, [f32; 3], [f32; 3])] = &[
     (HIPS, [0.0, 0.95, 0.0], [0.34, 0.18, 0.2]),
     (SPINE, [0.0, 1.15, 0.0], [0.3, 0.2, 0.18]),
-    (CHEST, [0.0, 1.37, 0.0], [0.38, 0.26, 0.22]),
+    (CHEST, [0.0, 1.37, 0.0], [0.46, 0.26, 0.22]),
     (NECK, [0.0, 1.54, 0.0], [0.09, 0.1, 0.09]),
     (HEAD, [0.0, 1.7, 0.01], [0.2, 0.24, 0.22]),
-    (UPPER_ARM_L, [0.26, 1.33, 0.0], [0.09, 0.3, 0.09]),
-    (FOREARM_L, [0.26, 1.05, 0.0], [0.08, 0.28, 0.08]),
-    (UPPER_ARM_R, [-0.26, 1.33, 0.0], [0.09, 0.3, 0.09]),
-    (FOREARM_R, [-0.26, 1.05, 0.0], [0.08, 0.28, 0.08]),
+    (UPPER_ARM_L, [0.32, 1.33, 0.0], [0.09, 0.3, 0.09]),
+    (FOREARM_L, [0.32, 1.05, 0.0], [0.08, 0.28, 0.08]),
+    (UPPER_ARM_R, [-0.32, 1.33, 0.0], [0.09, 0.3, 0.09]),
+    (FOREARM_R, [-0.32, 1.05, 0.0], [0.08, 0.28, 0.08]),
     (THIGH_L, [0.1, 0.71, 0.0], [0.13, 0.42, 0.13]),
     (SHIN_L, [0.1, 0.27, 0.0], [0.11, 0.46, 0.11]),
     (SHIN_L, [0.1, 0.03, 0.05], [0.11, 0.06, 0.22]),
@@ -117,6 +118,77 @@ fn body() -> Body {
         }
     }
     b
+}
+
+/// A skirt skinned to the hips and thighs: a closed tube of `SKIRT_ROWS` rings of
+/// `SKIRT_COLUMNS` vertices from the waist (y = 1.0, half widths 0.205 × 0.135 m, a
+/// superellipse: clear of the hips' box collider in the `cape` example and of the arms) to
+/// the hem (y = 0.56, 0.33 × 0.28 m). The waist follows `Hips`; lower down each vertex leans on
+/// the thigh on its side (up to 60 % at the hem), so the skin swings with the legs. Vertex
+/// colour red is the painted max distance (0 at the waist, 1 at the hem, growing as the
+/// square of the height fraction): what `ClothSkinning`'s `MaxDistance::VertexColor` reads.
+struct Skirt {
+    positions: Vec<[f32; 3]>,
+    normals: Vec<[f32; 3]>,
+    joints: Vec<[u8; 4]>,
+    weights: Vec<[f32; 4]>,
+    colours: Vec<[f32; 4]>,
+    indices: Vec<u16>,
+}
+
+const SKIRT_ROWS: usize = 12;
+const SKIRT_COLUMNS: usize = 32;
+
+fn skirt() -> Skirt {
+    let mut k = Skirt {
+        positions: Vec::new(),
+        normals: Vec::new(),
+        joints: Vec::new(),
+        weights: Vec::new(),
+        colours: Vec::new(),
+        indices: Vec::new(),
+    };
+    for r in 0..SKIRT_ROWS {
+        let t = r as f32 / (SKIRT_ROWS - 1) as f32;
+        let y = 1.0 - 0.44 * t;
+        let (rx, rz) = (0.205 + 0.125 * t, 0.135 + 0.145 * t);
+        for c in 0..SKIRT_COLUMNS {
+            let a = TAU * c as f32 / SKIRT_COLUMNS as f32;
+            // A superellipse |x/rx|⁶ + |z/rz|⁶ = 1: round, but square enough at the waist to
+            // clear the corners of the hips.
+            let (ca, sa) = (a.cos(), a.sin());
+            let e = |v: f32| v.signum() * v.abs().powf(1.0 / 3.0);
+            let (x, z) = (rx * e(ca), rz * e(sa));
+            // Outward: the gradient of the superellipse, tilted by the flare.
+            let g = |v: f32, r: f32| v.signum() * (v.abs() / r).powi(5) / r;
+            let n = [g(x, rx), 0.12 / 0.44 * 0.3, g(z, rz)];
+            let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            k.positions.push([x, y, z]);
+            k.normals.push([n[0] / l, n[1] / l, n[2] / l]);
+            // Shared between the thighs by the side it is on (half each at the front and
+            // back middle, so the skin never tears apart between the legs).
+            let w = 0.6 * t;
+            let left = 0.5 + 0.5 * ca;
+            k.joints.push([HIPS as u8, THIGH_L as u8, THIGH_R as u8, 0]);
+            k.weights.push([1.0 - w, w * left, w * (1.0 - left), 0.0]);
+            k.colours.push([t * t, 0.0, 0.0, 1.0]);
+        }
+    }
+    let at = |r: usize, c: usize| (r * SKIRT_COLUMNS + c % SKIRT_COLUMNS) as u16;
+    for r in 0..SKIRT_ROWS - 1 {
+        for c in 0..SKIRT_COLUMNS {
+            // Counter-clockwise seen from outside.
+            k.indices.extend([
+                at(r, c),
+                at(r, c + 1),
+                at(r + 1, c),
+                at(r + 1, c),
+                at(r, c + 1),
+                at(r + 1, c + 1),
+            ]);
+        }
+    }
+    k
 }
 
 /// One animation: its name, cycle length, and the pose at phase `φ ∈ [0, 1)`: rotation
@@ -257,6 +329,16 @@ fn main() {
     let wgt = w.floats(&weights, 4, "VEC4", false, Some(34962));
     let idx: Vec<u8> = b.indices.iter().flat_map(|i| i.to_le_bytes()).collect();
     let ind = w.raw(&idx, 5123, b.indices.len(), "SCALAR", 34963);
+    let k = skirt();
+    let flat4 = |v: &[[f32; 4]]| v.iter().flatten().copied().collect::<Vec<f32>>();
+    let skirt_pos = w.floats(&flat(&k.positions), 3, "VEC3", true, Some(34962));
+    let skirt_nrm = w.floats(&flat(&k.normals), 3, "VEC3", false, Some(34962));
+    let skirt_joints: Vec<u8> = k.joints.iter().flatten().copied().collect();
+    let skirt_jnt = w.raw(&skirt_joints, 5121, k.joints.len(), "VEC4", 34962);
+    let skirt_wgt = w.floats(&flat4(&k.weights), 4, "VEC4", false, Some(34962));
+    let skirt_col = w.floats(&flat4(&k.colours), 4, "VEC4", false, Some(34962));
+    let skirt_idx: Vec<u8> = k.indices.iter().flat_map(|i| i.to_le_bytes()).collect();
+    let skirt_ind = w.raw(&skirt_idx, 5123, k.indices.len(), "SCALAR", 34963);
     // Inverse bind matrices: the bones' rest frames are translations only.
     let ibm: Vec<f32> = BONES
         .iter()
@@ -269,14 +351,16 @@ fn main() {
         .collect();
     let ibm = w.floats(&ibm, 16, "MAT4", false, None);
 
-    // Nodes: 0 "Character" (the scene root), 1 "Body" (the skinned mesh), 2.. the bones.
-    let bone_node = |i: usize| i + 2;
+    // Nodes: 0 "Character" (the scene root), 1 "Body" and 2 "Skirt" (the skinned meshes),
+    // 3.. the bones.
+    let bone_node = |i: usize| i + 3;
     let mut nodes = vec![
         format!(
-            r#"{{"name":"Character","children":[1,{}]}}"#,
+            r#"{{"name":"Character","children":[1,2,{}]}}"#,
             bone_node(HIPS)
         ),
         r#"{"name":"Body","mesh":0,"skin":0}"#.to_string(),
+        r#"{"name":"Skirt","mesh":1,"skin":0}"#.to_string(),
     ];
     for (i, bn) in BONES.iter().enumerate() {
         let local = match bn.parent {
@@ -356,8 +440,14 @@ fn main() {
   "nodes": [
     {}
   ],
-  "meshes": [{{"name": "Body", "primitives": [{{"attributes": {{"POSITION": {pos}, "NORMAL": {nrm}, "JOINTS_0": {jnt}, "WEIGHTS_0": {wgt}}}, "indices": {ind}, "material": 0}}]}}],
-  "materials": [{{"name": "Body", "pbrMetallicRoughness": {{"baseColorFactor": [0.22, 0.2, 0.18, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8}}}}],
+  "meshes": [
+    {{"name": "Body", "primitives": [{{"attributes": {{"POSITION": {pos}, "NORMAL": {nrm}, "JOINTS_0": {jnt}, "WEIGHTS_0": {wgt}}}, "indices": {ind}, "material": 0}}]}},
+    {{"name": "Skirt", "primitives": [{{"attributes": {{"POSITION": {skirt_pos}, "NORMAL": {skirt_nrm}, "JOINTS_0": {skirt_jnt}, "WEIGHTS_0": {skirt_wgt}, "COLOR_0": {skirt_col}}}, "indices": {skirt_ind}, "material": 1}}]}}
+  ],
+  "materials": [
+    {{"name": "Body", "pbrMetallicRoughness": {{"baseColorFactor": [0.22, 0.2, 0.18, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8}}}},
+    {{"name": "Skirt", "doubleSided": true, "pbrMetallicRoughness": {{"baseColorFactor": [0.12, 0.3, 0.55, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.9}}}}
+  ],
   "skins": [{{"name": "Armature", "inverseBindMatrices": {ibm}, "joints": [{}], "skeleton": {}}}],
   "animations": [
     {}
@@ -383,9 +473,10 @@ fn main() {
     std::fs::write(format!("{out_dir}/character.gltf"), json).expect("write the glTF");
     std::fs::write(format!("{out_dir}/character.bin"), &w.bin).expect("write the buffer");
     println!(
-        "wrote {out_dir}/character.gltf and .bin ({} bytes): {} vertices, {} bones, animations {}",
+        "wrote {out_dir}/character.gltf and .bin ({} bytes): {} + {} (skirt) vertices, {} bones, animations {}",
         w.bin.len(),
         b.positions.len(),
+        k.positions.len(),
         BONES.len(),
         GAITS.map(|g| g.name).join(", ")
     );

@@ -447,3 +447,68 @@ fn step_many_gives_each_cloth_what_stepping_it_alone_gives() {
         assert!(moved, "cloth {i}");
     }
 }
+
+#[test]
+fn motion_targets_hold_the_cloth_and_refuse_bad_input() {
+    use crate::solver::{HangingCloth, StateError};
+    let mut sim = HangingCloth::new(8).build().expect("valid");
+    let n = sim.state().len();
+    let rest: Vec<Vec4> = sim.state().positions.clone();
+    // Every vertex within 1 cm of its rest position, the targets rising 1 cm a step.
+    for k in 0..30 {
+        let targets: Vec<Vec4> = rest
+            .iter()
+            .map(|p| (p.truncate() + Vec3::Y * 0.01 * (k + 1) as f32).extend(0.01))
+            .collect();
+        sim.set_motion_targets(&targets, &[], 0.0, false)
+            .expect("valid targets");
+        sim.step(1.0 / 60.0, &Serial);
+        // Pinned vertices follow their pins, not the targets.
+        for (p, t) in sim
+            .state()
+            .positions
+            .iter()
+            .zip(&targets)
+            .filter(|(p, _)| p.w > 0.0)
+        {
+            let d = p.truncate().distance(t.truncate());
+            assert!(d <= 0.01 + 1e-5, "step {k}: {d} m from the target");
+        }
+    }
+    assert!(sim.has_motion_targets());
+    // Bad input is refused and the targets stay.
+    let before = sim.motion_targets().map(|m| m.end.to_vec());
+    assert_eq!(
+        sim.set_motion_targets(&rest[..n - 1], &[], 0.0, false),
+        Err(StateError::MotionLengthMismatch {
+            targets: n - 1,
+            vertex_count: n
+        })
+    );
+    assert_eq!(
+        sim.set_motion_targets(&rest, &rest[..3], 0.5, false),
+        Err(StateError::MotionLengthMismatch {
+            targets: 3,
+            vertex_count: n
+        })
+    );
+    let mut nan = rest.clone();
+    nan[5].y = f32::NAN;
+    assert_eq!(
+        sim.set_motion_targets(&nan, &[], 0.0, false),
+        Err(StateError::NonFiniteMotionTarget { vertex: 5 })
+    );
+    assert_eq!(
+        sim.set_motion_targets(&rest, &rest, f32::INFINITY, false),
+        Err(StateError::NonFiniteMotionTarget { vertex: 0 })
+    );
+    assert_eq!(sim.motion_targets().map(|m| m.end.to_vec()), before);
+    // Let go: the cloth falls again, and a held cloth never fell asleep.
+    sim.clear_motion_targets();
+    let y = sim.state().positions[n - 1].y;
+    for _ in 0..60 {
+        sim.step(1.0 / 60.0, &Serial);
+    }
+    let now = sim.state().positions[n - 1].y;
+    assert!(now < y - 0.1, "{y} → {now}");
+}
