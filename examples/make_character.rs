@@ -49,10 +49,10 @@ const BONES: [Bone; 13] = [
     bone("Chest", Some(SPINE), [0.0, 1.26, 0.0]),
     bone("Neck", Some(CHEST), [0.0, 1.52, 0.0]),
     bone("Head", Some(NECK), [0.0, 1.60, 0.0]),
-    bone("UpperArm.L", Some(CHEST), [0.3, 1.47, 0.0]),
-    bone("Forearm.L", Some(UPPER_ARM_L), [0.3, 1.18, 0.0]),
-    bone("UpperArm.R", Some(CHEST), [-0.3, 1.47, 0.0]),
-    bone("Forearm.R", Some(UPPER_ARM_R), [-0.3, 1.18, 0.0]),
+    bone("UpperArm.L", Some(CHEST), [0.24, 1.47, 0.0]),
+    bone("Forearm.L", Some(UPPER_ARM_L), [0.24, 1.18, 0.0]),
+    bone("UpperArm.R", Some(CHEST), [-0.24, 1.47, 0.0]),
+    bone("Forearm.R", Some(UPPER_ARM_R), [-0.24, 1.18, 0.0]),
     bone("Thigh.L", Some(HIPS), [0.1, 0.92, 0.0]),
     bone("Shin.L", Some(THIGH_L), [0.1, 0.5, 0.0]),
     bone("Thigh.R", Some(HIPS), [-0.1, 0.92, 0.0]),
@@ -63,13 +63,13 @@ const BONES: [Bone; 13] = [
 const BOXES: &[(usize, [f32; 3], [f32; 3])] = &[
     (HIPS, [0.0, 0.95, 0.0], [0.34, 0.18, 0.2]),
     (SPINE, [0.0, 1.15, 0.0], [0.3, 0.2, 0.18]),
-    (CHEST, [0.0, 1.37, 0.0], [0.46, 0.26, 0.22]),
+    (CHEST, [0.0, 1.37, 0.0], [0.38, 0.26, 0.22]),
     (NECK, [0.0, 1.54, 0.0], [0.09, 0.1, 0.09]),
     (HEAD, [0.0, 1.7, 0.01], [0.2, 0.24, 0.22]),
-    (UPPER_ARM_L, [0.32, 1.33, 0.0], [0.09, 0.3, 0.09]),
-    (FOREARM_L, [0.32, 1.05, 0.0], [0.08, 0.28, 0.08]),
-    (UPPER_ARM_R, [-0.32, 1.33, 0.0], [0.09, 0.3, 0.09]),
-    (FOREARM_R, [-0.32, 1.05, 0.0], [0.08, 0.28, 0.08]),
+    (UPPER_ARM_L, [0.26, 1.33, 0.0], [0.09, 0.3, 0.09]),
+    (FOREARM_L, [0.26, 1.05, 0.0], [0.08, 0.28, 0.08]),
+    (UPPER_ARM_R, [-0.26, 1.33, 0.0], [0.09, 0.3, 0.09]),
+    (FOREARM_R, [-0.26, 1.05, 0.0], [0.08, 0.28, 0.08]),
     (THIGH_L, [0.1, 0.71, 0.0], [0.13, 0.42, 0.13]),
     (SHIN_L, [0.1, 0.27, 0.0], [0.11, 0.46, 0.11]),
     (SHIN_L, [0.1, 0.03, 0.05], [0.11, 0.06, 0.22]),
@@ -121,9 +121,9 @@ fn body() -> Body {
 }
 
 /// A skirt skinned to the hips and thighs: a closed tube of `SKIRT_ROWS` rings of
-/// `SKIRT_COLUMNS` vertices from the waist (y = 1.0, half widths 0.205 × 0.135 m, a
-/// superellipse: clear of the hips' box collider in the `cape` example and of the arms) to
-/// the hem (y = 0.56, 0.33 × 0.28 m). The waist follows `Hips`; lower down each vertex leans on
+/// `SKIRT_COLUMNS` vertices from the waist (y = 1.0, half widths 0.195 × 0.145 m, a
+/// superellipse: clear of the hips' box collider in the `cape` example and of the hanging
+/// hands) to the hem (y = 0.56, 0.33 × 0.28 m). The waist follows `Hips`; lower down each vertex leans on
 /// the thigh on its side (up to 60 % at the hem), so the skin swings with the legs. Vertex
 /// colour red is the painted max distance (0 at the waist, 1 at the hem, growing as the
 /// square of the height fraction): what `ClothSkinning`'s `MaxDistance::VertexColor` reads.
@@ -151,7 +151,8 @@ fn skirt() -> Skirt {
     for r in 0..SKIRT_ROWS {
         let t = r as f32 / (SKIRT_ROWS - 1) as f32;
         let y = 1.0 - 0.44 * t;
-        let (rx, rz) = (0.205 + 0.125 * t, 0.135 + 0.145 * t);
+        // Flaring slowly at first, past the hanging hands.
+        let (rx, rz) = (0.195 + 0.135 * t * t, 0.145 + 0.135 * t);
         for c in 0..SKIRT_COLUMNS {
             let a = TAU * c as f32 / SKIRT_COLUMNS as f32;
             // A superellipse |x/rx|⁶ + |z/rz|⁶ = 1: round, but square enough at the waist to
@@ -161,7 +162,7 @@ fn skirt() -> Skirt {
             let (x, z) = (rx * e(ca), rz * e(sa));
             // Outward: the gradient of the superellipse, tilted by the flare.
             let g = |v: f32, r: f32| v.signum() * (v.abs() / r).powi(5) / r;
-            let n = [g(x, rx), 0.12 / 0.44 * 0.3, g(z, rz)];
+            let n = [g(x, rx), 0.3 * t + 0.05, g(z, rz)];
             let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
             k.positions.push([x, y, z]);
             k.normals.push([n[0] / l, n[1] / l, n[2] / l]);

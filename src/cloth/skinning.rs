@@ -54,7 +54,8 @@ pub enum MaxDistance {
     /// One per vertex of the mesh (as the asset stores them, before welding), metres.
     PerVertex(Vec<f32>),
     /// A weight map painted into the mesh's vertex colours (`Mesh::ATTRIBUTE_COLOR`, glTF
-    /// `COLOR_0`): the red channel times `scale` metres (black follows the skin).
+    /// `COLOR_0`): the red channel times `scale` metres (black follows the skin). The cloth's
+    /// own mesh drops the colours, so the map does not tint the material.
     VertexColor {
         /// Metres at red = 1.
         scale: f32,
@@ -307,6 +308,10 @@ pub(super) fn skin_cloths(
                         // The cloth draws what it simulates: no skinning on its mesh.
                         mesh.remove_attribute(Mesh::ATTRIBUTE_JOINT_INDEX);
                         mesh.remove_attribute(Mesh::ATTRIBUTE_JOINT_WEIGHT);
+                        // A weight map, not a colour: not drawn.
+                        if matches!(settings.max_distance, MaxDistance::VertexColor { .. }) {
+                            mesh.remove_attribute(Mesh::ATTRIBUTE_COLOR);
+                        }
                     }
                     commands
                         .entity(entity)
