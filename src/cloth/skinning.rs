@@ -17,8 +17,7 @@ use crate::foundation::{EntityName, FixedPoses};
 /// Optionally a [`ClothBackstop`] keeps the cloth from passing through the body behind it.
 ///
 /// The skin is evaluated on the cloth's fixed clock from the joints' poses of each step
-/// ([`FixedPoses`]; with [`ClothAnimationPlugin`](crate::animation::ClothAnimationPlugin) the
-/// bones move on that clock too). The cloth takes over drawing: the entity's `SkinnedMesh`
+/// ([`FixedPoses`]; with `ClothAnimationPlugin` the bones move on that clock too). The cloth takes over drawing: the entity's `SkinnedMesh`
 /// is removed and the cloth's own mesh drops its joint attributes, so what is drawn is the
 /// simulation. At the first step every vertex is placed where the skin puts it.
 ///
