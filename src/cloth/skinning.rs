@@ -19,7 +19,8 @@ use crate::foundation::{EntityName, FixedPoses};
 /// The skin is evaluated on the cloth's fixed clock from the joints' poses of each step
 /// ([`FixedPoses`]; with `ClothAnimationPlugin` the bones move on that clock too). The cloth takes over drawing: the entity's `SkinnedMesh`
 /// is removed and the cloth's own mesh drops its joint attributes, so what is drawn is the
-/// simulation. At the first step every vertex is placed where the skin puts it.
+/// simulation. At the first step every vertex is placed where the skin puts it. Removing
+/// `ClothSkinning` lets the cloth run free (the `SkinnedMesh` is not put back).
 ///
 /// A `PerVertex` list of the wrong length, a mesh without joint attributes or vertex colours
 /// (where asked for), or a negative or non-finite distance is reported once as
