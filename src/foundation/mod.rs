@@ -103,6 +103,7 @@ impl Plugin for ClothFoundationPlugin {
 }
 
 /// Present once the plugin marked `P` has its systems in the cloth schedule.
+#[cfg(any(feature = "avian", feature = "rapier", feature = "animation"))]
 #[derive(Resource)]
 struct Scheduled<P>(core::marker::PhantomData<fn() -> P>);
 
@@ -110,6 +111,7 @@ struct Scheduled<P>(core::marker::PhantomData<fn() -> P>);
 /// `ClothPlugins` was added first: from the plugin's `build` when the [`ClothSchedule`] is
 /// known (`ClothPlugins` came first), otherwise from its `finish` (`in_finish`), once every
 /// plugin is built. For plugins outside the group (the physics bridges, animation).
+#[cfg(any(feature = "avian", feature = "rapier", feature = "animation"))]
 pub(crate) fn schedule_once<P: 'static>(
     app: &mut App,
     in_finish: bool,
