@@ -320,6 +320,17 @@ fn dress(
     }
 }
 
+/// How deep the deepest vertex of `s` is inside any of `colliders` (0 if none is).
+fn deepest(s: &bevy_cloth::solver::ClothState, colliders: &[bevy_cloth::solver::Collider]) -> f32 {
+    colliders
+        .iter()
+        .flat_map(|c| {
+            (0..s.len())
+                .map(move |i| -c.shape.distance(c.end.inverse_apply(s.position(i))).0 * c.end.scale)
+        })
+        .fold(0.0, f32::max)
+}
+
 /// Every fixed step, after the cloth stepped: how deep the cape is inside the body, how far
 /// the skirt is past its max distances and how deep in the body.
 fn measure_step(
@@ -336,13 +347,7 @@ fn measure_step(
     for sim in &capes {
         let s = sim.simulation().state();
         if time.elapsed_secs() > 1.0 {
-            for c in &colliders.colliders {
-                for i in 0..s.len() {
-                    let local = c.end.inverse_apply(s.position(i));
-                    let d = c.shape.distance(local).0 * c.end.scale;
-                    measured.penetration = measured.penetration.max(-d);
-                }
-            }
+            measured.penetration = measured.penetration.max(deepest(s, &colliders.colliders));
         }
         measured.steps += 1;
         measured.colliders = colliders.colliders.len();
@@ -357,13 +362,9 @@ fn measure_step(
                 let over = s.position(i).distance(t.truncate()) - t.w;
                 measured.skirt_over = measured.skirt_over.max(over);
             }
-            for c in &colliders.colliders {
-                for i in 0..s.len() {
-                    let local = c.end.inverse_apply(s.position(i));
-                    let d = c.shape.distance(local).0 * c.end.scale;
-                    measured.skirt_penetration = measured.skirt_penetration.max(-d);
-                }
-            }
+            measured.skirt_penetration = measured
+                .skirt_penetration
+                .max(deepest(s, &colliders.colliders));
             measured.skirt_steps += 1;
         }
     }

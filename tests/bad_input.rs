@@ -10,18 +10,12 @@ use bevy_cloth::prelude::*;
 use bevy_cloth::solver::{SolverError, StateError, TopologyError};
 
 mod common;
-use common::run;
-
-#[derive(Resource, Default)]
-struct Failures(Vec<ClothFailed>);
-
-fn collect(mut reader: MessageReader<ClothFailed>, mut out: ResMut<Failures>) {
-    out.0.extend(reader.read().cloned());
-}
+use common::{Failures, collect_failures, run};
 
 fn app() -> App {
     let mut app = common::app();
-    app.init_resource::<Failures>().add_systems(Update, collect);
+    app.init_resource::<Failures>()
+        .add_systems(Update, collect_failures);
     app
 }
 

@@ -12,7 +12,7 @@ use bevy_cloth::prelude::*;
 use bevy_cloth::solver::DEFAULT_TELEPORT_DISTANCE;
 
 mod common;
-use common::{app, app_with_frame, run};
+use common::{Failures, app, app_with_frame, collect_failures, run};
 
 fn add_mesh(app: &mut App, mesh: Mesh) -> Handle<Mesh> {
     app.world_mut().resource_mut::<Assets<Mesh>>().add(mesh)
@@ -798,13 +798,6 @@ fn colliders_follow_the_cloths_teleport_rule() {
         let moved = max_distance(&curtain_positions(&app, curtain), &before);
         assert_eq!(moved > 0.1, sweeps, "teleport {teleport}: moved {moved}");
     }
-}
-
-#[derive(Resource, Default)]
-struct Failures(Vec<ClothFailed>);
-
-fn collect_failures(mut reader: MessageReader<ClothFailed>, mut out: ResMut<Failures>) {
-    out.0.extend(reader.read().cloned());
 }
 
 #[test]
@@ -1696,18 +1689,11 @@ mod skinned_clothing {
         assert!(app.world().get::<ClothInvalid>(cloth).is_none());
     }
 
-    #[derive(Resource, Default)]
-    struct Failures(Vec<ClothFailed>);
-
-    fn collect(mut reader: MessageReader<ClothFailed>, mut out: ResMut<Failures>) {
-        out.0.extend(reader.read().cloned());
-    }
-
     #[test]
     fn a_weight_map_of_the_wrong_length_is_reported_and_the_cloth_runs_free() {
         let (mut app, cloth, _, _) = scene(Some(vec![0.0; 7]));
         app.init_resource::<Failures>()
-            .add_systems(PostUpdate, collect);
+            .add_systems(PostUpdate, collect_failures);
         run(&mut app, 2);
         let start = sim(&app, cloth).simulation().state().position(0);
         run(&mut app, 30);

@@ -154,6 +154,11 @@ impl ClothSim {
             .set_motion_targets(targets, backstop, backstop_radius, snap)
     }
 
+    /// Lets every particle go ([`Simulation::clear_motion_targets`]); not an edit either.
+    pub fn clear_motion_targets(&mut self) {
+        self.sim.clear_motion_targets();
+    }
+
     /// After a step taken elsewhere: see [`Simulation::motion_step_taken`].
     pub fn motion_step_taken(&mut self) {
         self.sim.motion_step_taken();

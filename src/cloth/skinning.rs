@@ -77,8 +77,6 @@ pub struct ClothBackstop {
 /// What a [`ClothSkinning`] cloth keeps between steps: the skin per particle.
 #[derive(Component, Debug)]
 pub(crate) struct ClothSkin {
-    /// The settings this was built from.
-    settings: ClothSkinning,
     /// The entity's `SkinnedMesh`, taken over (`None` until it was).
     skinned: Option<SkinnedMesh>,
     joints: Vec<Entity>,
@@ -220,12 +218,17 @@ fn max_distances(
 }
 
 impl ClothSkin {
-    /// The skin's targets (xyz, max distance in w) and backstop normals at the joints'
-    /// `matrices` (joint global × inverse bind pose).
-    fn evaluate(&self, matrices: &[Mat4], targets: &mut Vec<Vec4>, backstop: &mut Vec<Vec4>) {
+    /// The skin's targets (xyz, max distance in w) and backstop normals (with the backstop
+    /// `behind` the skin, if any) at the joints' `matrices` (joint global × inverse bind pose).
+    fn evaluate(
+        &self,
+        matrices: &[Mat4],
+        behind: Option<f32>,
+        targets: &mut Vec<Vec4>,
+        backstop: &mut Vec<Vec4>,
+    ) {
         targets.clear();
         backstop.clear();
-        let behind = self.settings.backstop.map(|b| b.distance);
         for (((p, n), (joints, weights)), max) in
             self.bind.iter().zip(&self.influence).zip(&self.max)
         {
@@ -258,7 +261,7 @@ pub(super) fn skin_cloths(
         (
             Entity,
             Option<&Name>,
-            &ClothSkinning,
+            Ref<ClothSkinning>,
             Option<&SkinnedMesh>,
             Option<&ClothSource>,
             Option<&mut ClothSkin>,
@@ -273,15 +276,15 @@ pub(super) fn skin_cloths(
     mut scratch: Local<(Vec<Mat4>, Vec<Vec4>, Vec<Vec4>)>,
 ) {
     for (entity, mut cloth) in &mut released {
-        cloth.simulation_mut().clear_motion_targets();
+        cloth.clear_motion_targets();
         commands.entity(entity).remove::<ClothSkin>();
     }
     let no_bindposes = Assets::<SkinnedMeshInverseBindposes>::default();
     let bindposes = bindposes.as_deref().unwrap_or(&no_bindposes);
-    for (entity, name, settings, skinned, source, skin, mut cloth) in &mut cloths {
+    for (entity, name, settings, skinned, source, mut skin, mut cloth) in &mut cloths {
         let who = EntityName::new(entity, name);
-        let fresh = skin.as_deref().is_none_or(|s| s.settings != *settings);
-        let mut skin = skin;
+        // Built once, and again when the settings change.
+        let fresh = skin.is_none() || settings.is_changed();
         if fresh {
             let mut slot = skin.as_deref_mut().and_then(|s| s.error.take());
             // The mesh as the user gave it (the cloth's copy holds simulated positions).
@@ -298,7 +301,7 @@ pub(super) fn skin_cloths(
                         .ok_or_else(|| "the entity has no SkinnedMesh".to_owned())?;
                     Ok((
                         skin_data(sk, bindposes, mesh, &cloth)?,
-                        max_distances(settings, mesh, &cloth)?,
+                        max_distances(&settings, mesh, &cloth)?,
                     ))
                 });
             match built {
@@ -317,7 +320,6 @@ pub(super) fn skin_cloths(
                         .entity(entity)
                         .remove::<SkinnedMesh>()
                         .insert(ClothSkin {
-                            settings: settings.clone(),
                             skinned,
                             joints,
                             inverse_bindposes,
@@ -336,17 +338,15 @@ pub(super) fn skin_cloths(
                         Err(ClothError::Skinning(reason)),
                         ("skinning", "it runs free meanwhile"),
                     );
-                    cloth.simulation_mut().clear_motion_targets();
+                    cloth.clear_motion_targets();
                     match skin.as_deref_mut() {
                         Some(s) => {
-                            s.settings = settings.clone();
                             s.max.clear();
                             s.error = slot;
                         }
                         // Where the report is kept until the settings change.
                         None => {
                             commands.entity(entity).insert(ClothSkin {
-                                settings: settings.clone(),
                                 skinned: None,
                                 joints: Vec::new(),
                                 inverse_bindposes: Vec::new(),
@@ -396,8 +396,13 @@ pub(super) fn skin_cloths(
         if missing.is_some() {
             continue;
         }
-        skin.evaluate(matrices, targets, backstop);
-        let radius = skin.settings.backstop.map_or(0.0, |b| b.radius);
+        skin.evaluate(
+            matrices,
+            settings.backstop.map(|b| b.distance),
+            targets,
+            backstop,
+        );
+        let radius = settings.backstop.map_or(0.0, |b| b.radius);
         let snap = core::mem::take(&mut skin.snap) || cloth.teleport.is_some();
         if !cloth.simulation().has_motion_targets() {
             // Start where the skin is (an edit: a GPU cloth restarts from it).

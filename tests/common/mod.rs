@@ -30,6 +30,15 @@ pub fn app() -> App {
     app_with_frame(Duration::from_secs_f64(1.0 / 60.0))
 }
 
+/// Every `ClothFailed` message so far (add [`collect_failures`] to a schedule).
+#[derive(Resource, Default)]
+pub struct Failures(pub Vec<ClothFailed>);
+
+/// Appends the frame's `ClothFailed` messages to [`Failures`].
+pub fn collect_failures(mut reader: MessageReader<ClothFailed>, mut out: ResMut<Failures>) {
+    out.0.extend(reader.read().cloned());
+}
+
 /// Runs `frames` app updates.
 pub fn run(app: &mut App, frames: usize) {
     for _ in 0..frames {

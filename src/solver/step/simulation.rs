@@ -82,7 +82,7 @@ pub struct Simulation {
 }
 
 /// A cloth's motion targets (see [`Simulation::set_motion_targets`]).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 struct Motion {
     start: Vec<Vec4>,
     end: Vec<Vec4>,
@@ -489,25 +489,16 @@ impl Simulation {
         if let Some(vertex) = bad {
             return Err(StateError::NonFiniteMotionTarget { vertex });
         }
-        match &mut self.motion {
-            Some(m) if !snap => {
-                m.end.clear();
-                m.end.extend_from_slice(targets);
-            }
-            _ => {
-                self.motion = Some(Motion {
-                    start: targets.to_vec(),
-                    end: targets.to_vec(),
-                    backstop: Vec::new(),
-                    radius: 0.0,
-                });
-            }
+        let fresh = snap || self.motion.is_none();
+        let m = self.motion.get_or_insert_with(Motion::default);
+        m.end.clear();
+        m.end.extend_from_slice(targets);
+        if fresh {
+            m.start.clone_from(&m.end);
         }
-        if let Some(m) = &mut self.motion {
-            m.backstop.clear();
-            m.backstop.extend_from_slice(backstop);
-            m.radius = backstop_radius;
-        }
+        m.backstop.clear();
+        m.backstop.extend_from_slice(backstop);
+        m.radius = backstop_radius;
         self.sleep.wake();
         Ok(())
     }
