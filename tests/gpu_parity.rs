@@ -1099,6 +1099,38 @@ fn a_substep_takes_a_few_dispatches_for_every_cloth() {
     eprintln!("8 × 64², one carried: {carried:?}");
     assert_eq!(carried.per_frame, counts[1].per_frame + 1, "{carried:?}");
     assert_eq!(carried.per_substep, counts[1].per_substep);
+    // Motion targets (skinned clothing) ride in the contact dispatch: none more where a
+    // collider already needs it; alone, one a substep.
+    let held = |s: &Simulation| MotionTargets {
+        start: s.state().positions.clone(),
+        end: s.state().positions.clone(),
+        ..Default::default()
+    };
+    let motion = [held(&sims[0])];
+    let mut frame = GpuFrame::uniform(DT, 1, &ball, &targets);
+    frame.cloths[0].motion = &motion;
+    world.prepare(&g.device, &g.queue, &g.kernels, &frame);
+    assert_eq!(world.dispatches(&g.kernels), counts[1]);
+    let plain = HangingCloth::new(64).build().unwrap();
+    let mut world = GpuWorld::new(&g.device, &g.queue, &g.kernels, &[&plain]).unwrap();
+    let pins = vec![vec![
+        plain.state().pins().iter().map(|p| p.target).collect(),
+    ]];
+    let frame = GpuFrame::uniform(DT, 1, &[], &pins);
+    world.prepare(&g.device, &g.queue, &g.kernels, &frame);
+    let alone = world.dispatches(&g.kernels);
+    let motion = [held(&plain)];
+    let mut frame = GpuFrame::uniform(DT, 1, &[], &pins);
+    frame.cloths[0].motion = &motion;
+    world.prepare(&g.device, &g.queue, &g.kernels, &frame);
+    let with_motion = world.dispatches(&g.kernels);
+    eprintln!("64², no contacts: {alone:?}; held by motion targets: {with_motion:?}");
+    assert_eq!(
+        with_motion.per_frame,
+        alone.per_frame + 10,
+        "{with_motion:?}"
+    );
+    assert_eq!(with_motion.per_substep, alone.per_substep + 1);
 }
 
 /// The standard scene (1 m², 1 kg, two corner pins, XPBD 10 × 1) stretches on the GPU no more
