@@ -32,7 +32,7 @@
 //! (XPBD 10 × 1): nothing, a sphere collider under the cloth, wind, self-collision, tethers,
 //! tearing (threshold never reached), and everything at once; with a feature off, its code
 //! does not run, so `plain` is the cost of every scene without it. Tethers also report their
-//! effect on `max_strain`.
+//! effect on `max_strain`. `--variants plain,self_collision` runs only those rows.
 //!
 //! `--many`: 64 cloths of 16² against one of 128² (the same vertex count) stepped together
 //! with `step_many`, and one 128² with 64 × 16² on all threads against one thread.
@@ -276,8 +276,12 @@ fn scene_costs(args: &Args, par: &Workers, threads: usize) {
         0.4,
     )];
     let wind = WindField::new([(WindParams::default(), None)]);
+    let wanted: Vec<String> = list(args, "variants", &[]);
     for n in list(args, "sizes", &[64u32, 256]) {
-        for v in variants {
+        for v in variants
+            .into_iter()
+            .filter(|v| wanted.is_empty() || wanted.iter().any(|w| w == v.name))
+        {
             let make = || {
                 let mut sim = scene(n, "xpbd", 10, 1, Bending::parse(args));
                 let spacing = 1.0 / (n - 1) as f32;

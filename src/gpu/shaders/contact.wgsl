@@ -130,8 +130,9 @@ fn sc_min3(v: vec3<f32>) -> f32 {
 // rules): every other vertex of the same cloth closer than the reach that rests farther than
 // 2.5 thicknesses away, the `SC_MAX` lowest-numbered ones in increasing order; and every
 // triangle within the reach none of whose corners rests within half a thickness, that the
-// vertex is over or can slide over in the step, found through its first corner, the
-// `SC_TRI_MAX` lowest-numbered ones with their side codes.
+// vertex is over or can slide over in the step, found through its first corner (one resting
+// within 2.5 thicknesses only where the neighbourhood folded), the `SC_TRI_MAX`
+// lowest-numbered ones with their side codes.
 @compute @workgroup_size(64)
 fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -164,6 +165,41 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
         let size = 2u * cl.n;
         let lo = sc_cell(p - vec3<f32>(radius), inv);
         let hi = sc_cell(p + vec3<f32>(radius), inv);
+        // Has the own neighbourhood folded (`self_collision::NEAR_FOLDED`, `AHEAD`)? A vertex
+        // resting within 2.5 thicknesses, within the radius, now or two steps on at 97 % of
+        // its rest distance or closer.
+        let ahead = 2.0 * P.dt;
+        let pa = p + vel_i * ahead;
+        var folded = false;
+        for (var z = lo.z; z <= hi.z && !folded; z++) {
+            for (var y = lo.y; y <= hi.y && !folded; y++) {
+                for (var x = lo.x; x <= hi.x && !folded; x++) {
+                    let cell = vec3<i32>(x, y, z);
+                    var e = atomicLoad(&scratch[P.head_at + cl.head_base + sc_hash(cell, size)]);
+                    while e != 0u {
+                        let j = e - 1u;
+                        e = atomicLoad(&scratch[P.next_at + j]);
+                        let q = state[j].xyz;
+                        let d = q - p;
+                        let d2 = dot(d, d);
+                        if !(d2 < big2) || j == i || any(sc_cell(q, inv) != cell) {
+                            continue;
+                        }
+                        let r = state[P.rest_at + j].xyz - rest_i;
+                        let rest2 = dot(r, r);
+                        if !(rest2 > tri_skip2) || rest2 > skip2 {
+                            continue;
+                        }
+                        let f2 = 0.97 * 0.97 * rest2;
+                        let a = (q + state[P.vel_at + j].xyz * ahead) - pa;
+                        if d2 < f2 || dot(a, a) < f2 {
+                            folded = true;
+                            break;
+                        }
+                    }
+                }
+            }
+        }
         for (var z = lo.z; z <= hi.z; z++) {
             for (var y = lo.y; y <= hi.y; y++) {
                 for (var x = lo.x; x <= hi.x; x++) {
@@ -196,6 +232,10 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
                         // Beyond 2.5 thicknesses at rest, only where the cloth came closer to
                         // itself than at rest.
                         if rest2 > skip2 && !(d2 < 0.9 * 0.9 * rest2) {
+                            continue;
+                        }
+                        // Within 2.5 thicknesses at rest, only where the neighbourhood folded.
+                        if !(rest2 > skip2) && !folded {
                             continue;
                         }
                         // The triangles whose first corner is j.

@@ -73,9 +73,9 @@ fn sc_hash(c: vec3<i32>, size: u32) -> u32 {
     return bitcast<u32>(select(h, -h, h < 0)) % size;
 }
 
-// Cells of the self-collision hash (`self_collision::SelfCollisionScratch::find`): as wide as
-// the farthest a query reaches (2.5 thicknesses and the triangle reach), so the hash needs
-// no step-wide maximum first.
+// Cells of the self-collision hash: as wide as the farthest a query reaches (2.5 thicknesses
+// and the triangle reach), so the hash needs no step-wide maximum first. (The CPU's grid,
+// `self_collision::Grid`, is laid out for its vector units; both find the same vertices.)
 fn sc_cell_size(cl: Cloth) -> f32 {
     return 2.5 * cl.sc_thickness + cl.sc_tri_reach;
 }

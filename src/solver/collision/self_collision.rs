@@ -2,18 +2,30 @@
 //! and the triangles of other layers, and no vertex passes through a triangle it was in front
 //! of when the step began.
 //!
-//! Once per step, vertices go into a dense spatial hash (cells as wide as the farthest a query
-//! reaches; Müller, "Ten Minute Physics" 11) and every vertex collects, in parallel:
+//! Once per step, vertices go into a dense spatial hash (Müller, "Ten Minute Physics" 11) and
+//! every vertex collects, in parallel:
 //! - the vertices closer than the *reach* (`thickness` plus a margin for the motion during the
 //!   step: twice the fastest vertex's travel, at most 1.5 thicknesses), the
 //!   [`MAX_SELF_NEIGHBOURS`] lowest-numbered ones;
 //! - the triangles closer than the reach, the [`MAX_SELF_TRIANGLES`] lowest-numbered ones, each
 //!   with the side of it the vertex is on when the step begins (when the vertex is over the
 //!   triangle; otherwise the side is decided when it gets over it). A triangle is found
-//!   through its first corner, which lies within the reach plus [`triangle_reach`] of the
-//!   vertex; where that corner rests more than 2.5 thicknesses away, only when it is now at
-//!   least 10 % closer to the vertex than at rest: the cloth has folded or piled up between
-//!   them (a flat or stretched sheet's own distant triangles are never looked at).
+//!   through its first corner, which lies within the reach plus [`triangle_reach`] (the
+//!   query's *radius*) of the vertex. Where that corner rests more than 2.5 thicknesses away,
+//!   only when it is now at least 10 % closer to the vertex than at rest: the cloth has folded
+//!   or piled up between them (a flat or stretched sheet's own distant triangles are never
+//!   looked at). Where it rests nearer (the vertex's own neighbourhood), only when the
+//!   neighbourhood has *folded*: one of its vertices within the radius is now, or two steps
+//!   on at the velocities the step begins with, at least 3 % closer to the vertex than at
+//!   rest. A sheet lying flat, stretched or curving gently around a vertex does not bring its
+//!   own triangles over it within the step; testing them anyway cost five times the rest of
+//!   the query.
+//!
+//! The CPU's hash keeps the cells of a row along x in consecutive buckets and the positions,
+//! rest positions and positions two steps ahead in separate lanes, so that a query reads a
+//! few runs of entries in sequence and tests eight at a time (vectorised); the GPU's
+//! (`contact.wgsl`, `sc_query`) is a linked list per bucket. Both find the same vertices and
+//! keep the same lowest-numbered ones.
 //!
 //! Parts of the cloth that rest close together (a vertex and a vertex or triangle corner
 //! closer than 2.5 thicknesses in the rest shape) are left to the distance and bending
@@ -45,16 +57,12 @@ pub struct SelfCollision {
 /// Hash table and per-vertex candidate lists, reused between steps.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SelfCollisionScratch {
-    start: Vec<u32>,
-    entries: Vec<u32>,
-    /// Each entry's position and cell, in bucket order (read in sequence by the queries).
-    entry_pos: Vec<Vec3>,
-    entry_cells: Vec<IVec3>,
-    /// Cell of each vertex, to tell it from other cells sharing its bucket.
-    cells: Vec<IVec3>,
+    grid: Grid,
     /// Triangles by their first corner (offsets per vertex, then triangle indices).
     first_start: Vec<u32>,
     first_tris: Vec<u32>,
+    /// Every triangle's [`Frame`] at the step's start.
+    frames: Vec<Frame>,
     /// Per vertex: its neighbours' count and [`MAX_SELF_NEIGHBOURS`] slots.
     neighbour_count: Vec<u32>,
     neighbours: Vec<u32>,
@@ -93,6 +101,24 @@ const TRIANGLE_SKIP: f32 = 0.5;
 /// has folded or piled up between them.
 const FOLDED: f32 = 0.9;
 
+/// The query's grid has cells this many times narrower than the query's radius: rows of a few
+/// cells are read in sequence, fewer vertices outside the radius are looked at than with cells
+/// as wide as it.
+const CELLS_PER_RADIUS: f32 = 1.5;
+
+/// A vertex's own neighbourhood (the vertices resting between half a thickness and 2.5
+/// thicknesses from it) has *folded* when one of them is closer to it than this share of their
+/// rest distance, now or [`AHEAD`] × the step later at their velocities when the step begins;
+/// only then are the triangles through them looked at (a sheet that is flat or stretched
+/// around a vertex cannot bring its own triangles over it within the step).
+const NEAR_FOLDED: f32 = 0.97;
+
+/// How many steps ahead the fold test of [`NEAR_FOLDED`] also looks.
+const AHEAD: f32 = 2.0;
+
+/// Padding after the grid's entries: the query reads them eight at a time.
+const LANES: usize = 8;
+
 /// Vertices handled by one parallel work item.
 const CHUNK: usize = 512;
 
@@ -105,13 +131,7 @@ fn cell_of(p: Vec3, inv_cell: f32) -> IVec3 {
     t - IVec3::select(t.as_vec3().cmpgt(v), IVec3::ONE, IVec3::ZERO)
 }
 
-/// The query's bucket of cell `c` in a table of `mask + 1` (a power of two) buckets.
-#[inline]
-fn bucket(c: IVec3, mask: usize) -> usize {
-    mix(c) & mask
-}
-
-/// The cell hash both tables use (the GPU's `sc_hash` mixes the same way).
+/// The cell hash of [`count_self_crossings`] (the GPU's `sc_hash` mixes the same way).
 #[inline]
 fn mix(c: IVec3) -> usize {
     let h = (c.x.wrapping_mul(92_837_111))
@@ -123,6 +143,24 @@ fn mix(c: IVec3) -> usize {
 #[inline]
 fn hash(c: IVec3, size: usize) -> usize {
     mix(c) % size
+}
+
+/// The query grid's bucket of cell `c` in a table of `mask + 1` (a power of two) buckets: the
+/// cells of a row along x fall into consecutive buckets.
+#[inline]
+fn grid_bucket(c: IVec3, mask: usize) -> usize {
+    row_base(c.y, c.z).wrapping_add(c.x as isize as usize) & mask
+}
+
+#[inline]
+fn row_base(y: i32, z: i32) -> usize {
+    mix(IVec3::new(0, y, z))
+}
+
+/// How far `v` lies outside `[lo, hi)` (0 inside).
+#[inline]
+fn gap(v: f32, lo: f32, hi: f32) -> f32 {
+    (lo - v).max(v - hi).max(0.0)
 }
 
 /// How far past a triangle's nearest point its first corner may lie: the longest rest edge
@@ -148,33 +186,80 @@ pub fn triangle_reach(rest: &[Vec3], triangles: &[[u32; 3]], thickness: f32) -> 
     (1.25 * longest2.sqrt()).min(4.0 * thickness)
 }
 
+/// What projecting onto a triangle needs of it, computed once a step for the query (the same
+/// operations in the same order as the GPU's `sc_project`, so the results are the same bits).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Frame {
+    /// Unit normal, `(b - a) × (c - a)` normalised.
+    n: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+    d00: f32,
+    d01: f32,
+    d11: f32,
+    denom: f32,
+    /// Twice the area; NaN for a degenerate triangle (or one not finite).
+    area2: f32,
+    /// The longest edge.
+    longest: f32,
+}
+
+impl Frame {
+    /// The frame of `[a, b, c]`; its `area2` is NaN when the triangle is degenerate.
+    #[inline]
+    fn of([a, b, c]: [Vec3; 3]) -> Self {
+        let e1 = b - a;
+        let e2 = c - a;
+        let nn = e1.cross(e2);
+        let len = nn.length();
+        let d00 = e1.dot(e1);
+        let d01 = e1.dot(e2);
+        let d11 = e2.dot(e2);
+        let denom = d00 * d11 - d01 * d01;
+        let ok = !(len.is_nan() || len <= 1e-12 || denom.is_nan() || denom <= 0.0);
+        let longest2 = a
+            .distance_squared(b)
+            .max(b.distance_squared(c))
+            .max(c.distance_squared(a));
+        Self {
+            n: nn / len,
+            e1,
+            e2,
+            d00,
+            d01,
+            d11,
+            denom,
+            area2: if ok { len } else { f32::NAN },
+            longest: longest2.sqrt(),
+        }
+    }
+
+    /// `p`'s signed distance along the normal and its projection's barycentric weights (all
+    /// ≥ 0 inside), `a` being the first corner; `None` for a degenerate triangle.
+    #[inline]
+    fn project(&self, p: Vec3, a: Vec3) -> Option<(f32, Vec3)> {
+        if self.area2.is_nan() {
+            return None;
+        }
+        let ap = p - a;
+        let d = ap.dot(self.n);
+        let d20 = ap.dot(self.e1);
+        let d21 = ap.dot(self.e2);
+        let v = (self.d11 * d20 - self.d01 * d21) / self.denom;
+        let w = (self.d00 * d21 - self.d01 * d20) / self.denom;
+        Some((d, Vec3::new(1.0 - v - w, v, w)))
+    }
+}
+
 /// Where `p`'s projection onto the plane of `[a, b, c]` falls: the unit normal, `p`'s signed
 /// distance along it, the projection's barycentric weights (all ≥ 0 when it is inside) and
-/// twice the triangle's area; `None` for a degenerate triangle. The GPU's `sc_project` does the same operations.
+/// twice the triangle's area; `None` for a degenerate triangle. The GPU's `sc_project` does
+/// the same operations.
 #[inline]
-fn project(p: Vec3, [a, b, c]: [Vec3; 3]) -> Option<(Vec3, f32, Vec3, f32)> {
-    let e1 = b - a;
-    let e2 = c - a;
-    let nn = e1.cross(e2);
-    let len = nn.length();
-    if len.is_nan() || len <= 1e-12 {
-        return None;
-    }
-    let n = nn / len;
-    let ap = p - a;
-    let d = ap.dot(n);
-    let d00 = e1.dot(e1);
-    let d01 = e1.dot(e2);
-    let d11 = e2.dot(e2);
-    let d20 = ap.dot(e1);
-    let d21 = ap.dot(e2);
-    let denom = d00 * d11 - d01 * d01;
-    if denom.is_nan() || denom <= 0.0 {
-        return None;
-    }
-    let v = (d11 * d20 - d01 * d21) / denom;
-    let w = (d00 * d21 - d01 * d20) / denom;
-    Some((n, d, Vec3::new(1.0 - v - w, v, w), len))
+fn project(p: Vec3, corners: [Vec3; 3]) -> Option<(Vec3, f32, Vec3, f32)> {
+    let f = Frame::of(corners);
+    let (d, bary) = f.project(p, corners[0])?;
+    Some((f.n, d, bary, f.area2))
 }
 
 /// A triangle's slot: `triangle << 2 | side`, with [`BESIDE`] set for a triangle the vertex is
@@ -211,131 +296,398 @@ struct Query<'a> {
     dt: f32,
     rest: &'a [Vec3],
     triangles: &'a [[u32; 3]],
-    start: &'a [u32],
-    entries: &'a [u32],
-    entry_pos: &'a [Vec3],
-    entry_cells: &'a [IVec3],
+    grid: &'a Grid,
     first_start: &'a [u32],
     first_tris: &'a [u32],
+    frames: &'a [Frame],
     thickness: f32,
     reach: f32,
     radius: f32,
     skip: f32,
-    cell: f32,
+}
+
+/// A vertex's query in progress.
+struct Found<'a> {
+    neighbours: &'a mut [u32],
+    nc: usize,
+    tris: &'a mut [u32],
+    tc: usize,
+    /// The grid ranges the query reads, with their rows.
+    ranges: &'a mut Vec<(Row, usize, usize)>,
+    folded: bool,
+}
+
+/// Working space of one parallel work item of the query.
+#[derive(Default)]
+struct QuerySpace {
+    ranges: Vec<(Row, usize, usize)>,
+}
+
+/// What one look at eight grid entries found, as bit masks: within the radius and resting
+/// farther than 2.5 thicknesses, and neither a neighbour nor through a fold (`far` is only a
+/// candidate: the row is checked after); of the own neighbourhood and within the radius
+/// (`near`); of it and folded (`fold`).
+struct Lanes {
+    far: u32,
+    near: u32,
+    fold: u32,
 }
 
 impl Query<'_> {
     /// Vertex `i`'s neighbours and triangles into its slots; returns their counts.
-    fn vertex(&self, i: usize, neighbours: &mut [u32], tris: &mut [u32]) -> (usize, usize) {
-        let (mut nc, mut tc) = (0, 0);
+    fn vertex(
+        &self,
+        i: usize,
+        neighbours: &mut [u32],
+        tris: &mut [u32],
+        space: &mut QuerySpace,
+    ) -> (usize, usize) {
         let p = self.pos[i].xyz();
         if !p.is_finite() {
             return (0, 0);
         }
-        let inv = 1.0 / self.cell;
-        let mask = self.start.len() - 2;
-        let (r2, big2, skip2) = (
-            self.reach * self.reach,
-            self.radius * self.radius,
-            self.skip * self.skip,
-        );
+        space.ranges.clear();
+        let mut found = Found {
+            neighbours,
+            nc: 0,
+            tris,
+            tc: 0,
+            ranges: &mut space.ranges,
+            folded: false,
+        };
+        self.ranges(p, found.ranges);
+        let ahead = AHEAD * self.dt;
+        let pa = p + self.vel[i].xyz() * ahead;
+        let rest_i = self.rest[i];
+        for r in 0..found.ranges.len() {
+            let (row, k0, k1) = found.ranges[r];
+            let mut k = k0;
+            while k < k1 {
+                let m = (k1 - k).min(LANES);
+                let keep = (1u32 << m) - 1;
+                let lanes = self.lanes(k, p, pa, rest_i);
+                let mut far = lanes.far & keep;
+                while far != 0 {
+                    let l = far.trailing_zeros() as usize;
+                    far &= far - 1;
+                    self.far_hit(i, p, row, k + l, &mut found);
+                }
+                let mut fold = lanes.fold & keep;
+                while fold != 0 && !found.folded {
+                    let l = fold.trailing_zeros() as usize;
+                    fold &= fold - 1;
+                    found.folded |= self.in_row(i, row, k + l).is_some();
+                }
+                k += LANES;
+            }
+        }
+        // The own neighbourhood's triangles, where it has folded.
+        if found.folded {
+            for r in 0..found.ranges.len() {
+                let (row, k0, k1) = found.ranges[r];
+                let mut k = k0;
+                while k < k1 {
+                    let m = (k1 - k).min(LANES);
+                    let mut near = self.lanes(k, p, pa, rest_i).near & ((1u32 << m) - 1);
+                    while near != 0 {
+                        let l = near.trailing_zeros() as usize;
+                        near &= near - 1;
+                        if let Some(j) = self.in_row(i, row, k + l) {
+                            let rest2 = (self.rest[j] - rest_i).length_squared();
+                            self.triangles_through(i, p, j, rest2, &mut found);
+                        }
+                    }
+                    k += LANES;
+                }
+            }
+        }
+        (found.nc, found.tc)
+    }
+
+    /// The grid ranges within the radius of `p`: rows (cells along x) whose y–z square comes
+    /// within it, each trimmed to the x range it leaves there (a hundredth of a cell of slack
+    /// against rounding).
+    fn ranges(&self, p: Vec3, out: &mut Vec<(Row, usize, usize)>) {
+        let g = self.grid;
+        let (cell, inv) = (g.cell, 1.0 / g.cell);
+        let big2 = self.radius * self.radius;
+        let size = g.start.len() - 1;
+        let mask = size - 1;
+        let lo = cell_of(p - Vec3::splat(self.radius), inv);
+        let hi = cell_of(p + Vec3::splat(self.radius), inv);
+        // Slack for the rounding of cell bounds; more than four million cells out (or beyond
+        // an `i32`, where the cells saturate) whole rows are read.
+        let far = p.abs().max_element();
+        let slack = 0.01 * cell + far * 1e-6;
+        let exact = (far + self.radius) * inv < 4.0e6;
+        let bounds = |c: i32| (c as f32 * cell, (c as f32 + 1.0) * cell);
+        for z in lo.z..=hi.z {
+            let (z0, z1) = bounds(z);
+            let gz = if exact {
+                (gap(p.z, z0, z1) - slack).max(0.0)
+            } else {
+                0.0
+            };
+            for y in lo.y..=hi.y {
+                let (y0, y1) = bounds(y);
+                let gy = if exact {
+                    (gap(p.y, y0, y1) - slack).max(0.0)
+                } else {
+                    0.0
+                };
+                let left = big2 - gy * gy - gz * gz;
+                if left < 0.0 {
+                    continue;
+                }
+                let (x0, x1) = if exact {
+                    let half = left.sqrt() + slack;
+                    (
+                        cell_of(Vec3::splat(p.x - half), inv).x.max(lo.x),
+                        cell_of(Vec3::splat(p.x + half), inv).x.min(hi.x),
+                    )
+                } else {
+                    (lo.x, hi.x)
+                };
+                if x0 > x1 {
+                    continue;
+                }
+                let row = Row { y, z, x0, x1 };
+                let cells = (i64::from(x1) - i64::from(x0) + 1) as u64;
+                if cells >= size as u64 {
+                    out.push((row, g.start[0] as usize, g.start[size] as usize));
+                    continue;
+                }
+                let base = row_base(y, z);
+                let b0 = base.wrapping_add(x0 as isize as usize) & mask;
+                let b1 = base.wrapping_add(x1 as isize as usize) & mask;
+                if b0 <= b1 {
+                    out.push((row, g.start[b0] as usize, g.start[b1 + 1] as usize));
+                } else {
+                    out.push((row, g.start[b0] as usize, g.start[size] as usize));
+                    out.push((row, g.start[0] as usize, g.start[b1 + 1] as usize));
+                }
+            }
+        }
+    }
+
+    /// Grid entries `k..k + 8` against vertex `i` at `p` (`pa` ahead, resting at `rest_i`):
+    /// plain arithmetic on the grid's lanes, which the compiler vectorises.
+    #[inline(always)]
+    fn lanes(&self, k: usize, p: Vec3, pa: Vec3, rest_i: Vec3) -> Lanes {
+        let g = self.grid;
+        let big2 = self.radius * self.radius;
+        let r2 = self.reach * self.reach;
+        let skip2 = self.skip * self.skip;
+        let tri_skip = TRIANGLE_SKIP * self.thickness;
+        let tri_skip2 = tri_skip * tri_skip;
+        let at = |lane: &[f32]| -> [f32; LANES] {
+            lane[k..k + LANES].try_into().unwrap_or([f32::NAN; LANES])
+        };
+        let (x, y, z) = (at(&g.x), at(&g.y), at(&g.z));
+        let (rx, ry, rz) = (at(&g.rx), at(&g.ry), at(&g.rz));
+        let (ax, ay, az) = (at(&g.ax), at(&g.ay), at(&g.az));
+        let (mut far, mut near, mut fold) = (0u32, 0u32, 0u32);
+        for l in 0..LANES {
+            let (dx, dy, dz) = (x[l] - p.x, y[l] - p.y, z[l] - p.z);
+            let d2 = dx * dx + dy * dy + dz * dz;
+            let (ex, ey, ez) = (rx[l] - rest_i.x, ry[l] - rest_i.y, rz[l] - rest_i.z);
+            let rest2 = ex * ex + ey * ey + ez * ez;
+            let (fx, fy, fz) = (ax[l] - pa.x, ay[l] - pa.y, az[l] - pa.z);
+            let a2 = fx * fx + fy * fy + fz * fz;
+            let inside = d2 < big2;
+            let is_far = rest2 > skip2;
+            let is_near = rest2 > tri_skip2 && !is_far;
+            let f2 = NEAR_FOLDED * NEAR_FOLDED * rest2;
+            far |= u32::from(inside & is_far & ((d2 < r2) | (d2 < FOLDED * FOLDED * rest2))) << l;
+            near |= u32::from(inside & is_near) << l;
+            fold |= u32::from(inside & is_near & ((d2 < f2) | (a2 < f2))) << l;
+        }
+        Lanes { far, near, fold }
+    }
+
+    /// The vertex of grid entry `k` when it is not `i` and read through its own row (cells of
+    /// other rows hashed into these buckets are read through theirs: each vertex is seen once).
+    #[inline]
+    fn in_row(&self, i: usize, row: Row, k: usize) -> Option<usize> {
+        let c = self.grid.cells[k];
+        let j = self.grid.entries[k] as usize;
+        (c.y == row.y && c.z == row.z && c.x >= row.x0 && c.x <= row.x1 && j != i).then_some(j)
+    }
+
+    /// Grid entry `k` within the radius of vertex `i` at `p`, resting more than 2.5
+    /// thicknesses from it, and close enough to be a neighbour or to have folded towards it.
+    fn far_hit(&self, i: usize, p: Vec3, row: Row, k: usize, found: &mut Found) {
+        let Some(j) = self.in_row(i, row, k) else {
+            return;
+        };
+        let g = self.grid;
+        let d2 = (Vec3::new(g.x[k], g.y[k], g.z[k]) - p).length_squared();
+        let rest2 = (self.rest[j] - self.rest[i]).length_squared();
+        if d2 < self.reach * self.reach {
+            keep_smallest(found.neighbours, &mut found.nc, j as u32);
+        }
+        // Triangles through a `j` resting farther than 2.5 thicknesses away: only where the
+        // cloth has come closer to itself than it is at rest (a fold, a pile), never across a
+        // flat or stretched sheet, whose own triangles lie beside its vertices.
+        if d2 < FOLDED * FOLDED * rest2 {
+            self.triangles_through(i, p, j, rest2, found);
+        }
+    }
+
+    /// The triangles whose first corner is `j` (resting `rest2` from vertex `i` at `p`) that
+    /// `i` is over, or beside by no more than it can slide over in the step, into its list.
+    fn triangles_through(&self, i: usize, p: Vec3, j: usize, rest2: f32, found: &mut Found) {
         let rest_i = self.rest[i];
         let tri_skip = TRIANGLE_SKIP * self.thickness;
         let tri_skip2 = tri_skip * tri_skip;
         let margin = self.reach - self.thickness;
+        let r2 = self.reach * self.reach;
         let v = self.vel[i];
-        let lo = cell_of(p - Vec3::splat(self.radius), inv);
-        let hi = cell_of(p + Vec3::splat(self.radius), inv);
-        for z in lo.z..=hi.z {
-            for y in lo.y..=hi.y {
-                for x in lo.x..=hi.x {
-                    let cell = IVec3::new(x, y, z);
-                    let h = bucket(cell, mask);
-                    for k in self.start[h] as usize..self.start[h + 1] as usize {
-                        let d2 = self.entry_pos[k].distance_squared(p);
-                        let j = self.entries[k] as usize;
-                        // Other cells hashed into this bucket are visited through their own
-                        // coordinates: each vertex is seen once.
-                        if d2.is_nan() || d2 >= big2 || j == i || self.entry_cells[k] != cell {
-                            continue;
-                        }
-                        let rest2 = rest_i.distance_squared(self.rest[j]);
-                        if rest2.is_nan() || rest2 <= tri_skip2 {
-                            continue;
-                        }
-                        if d2 < r2 && rest2 > skip2 {
-                            keep_smallest(neighbours, &mut nc, j as u32);
-                        }
-                        // Triangles through a `j` resting farther than 2.5 thicknesses away:
-                        // only where the cloth has come closer to itself than it is at rest (a
-                        // fold, a pile), never across a flat or stretched sheet, whose own
-                        // triangles lie beside its vertices. Nearer ones always (a sharp fold).
-                        if rest2 > skip2 && d2 >= FOLDED * FOLDED * rest2 {
-                            continue;
-                        }
-                        let first = &self.first_tris
-                            [self.first_start[j] as usize..self.first_start[j + 1] as usize];
-                        for &t in first {
-                            let tri = self.triangles[t as usize];
-                            if !tri[1..].iter().all(|&k| {
-                                rest_i.distance_squared(self.rest[k as usize]) > tri_skip2
-                            }) {
-                                continue;
-                            }
-                            let corners = tri.map(|k| self.pos[k as usize].xyz());
-                            if !corners.iter().all(|c| c.is_finite()) {
-                                continue;
-                            }
-                            // Over the triangle, or beside it by no more than it can slide
-                            // over in the step (the sheet's own triangles around the vertex
-                            // are beside it, in its plane).
-                            let Some((_, d, bary, area2)) = project(p, corners) else {
-                                continue;
-                            };
-                            if d.is_nan() || d.abs() >= self.reach {
-                                continue;
-                            }
-                            let code = if bary.min_element() >= 0.0 {
-                                if d >= 0.0 { SIDE_FRONT } else { SIDE_BACK }
-                            } else {
-                                // How far it can slide over the triangle in the step: the margin;
-                                // over its own neighbourhood (which moves with it) twice its
-                                // fastest speed relative to a corner and a quarter thickness.
-                                let slide = if rest2 > skip2 {
-                                    margin
-                                } else {
-                                    let rel = tri
-                                        .iter()
-                                        .map(|&k| (self.vel[k as usize] - v).xyz().length_squared())
-                                        .fold(0.0f32, f32::max);
-                                    (2.0 * self.dt * rel.sqrt() + 0.25 * self.thickness).min(margin)
-                                };
-                                // At least −(the negative weight) altitudes from the triangle
-                                // (an altitude is at least twice the area over the longest
-                                // edge): most of a sheet's own triangles end here.
-                                let [a, b, c] = corners;
-                                let longest2 = a
-                                    .distance_squared(b)
-                                    .max(b.distance_squared(c))
-                                    .max(c.distance_squared(a));
-                                let below = -bary.min_element() * area2 / longest2.sqrt();
-                                if below > slide {
-                                    continue;
-                                }
-                                let q = super::sdf::closest_point_on_triangle(p, &corners);
-                                let near2 = q.distance_squared(p);
-                                if !(near2 < r2 && near2 - d * d <= slide * slide) {
-                                    continue;
-                                }
-                                SIDE_FREE
-                            };
-                            keep_smallest(tris, &mut tc, slot(t, code));
-                        }
-                    }
+        let first =
+            &self.first_tris[self.first_start[j] as usize..self.first_start[j + 1] as usize];
+        for &t in first {
+            let tri = self.triangles[t as usize];
+            if !tri[1..]
+                .iter()
+                .all(|&k| (self.rest[k as usize] - rest_i).length_squared() > tri_skip2)
+            {
+                continue;
+            }
+            let corners = tri.map(|k| self.pos[k as usize].xyz());
+            if !corners.iter().all(|c| c.is_finite()) {
+                continue;
+            }
+            // Over the triangle, or beside it by no more than it can slide over in the step
+            // (the sheet's own triangles around the vertex are beside it, in its plane).
+            let frame = &self.frames[t as usize];
+            let Some((d, bary)) = frame.project(p, corners[0]) else {
+                continue;
+            };
+            if d.is_nan() || d.abs() >= self.reach {
+                continue;
+            }
+            let code = if bary.min_element() >= 0.0 {
+                if d >= 0.0 { SIDE_FRONT } else { SIDE_BACK }
+            } else {
+                // How far it can slide over the triangle in the step: the margin; over its
+                // own neighbourhood (which moves with it) twice its fastest speed relative to
+                // a corner and a quarter thickness.
+                let slide = if rest2 > self.skip * self.skip {
+                    margin
+                } else {
+                    let rel = tri
+                        .iter()
+                        .map(|&k| (self.vel[k as usize] - v).xyz().length_squared())
+                        .fold(0.0f32, f32::max);
+                    (2.0 * self.dt * rel.sqrt() + 0.25 * self.thickness).min(margin)
+                };
+                // At least −(the negative weight) altitudes from the triangle (an altitude is
+                // at least twice the area over the longest edge): most of a sheet's own
+                // triangles end here.
+                let below = -bary.min_element() * frame.area2 / frame.longest;
+                if below > slide {
+                    continue;
                 }
+                let q = super::sdf::closest_point_on_triangle(p, &corners);
+                let near2 = q.distance_squared(p);
+                if !(near2 < r2 && near2 - d * d <= slide * slide) {
+                    continue;
+                }
+                SIDE_FREE
+            };
+            keep_smallest(found.tris, &mut found.tc, slot(t, code));
+        }
+    }
+}
+
+/// A row of the query grid: cells `x0..=x1` at `y`, `z`.
+#[derive(Clone, Copy)]
+struct Row {
+    y: i32,
+    z: i32,
+    x0: i32,
+    x1: i32,
+}
+
+/// The step's grid of vertices (cells of [`CELLS_PER_RADIUS`] to the query radius), its
+/// entries in bucket order with their positions in separate lanes.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Grid {
+    cell: f32,
+    /// Per bucket, its first entry; one more at the end.
+    start: Vec<u32>,
+    entries: Vec<u32>,
+    x: Vec<f32>,
+    y: Vec<f32>,
+    z: Vec<f32>,
+    /// Rest positions.
+    rx: Vec<f32>,
+    ry: Vec<f32>,
+    rz: Vec<f32>,
+    /// Positions [`AHEAD`] × the step on at the step's start velocities.
+    ax: Vec<f32>,
+    ay: Vec<f32>,
+    az: Vec<f32>,
+    cells: Vec<IVec3>,
+    /// Cell of each vertex.
+    vertex_cells: Vec<IVec3>,
+}
+
+impl Grid {
+    /// Every vertex with a finite position into its cell's bucket.
+    fn fill(&mut self, pos: &[Vec4], vel: &[Vec4], rest: &[Vec3], ahead: f32, cell: f32) {
+        let n = pos.len();
+        let size = (2 * n).next_power_of_two().max(2);
+        let mask = size - 1;
+        let inv = 1.0 / cell;
+        self.cell = cell;
+        self.start.clear();
+        self.start.resize(size + 1, 0);
+        self.vertex_cells.clear();
+        self.vertex_cells
+            .extend(pos.iter().map(|p| cell_of(p.xyz(), inv)));
+        for (p, c) in pos.iter().zip(&self.vertex_cells) {
+            if p.xyz().is_finite() {
+                self.start[grid_bucket(*c, mask)] += 1;
             }
         }
-        (nc, tc)
+        let mut acc = 0;
+        for s in &mut self.start {
+            acc += *s;
+            *s = acc;
+        }
+        let count = acc as usize + LANES;
+        self.entries.resize(count, 0);
+        self.x.resize(count, 0.0);
+        self.y.resize(count, 0.0);
+        self.z.resize(count, 0.0);
+        for lane in [
+            &mut self.rx,
+            &mut self.ry,
+            &mut self.rz,
+            &mut self.ax,
+            &mut self.ay,
+            &mut self.az,
+        ] {
+            lane.resize(count, 0.0);
+        }
+        self.cells.resize(count, IVec3::ZERO);
+        for (i, p) in pos.iter().enumerate() {
+            let p = p.xyz();
+            if p.is_finite() {
+                let c = self.vertex_cells[i];
+                let h = grid_bucket(c, mask);
+                self.start[h] -= 1;
+                let k = self.start[h] as usize;
+                self.entries[k] = i as u32;
+                (self.x[k], self.y[k], self.z[k]) = (p.x, p.y, p.z);
+                let r = rest[i];
+                (self.rx[k], self.ry[k], self.rz[k]) = (r.x, r.y, r.z);
+                let a = p + vel[i].xyz() * ahead;
+                (self.ax[k], self.ay[k], self.az[k]) = (a.x, a.y, a.z);
+                self.cells[k] = c;
+            }
+        }
     }
 }
 
@@ -349,7 +701,7 @@ struct QueryChunk<'a> {
 }
 
 impl SelfCollisionScratch {
-    /// Fills the hash with the current positions and every vertex's lists (see the module
+    /// Fills the grid with the current positions and every vertex's lists (see the module
     /// docs), the vertices in parallel.
     #[expect(clippy::too_many_arguments)]
     fn find(
@@ -363,42 +715,11 @@ impl SelfCollisionScratch {
         reach: f32,
         par: &impl Parallel,
     ) {
-        let skip = SKIP * thickness;
-        let tri_reach = triangle_reach(rest, triangles, thickness);
-        // Cells as wide as the farthest query (the reach is at most 2.5 thicknesses), in a
-        // power-of-two table (a bucket is a mask).
-        let cell = skip + tri_reach;
         let n = pos.len();
-        let size = (2 * n).next_power_of_two().max(2);
-        let mask = size - 1;
-        let inv = 1.0 / cell;
-        self.start.clear();
-        self.start.resize(size + 1, 0);
-        self.entries.resize(n, 0);
-        self.entry_pos.resize(n, Vec3::ZERO);
-        self.entry_cells.resize(n, IVec3::ZERO);
-        self.cells.clear();
-        self.cells.extend(pos.iter().map(|p| cell_of(p.xyz(), inv)));
-        for (p, c) in pos.iter().zip(&self.cells) {
-            if p.xyz().is_finite() {
-                self.start[bucket(*c, mask)] += 1;
-            }
-        }
-        let mut acc = 0;
-        for s in &mut self.start {
-            acc += *s;
-            *s = acc;
-        }
-        for (i, p) in pos.iter().enumerate() {
-            if p.xyz().is_finite() {
-                let h = bucket(self.cells[i], mask);
-                self.start[h] -= 1;
-                let k = self.start[h] as usize;
-                self.entries[k] = i as u32;
-                self.entry_pos[k] = p.xyz();
-                self.entry_cells[k] = self.cells[i];
-            }
-        }
+        let skip = SKIP * thickness;
+        let radius = reach + triangle_reach(rest, triangles, thickness);
+        self.grid
+            .fill(pos, vel, rest, AHEAD * dt, radius / CELLS_PER_RADIUS);
         // Triangles by first corner, in triangle order.
         self.first_start.clear();
         self.first_start.resize(n + 1, 0);
@@ -417,6 +738,28 @@ impl SelfCollisionScratch {
             *at += 1;
         }
 
+        self.frames.resize(triangles.len(), Frame::default());
+        let mut parts: Vec<(usize, &mut [Frame])> = self
+            .frames
+            .chunks_mut(4 * CHUNK)
+            .enumerate()
+            .map(|(k, f)| (k * 4 * CHUNK, f))
+            .collect();
+        par.for_each_mut(&mut parts, |(first, frames)| {
+            for (k, f) in frames.iter_mut().enumerate() {
+                let tri = triangles[*first + k];
+                *f = if valid(&tri) {
+                    Frame::of(tri.map(|k| pos[k as usize].xyz()))
+                } else {
+                    Frame {
+                        area2: f32::NAN,
+                        ..Frame::default()
+                    }
+                };
+            }
+        });
+        drop(parts);
+
         self.neighbour_count.clear();
         self.neighbour_count.resize(n, 0);
         self.neighbours.resize(n * MAX_SELF_NEIGHBOURS, 0);
@@ -429,17 +772,14 @@ impl SelfCollisionScratch {
             dt,
             rest,
             triangles,
-            start: &self.start,
-            entries: &self.entries,
-            entry_pos: &self.entry_pos,
-            entry_cells: &self.entry_cells,
+            grid: &self.grid,
             first_start: &self.first_start,
             first_tris: &self.first_tris,
+            frames: &self.frames,
             thickness,
             reach,
-            radius: reach + tri_reach,
+            radius,
             skip,
-            cell,
         };
         let mut chunks: Vec<QueryChunk> = self
             .neighbour_count
@@ -457,11 +797,13 @@ impl SelfCollisionScratch {
             })
             .collect();
         par.for_each_mut(&mut chunks, |c| {
+            let mut space = QuerySpace::default();
             for k in 0..c.neighbour_count.len() {
                 let (nc, tc) = query.vertex(
                     c.first + k,
                     &mut c.neighbours[k * MAX_SELF_NEIGHBOURS..(k + 1) * MAX_SELF_NEIGHBOURS],
                     &mut c.triangles[k * MAX_SELF_TRIANGLES..(k + 1) * MAX_SELF_TRIANGLES],
+                    &mut space,
                 );
                 c.neighbour_count[k] = nc as u32;
                 c.triangle_count[k] = tc as u32;
@@ -869,6 +1211,129 @@ mod tests {
         assert!((pos[3].z - (-0.05 + 0.075)).abs() < 1e-6, "{}", pos[3]);
         // The triangle's corners are moved by their own lists (they have none here).
         assert_eq!(&pos[..3], &start[..3]);
+    }
+
+    /// A 5 × 5 sheet in the XY plane, 0.1 apart, its triangles and rest positions.
+    fn sheet() -> (Vec<Vec4>, Vec<Vec3>, Vec<[u32; 3]>) {
+        let rest: Vec<Vec3> = (0..25)
+            .map(|k| Vec3::new((k % 5) as f32 * 0.1, (k / 5) as f32 * 0.1, 0.0))
+            .collect();
+        let mut tris = Vec::new();
+        for y in 0..4u32 {
+            for x in 0..4u32 {
+                let k = y * 5 + x;
+                tris.push([k, k + 1, k + 6]);
+                tris.push([k, k + 6, k + 5]);
+            }
+        }
+        (rest.iter().map(|p| p.extend(1.0)).collect(), rest, tris)
+    }
+
+    #[test]
+    fn the_own_neighbourhood_is_looked_at_only_where_it_folded() {
+        let (pos, rest, tris) = sheet();
+        let params = SelfCollision {
+            thickness: 0.1,
+            friction: 0.0,
+        };
+        let lists = |pos: &[Vec4], vel: &[Vec4]| {
+            let mut s = SelfCollisionScratch::default();
+            find_self_collision_candidates(
+                pos,
+                vel,
+                &rest,
+                &tris,
+                params,
+                1.0 / 60.0,
+                &mut s,
+                &Serial,
+            );
+            let count = s.triangle_count[12] as usize;
+            s.triangles[12 * MAX_SELF_TRIANGLES..12 * MAX_SELF_TRIANGLES + count].to_vec()
+        };
+        // The middle vertex leaves the flat sheet fast along its normal: fast enough to slide
+        // over the triangles beside it (within a thickness), but the sheet around it only
+        // stretches, so none of them is looked at.
+        let mut vel = vec![Vec4::ZERO; 25];
+        vel[12] = Vec4::new(0.0, 0.0, 3.0, 0.0);
+        assert_eq!(lists(&pos, &vel), Vec::<u32>::new());
+        // The same with a vertex two edges away come 10 % closer (the sheet folds between
+        // them): the triangles beside it that it can slide over are.
+        let mut folded = pos.clone();
+        folded[14].x -= 0.02;
+        let found = lists(&folded, &vel);
+        assert!(!found.is_empty());
+        assert!(found.iter().all(|s| s & 3 == SIDE_FREE), "{found:?}");
+        // Or the same vertex coming that close within two steps at its velocity (rising with
+        // the middle one).
+        let mut closing = vel.clone();
+        closing[14] = Vec4::new(-0.6, 0.0, 3.0, 0.0);
+        let ahead = lists(&pos, &closing);
+        assert!(!ahead.is_empty());
+        assert!(ahead.iter().all(|s| s & 3 == SIDE_FREE), "{ahead:?}");
+        // Only just not: 2 % closer within two steps.
+        closing[14].x = -0.12;
+        assert_eq!(lists(&pos, &closing), Vec::<u32>::new());
+    }
+
+    /// The grid finds every neighbour brute force finds, wherever the vertices are: a pile
+    /// around the origin, around a point 10⁹ m out (cells beyond what an `i32`
+    /// counts), two vertices alone (fewer buckets than a row has cells) and non-finite ones.
+    #[test]
+    fn the_grid_finds_what_brute_force_finds() {
+        let mut seed = 7u32;
+        let mut next = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let params = SelfCollision {
+            thickness: 0.05,
+            friction: 0.0,
+        };
+        for (n, at) in [(400, Vec3::ZERO), (400, Vec3::splat(1e9)), (2, Vec3::ZERO)] {
+            let spread = if n == 2 { 0.04 } else { 0.3 };
+            let mut pos: Vec<Vec4> = (0..n)
+                .map(|_| (at + Vec3::new(next(), next(), next()) * spread).extend(1.0))
+                .collect();
+            if n > 2 {
+                pos[3].x = f32::NAN;
+                pos[5].y = f32::INFINITY;
+            }
+            // Rest far apart: every pair can be neighbours.
+            let rest: Vec<Vec3> = (0..n).map(|k| Vec3::X * k as f32).collect();
+            let vel = vec![Vec4::ZERO; n];
+            let mut s = SelfCollisionScratch::default();
+            find_self_collision_candidates(
+                &pos,
+                &vel,
+                &rest,
+                &[],
+                params,
+                1.0 / 60.0,
+                &mut s,
+                &Serial,
+            );
+            let reach = params.thickness;
+            let mut total = 0;
+            for i in 0..n {
+                let p = pos[i].xyz();
+                let mut want: Vec<u32> = (0..n)
+                    .filter(|&j| {
+                        j != i
+                            && p.is_finite()
+                            && pos[j].xyz().is_finite()
+                            && (pos[j].xyz() - p).length_squared() < reach * reach
+                    })
+                    .map(|j| j as u32)
+                    .collect();
+                want.truncate(MAX_SELF_NEIGHBOURS);
+                let count = s.neighbour_count[i] as usize;
+                let got = &s.neighbours[i * MAX_SELF_NEIGHBOURS..i * MAX_SELF_NEIGHBOURS + count];
+                assert_eq!(got, &want[..], "vertex {i} of {n} at {at}");
+                total += count;
+            }
+            assert!(total > 0, "{n} at {at}: no pairs to compare");
+        }
     }
 
     #[test]
