@@ -126,13 +126,97 @@ fn sc_min3(v: vec3<f32>) -> f32 {
     return min(v.x, min(v.y, v.z));
 }
 
+// What a vertex's query knows of it and of the step.
+struct ScVertex {
+    p: vec3<f32>,
+    rest_i: vec3<f32>,
+    vel_i: vec3<f32>,
+    reach: f32,
+    margin: f32,
+    skip2: f32,
+    tri_skip2: f32,
+    thickness: f32,
+}
+
+// The triangles whose first corner is `j` (at `q`, resting `rest2` from the vertex) that the
+// vertex is over, or beside by no more than it can slide over in the step, into its sorted
+// list (CPU twin: `self_collision::Query::triangles_through`).
+fn sc_triangles_of(v: ScVertex, j: u32, q: vec3<f32>, rest2: f32, tlist: ptr<function, array<u32, 64>>, tcount: ptr<function, u32>) {
+    let r2 = v.reach * v.reach;
+    for (var m = topo[P.tri_offsets_at + j]; m < topo[P.tri_offsets_at + j + 1u]; m++) {
+        let t = topo[m];
+        let tb = P.tri_at + 3u * t;
+        if topo[tb] != j {
+            continue;
+        }
+        let k1 = topo[tb + 1u];
+        let k2 = topo[tb + 2u];
+        let r1 = state[P.rest_at + k1].xyz - v.rest_i;
+        let r2b = state[P.rest_at + k2].xyz - v.rest_i;
+        if !(dot(r1, r1) > v.tri_skip2 && dot(r2b, r2b) > v.tri_skip2) {
+            continue;
+        }
+        let b = state[k1].xyz;
+        let cc = state[k2].xyz;
+        if !(finite3(b) && finite3(cc)) {
+            continue;
+        }
+        // Over the triangle, or beside it by no more than it can slide over in the step.
+        let pr = sc_project(v.p, q, b, cc);
+        if !pr.ok || !(abs(pr.d) < v.reach) {
+            continue;
+        }
+        var code = SIDE_FREE;
+        if sc_min3(pr.bary) >= 0.0 {
+            code = select(SIDE_BACK, SIDE_FRONT, pr.d >= 0.0);
+        } else {
+            // How far it can slide over the triangle in the step (CPU twin: the same rule).
+            var slide = v.margin;
+            if !(rest2 > v.skip2) {
+                let v0 = state[P.vel_at + j].xyz - v.vel_i;
+                let v1 = state[P.vel_at + k1].xyz - v.vel_i;
+                let v2 = state[P.vel_at + k2].xyz - v.vel_i;
+                let rel = max(max(max(0.0, dot(v0, v0)), dot(v1, v1)), dot(v2, v2));
+                slide = min(2.0 * P.dt * sqrt(rel) + 0.25 * v.thickness, v.margin);
+            }
+            // At least −(the negative weight) altitudes away.
+            let longest2 = max(max(dot(b - q, b - q), dot(cc - b, cc - b)), dot(q - cc, q - cc));
+            let below = -sc_min3(pr.bary) * pr.area2 / sqrt(longest2);
+            if below > slide {
+                continue;
+            }
+            let near = sc_closest(v.p, q, b, cc) - v.p;
+            let near2 = dot(near, near);
+            if !(near2 < r2 && near2 - pr.d * pr.d <= slide * slide) {
+                continue;
+            }
+        }
+        // `self_collision::slot`: triangles it is over sort first.
+        let slot = select(0u, BESIDE, code == SIDE_FREE) | (t << 2u) | code;
+        if *tcount < SC_TRI_MAX || slot < (*tlist)[SC_TRI_MAX - 1u] {
+            var k = min(*tcount, SC_TRI_MAX - 1u);
+            while k > 0u && (*tlist)[k - 1u] > slot {
+                (*tlist)[k] = (*tlist)[k - 1u];
+                k -= 1u;
+            }
+            (*tlist)[k] = slot;
+            *tcount = min(*tcount + 1u, SC_TRI_MAX);
+        }
+    }
+}
+
+// Vertices of the own neighbourhood a query holds back until it knows whether the
+// neighbourhood folded; past that many it walks the cells again for the rest.
+const SC_PEND: u32 = 32u;
+
 // Once per step, from the step's start (CPU twin: `self_collision::Query::vertex`, the same
 // rules): every other vertex of the same cloth closer than the reach that rests farther than
 // 2.5 thicknesses away, the `SC_MAX` lowest-numbered ones in increasing order; and every
 // triangle within the reach none of whose corners rests within half a thickness, that the
 // vertex is over or can slide over in the step, found through its first corner (one resting
-// within 2.5 thicknesses only where the neighbourhood folded), the `SC_TRI_MAX`
-// lowest-numbered ones with their side codes.
+// within 2.5 thicknesses only where the neighbourhood folded: `self_collision::NEAR_FOLDED2`,
+// `AHEAD`), the `SC_TRI_MAX` lowest-numbered ones with their side codes. The lists are sorted,
+// so the order vertices are met in does not matter.
 @compute @workgroup_size(64)
 fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -156,50 +240,26 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
         let r2 = reach * reach;
         let big2 = radius * radius;
         let skip = 2.5 * cl.sc_thickness;
-        let skip2 = skip * skip;
         let tri_skip = 0.5 * cl.sc_thickness;
-        let tri_skip2 = tri_skip * tri_skip;
-        let margin = reach - cl.sc_thickness;
-        let vel_i = state[P.vel_at + i].xyz;
-        let rest_i = state[P.rest_at + i].xyz;
+        var v: ScVertex;
+        v.p = p;
+        v.rest_i = state[P.rest_at + i].xyz;
+        v.vel_i = state[P.vel_at + i].xyz;
+        v.reach = reach;
+        v.margin = reach - cl.sc_thickness;
+        v.skip2 = skip * skip;
+        v.tri_skip2 = tri_skip * tri_skip;
+        v.thickness = cl.sc_thickness;
         let size = 2u * cl.n;
         let lo = sc_cell(p - vec3<f32>(radius), inv);
         let hi = sc_cell(p + vec3<f32>(radius), inv);
-        // Has the own neighbourhood folded (`self_collision::NEAR_FOLDED`, `AHEAD`)? A vertex
-        // resting within 2.5 thicknesses, within the radius, now or two steps on at 97 % of
-        // its rest distance or closer.
+        // The own neighbourhood has folded when a vertex of it within the radius is now, or
+        // two steps on, at 97 % of its rest distance or closer; until then its vertices wait.
         let ahead = 2.0 * P.dt;
-        let pa = p + vel_i * ahead;
+        let pa = p + v.vel_i * ahead;
         var folded = false;
-        for (var z = lo.z; z <= hi.z && !folded; z++) {
-            for (var y = lo.y; y <= hi.y && !folded; y++) {
-                for (var x = lo.x; x <= hi.x && !folded; x++) {
-                    let cell = vec3<i32>(x, y, z);
-                    var e = atomicLoad(&scratch[P.head_at + cl.head_base + sc_hash(cell, size)]);
-                    while e != 0u {
-                        let j = e - 1u;
-                        e = atomicLoad(&scratch[P.next_at + j]);
-                        let q = state[j].xyz;
-                        let d = q - p;
-                        let d2 = dot(d, d);
-                        if !(d2 < big2) || j == i || any(sc_cell(q, inv) != cell) {
-                            continue;
-                        }
-                        let r = state[P.rest_at + j].xyz - rest_i;
-                        let rest2 = dot(r, r);
-                        if !(rest2 > tri_skip2) || rest2 > skip2 {
-                            continue;
-                        }
-                        let f2 = 0.97 * 0.97 * rest2;
-                        let a = (q + state[P.vel_at + j].xyz * ahead) - pa;
-                        if d2 < f2 || dot(a, a) < f2 {
-                            folded = true;
-                            break;
-                        }
-                    }
-                }
-            }
-        }
+        var pend: array<u32, SC_PEND>;
+        var npend = 0u;
         for (var z = lo.z; z <= hi.z; z++) {
             for (var y = lo.y; y <= hi.y; y++) {
                 for (var x = lo.x; x <= hi.x; x++) {
@@ -214,13 +274,13 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
                         if !(d2 < big2) || j == i || any(sc_cell(q, inv) != cell) {
                             continue;
                         }
-                        let r = state[P.rest_at + j].xyz - rest_i;
+                        let r = state[P.rest_at + j].xyz - v.rest_i;
                         let rest2 = dot(r, r);
-                        if !(rest2 > tri_skip2) {
+                        if !(rest2 > v.tri_skip2) {
                             continue;
                         }
                         // Keep the SC_MAX smallest indices, sorted.
-                        if d2 < r2 && rest2 > skip2 && (count < SC_MAX || j < list[SC_MAX - 1u]) {
+                        if d2 < r2 && rest2 > v.skip2 && (count < SC_MAX || j < list[SC_MAX - 1u]) {
                             var k = min(count, SC_MAX - 1u);
                             while k > 0u && list[k - 1u] > j {
                                 list[k] = list[k - 1u];
@@ -229,76 +289,63 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
                             list[k] = j;
                             count = min(count + 1u, SC_MAX);
                         }
-                        // Beyond 2.5 thicknesses at rest, only where the cloth came closer to
-                        // itself than at rest.
-                        if rest2 > skip2 && !(d2 < 0.9 * 0.9 * rest2) {
-                            continue;
-                        }
-                        // Within 2.5 thicknesses at rest, only where the neighbourhood folded.
-                        if !(rest2 > skip2) && !folded {
-                            continue;
-                        }
-                        // The triangles whose first corner is j.
-                        for (var m = topo[P.tri_offsets_at + j]; m < topo[P.tri_offsets_at + j + 1u]; m++) {
-                            let t = topo[m];
-                            let tb = P.tri_at + 3u * t;
-                            if topo[tb] != j {
+                        if rest2 > v.skip2 {
+                            // Beyond 2.5 thicknesses at rest, only where the cloth came closer
+                            // to itself than at rest.
+                            if !(d2 < 0.81 * rest2) {
                                 continue;
                             }
-                            let k1 = topo[tb + 1u];
-                            let k2 = topo[tb + 2u];
-                            let r1 = state[P.rest_at + k1].xyz - rest_i;
-                            let r2b = state[P.rest_at + k2].xyz - rest_i;
-                            if !(dot(r1, r1) > tri_skip2 && dot(r2b, r2b) > tri_skip2) {
-                                continue;
-                            }
-                            let b = state[k1].xyz;
-                            let cc = state[k2].xyz;
-                            if !(finite3(b) && finite3(cc)) {
-                                continue;
-                            }
-                            // Over the triangle, or beside it by no more than it can slide
-                            // over in the step.
-                            let pr = sc_project(p, q, b, cc);
-                            if !pr.ok || !(abs(pr.d) < reach) {
-                                continue;
-                            }
-                            var code = SIDE_FREE;
-                            if sc_min3(pr.bary) >= 0.0 {
-                                code = select(SIDE_BACK, SIDE_FRONT, pr.d >= 0.0);
+                        } else if !folded {
+                            let f2 = 0.9409 * rest2;
+                            let a = (q + state[P.vel_at + j].xyz * ahead) - pa;
+                            if d2 < f2 || dot(a, a) < f2 {
+                                folded = true;
                             } else {
-                                // How far it can slide over the triangle in the step (CPU twin:
-                                // the same rule).
-                                var slide = margin;
-                                if !(rest2 > skip2) {
-                                    let v0 = state[P.vel_at + j].xyz - vel_i;
-                                    let v1 = state[P.vel_at + k1].xyz - vel_i;
-                                    let v2 = state[P.vel_at + k2].xyz - vel_i;
-                                    let rel = max(max(max(0.0, dot(v0, v0)), dot(v1, v1)), dot(v2, v2));
-                                    slide = min(2.0 * P.dt * sqrt(rel) + 0.25 * cl.sc_thickness, margin);
+                                if npend < SC_PEND {
+                                    pend[npend] = j;
                                 }
-                                // At least −(the negative weight) altitudes away.
-                                let longest2 = max(max(dot(b - q, b - q), dot(cc - b, cc - b)), dot(q - cc, q - cc));
-                                let below = -sc_min3(pr.bary) * pr.area2 / sqrt(longest2);
-                                if below > slide {
-                                    continue;
-                                }
-                                let near = sc_closest(p, q, b, cc) - p;
-                                let near2 = dot(near, near);
-                                if !(near2 < r2 && near2 - pr.d * pr.d <= slide * slide) {
-                                    continue;
-                                }
+                                npend += 1u;
+                                continue;
                             }
-                            // `self_collision::slot`: triangles it is over sort first.
-                            let slot = select(0u, BESIDE, code == SIDE_FREE) | (t << 2u) | code;
-                            if tcount < SC_TRI_MAX || slot < tlist[SC_TRI_MAX - 1u] {
-                                var k = min(tcount, SC_TRI_MAX - 1u);
-                                while k > 0u && tlist[k - 1u] > slot {
-                                    tlist[k] = tlist[k - 1u];
-                                    k -= 1u;
+                        }
+                        sc_triangles_of(v, j, q, rest2, &tlist, &tcount);
+                    }
+                }
+            }
+        }
+        if folded {
+            // The neighbourhood's vertices met before it was known to have folded.
+            for (var k = 0u; k < min(npend, SC_PEND); k++) {
+                let j = pend[k];
+                let r = state[P.rest_at + j].xyz - v.rest_i;
+                sc_triangles_of(v, j, state[j].xyz, dot(r, r), &tlist, &tcount);
+            }
+            // More of them than were held: the same walk again for the ones past SC_PEND (the
+            // walk meets them in the same order).
+            if npend > SC_PEND {
+                var seen = 0u;
+                for (var z = lo.z; z <= hi.z; z++) {
+                    for (var y = lo.y; y <= hi.y; y++) {
+                        for (var x = lo.x; x <= hi.x; x++) {
+                            let cell = vec3<i32>(x, y, z);
+                            var e = atomicLoad(&scratch[P.head_at + cl.head_base + sc_hash(cell, size)]);
+                            while e != 0u && seen < npend {
+                                let j = e - 1u;
+                                e = atomicLoad(&scratch[P.next_at + j]);
+                                let q = state[j].xyz;
+                                let d = q - p;
+                                if !(dot(d, d) < big2) || j == i || any(sc_cell(q, inv) != cell) {
+                                    continue;
                                 }
-                                tlist[k] = slot;
-                                tcount = min(tcount + 1u, SC_TRI_MAX);
+                                let r = state[P.rest_at + j].xyz - v.rest_i;
+                                let rest2 = dot(r, r);
+                                if !(rest2 > v.tri_skip2) || rest2 > v.skip2 {
+                                    continue;
+                                }
+                                if seen >= SC_PEND {
+                                    sc_triangles_of(v, j, q, rest2, &tlist, &tcount);
+                                }
+                                seen += 1u;
                             }
                         }
                     }
