@@ -316,15 +316,7 @@ struct Found<'a> {
     nc: usize,
     tris: &'a mut [u32],
     tc: usize,
-    /// The grid ranges the query reads, with their rows.
-    ranges: &'a mut Vec<(Row, usize, usize)>,
     folded: bool,
-}
-
-/// Working space of one parallel work item of the query.
-#[derive(Default)]
-struct QuerySpace {
-    ranges: Vec<(Row, usize, usize)>,
 }
 
 /// What one look at eight grid entries found, as bit masks: within the radius and resting
@@ -338,33 +330,32 @@ struct Lanes {
 }
 
 impl Query<'_> {
-    /// Vertex `i`'s neighbours and triangles into its slots; returns their counts.
+    /// Vertex `i`'s neighbours and triangles into its slots; returns their counts. `ranges`
+    /// is working space.
     fn vertex(
         &self,
         i: usize,
         neighbours: &mut [u32],
         tris: &mut [u32],
-        space: &mut QuerySpace,
+        ranges: &mut Vec<(Row, usize, usize)>,
     ) -> (usize, usize) {
         let p = self.pos[i].xyz();
         if !p.is_finite() {
             return (0, 0);
         }
-        space.ranges.clear();
+        ranges.clear();
+        self.ranges(p, ranges);
         let mut found = Found {
             neighbours,
             nc: 0,
             tris,
             tc: 0,
-            ranges: &mut space.ranges,
             folded: false,
         };
-        self.ranges(p, found.ranges);
         let ahead = AHEAD * self.dt;
         let pa = p + self.vel[i].xyz() * ahead;
         let rest_i = self.rest[i];
-        for r in 0..found.ranges.len() {
-            let (row, k0, k1) = found.ranges[r];
+        for &(row, k0, k1) in ranges.iter() {
             let mut k = k0;
             while k < k1 {
                 let m = (k1 - k).min(LANES);
@@ -387,8 +378,7 @@ impl Query<'_> {
         }
         // The own neighbourhood's triangles, where it has folded.
         if found.folded {
-            for r in 0..found.ranges.len() {
-                let (row, k0, k1) = found.ranges[r];
+            for &(row, k0, k1) in ranges.iter() {
                 let mut k = k0;
                 while k < k1 {
                     let m = (k1 - k).min(LANES);
@@ -801,13 +791,13 @@ impl SelfCollisionScratch {
             })
             .collect();
         par.for_each_mut(&mut chunks, |c| {
-            let mut space = QuerySpace::default();
+            let mut ranges = Vec::new();
             for k in 0..c.neighbour_count.len() {
                 let (nc, tc) = query.vertex(
                     c.first + k,
                     &mut c.neighbours[k * MAX_SELF_NEIGHBOURS..(k + 1) * MAX_SELF_NEIGHBOURS],
                     &mut c.triangles[k * MAX_SELF_TRIANGLES..(k + 1) * MAX_SELF_TRIANGLES],
-                    &mut space,
+                    &mut ranges,
                 );
                 c.neighbour_count[k] = nc as u32;
                 c.triangle_count[k] = tc as u32;
@@ -1118,6 +1108,19 @@ mod tests {
     use super::*;
     use crate::solver::parallel::Serial;
 
+    /// The candidate lists of one step of 1/60 s, on one thread.
+    fn candidates(
+        pos: &[Vec4],
+        vel: &[Vec4],
+        rest: &[Vec3],
+        tris: &[[u32; 3]],
+        params: SelfCollision,
+    ) -> SelfCollisionScratch {
+        let mut s = SelfCollisionScratch::default();
+        find_self_collision_candidates(pos, vel, rest, tris, params, 1.0 / 60.0, &mut s, &Serial);
+        s
+    }
+
     #[test]
     fn close_vertices_are_pushed_apart_to_thickness() {
         let mut pos = vec![
@@ -1127,21 +1130,11 @@ mod tests {
         ];
         let prev = pos.clone();
         let rest = [Vec3::ZERO, Vec3::X, Vec3::X * 2.0];
-        let mut s = SelfCollisionScratch::default();
         let params = SelfCollision {
             thickness: 0.1,
             friction: 0.0,
         };
-        find_self_collision_candidates(
-            &pos,
-            &[Vec4::ZERO; 3],
-            &rest,
-            &[],
-            params,
-            1.0 / 60.0,
-            &mut s,
-            &Serial,
-        );
+        let mut s = candidates(&pos, &[Vec4::ZERO; 3], &rest, &[], params);
         self_collide(&mut pos, &prev, &[], params, &mut s, &Serial);
         assert!((pos[0].xyz().distance(pos[1].xyz()) - 0.1).abs() < 1e-6);
         assert_eq!(pos[2], prev[2]);
@@ -1157,21 +1150,11 @@ mod tests {
         ];
         let prev = pos.clone();
         let rest = [Vec3::ZERO, Vec3::X * 0.05];
-        let mut s = SelfCollisionScratch::default();
         let params = SelfCollision {
             thickness: 0.1,
             friction: 0.0,
         };
-        find_self_collision_candidates(
-            &pos,
-            &[Vec4::ZERO; 2],
-            &rest,
-            &[],
-            params,
-            1.0 / 60.0,
-            &mut s,
-            &Serial,
-        );
+        let mut s = candidates(&pos, &[Vec4::ZERO; 2], &rest, &[], params);
         self_collide(&mut pos, &prev, &[], params, &mut s, &Serial);
         assert_eq!(pos, prev);
     }
@@ -1191,17 +1174,7 @@ mod tests {
             Vec4::new(0.0, 1.0, 0.0, 1.0),
             Vec4::new(0.25, 0.25, 0.02, 1.0),
         ];
-        let mut s = SelfCollisionScratch::default();
-        find_self_collision_candidates(
-            &start,
-            &[Vec4::ZERO; 4],
-            &rest,
-            &tri,
-            params,
-            1.0 / 60.0,
-            &mut s,
-            &Serial,
-        );
+        let mut s = candidates(&start, &[Vec4::ZERO; 4], &rest, &tri, params);
         assert_eq!(s.triangle_count[3], 1);
         assert_eq!(s.triangles[3 * MAX_SELF_TRIANGLES], SIDE_FRONT);
         // Too close on its side: pushed out along +z, its share half the push (equal masses).
@@ -1241,17 +1214,7 @@ mod tests {
             friction: 0.0,
         };
         let lists = |pos: &[Vec4], vel: &[Vec4]| {
-            let mut s = SelfCollisionScratch::default();
-            find_self_collision_candidates(
-                pos,
-                vel,
-                &rest,
-                &tris,
-                params,
-                1.0 / 60.0,
-                &mut s,
-                &Serial,
-            );
+            let s = candidates(pos, vel, &rest, &tris, params);
             let count = s.triangle_count[12] as usize;
             s.triangles[12 * MAX_SELF_TRIANGLES..12 * MAX_SELF_TRIANGLES + count].to_vec()
         };
@@ -1306,17 +1269,7 @@ mod tests {
             // Rest far apart: every pair can be neighbours.
             let rest: Vec<Vec3> = (0..n).map(|k| Vec3::X * k as f32).collect();
             let vel = vec![Vec4::ZERO; n];
-            let mut s = SelfCollisionScratch::default();
-            find_self_collision_candidates(
-                &pos,
-                &vel,
-                &rest,
-                &[],
-                params,
-                1.0 / 60.0,
-                &mut s,
-                &Serial,
-            );
+            let s = candidates(&pos, &vel, &rest, &[], params);
             let reach = params.thickness;
             let mut total = 0;
             for i in 0..n {
