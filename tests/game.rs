@@ -154,6 +154,77 @@ fn a_sheet_with_a_uv_seam_hangs_as_one_piece() {
 }
 
 #[test]
+fn a_mesh_without_an_index_buffer_hangs_like_the_indexed_one() {
+    // glTF primitives may have no indices (Bevy's own Fox has none): every three vertices are
+    // a triangle, each with its own copies of its corners. The copies are welded, so the sheet
+    // is the same cloth as the indexed grid: as many particles, edges and bends, pinned by any
+    // copy, hanging the same way.
+    let grid_indices = GRID.indices();
+    let unrolled: Vec<[f32; 3]> = grid_indices
+        .iter()
+        .map(|&v| GRID.positions()[v as usize].to_array())
+        .collect();
+    let mesh = Mesh::new(
+        bevy::mesh::PrimitiveTopology::TriangleList,
+        bevy::asset::RenderAssetUsages::default(),
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, unrolled);
+    assert!(mesh.indices().is_none());
+    // The first copy of each grid vertex in the unrolled list.
+    let copy = |v: u32| grid_indices.iter().position(|&i| i == v).unwrap() as u32;
+    // A curtain: the sheet stood up, its whole top row pinned (a sheet held at two corners
+    // buckles one way or the other, and the constraints' order decides which).
+    let curtain = |app: &mut App, mesh: Mesh, vertex: &dyn Fn(u32) -> u32| {
+        let mesh = add_mesh(app, mesh);
+        app.world_mut()
+            .spawn((
+                Mesh3d(mesh),
+                Transform::from_xyz(0.0, 2.0, 0.0)
+                    .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2)),
+                Cloth::default(),
+                ClothPins::rest((0..16).map(|i| vertex(GRID.index(i, 0)))),
+            ))
+            .id()
+    };
+    let mut plain = app();
+    let p = curtain(&mut plain, grid_mesh(&GRID), &|v| v);
+    let mut flat = app();
+    let f = curtain(&mut flat, mesh, &copy);
+    run(&mut plain, 120);
+    run(&mut flat, 120);
+    assert!(
+        flat.world().get::<ClothInvalid>(f).is_none(),
+        "refused: {:?}",
+        flat.world().get::<ClothInvalid>(f)
+    );
+    let (a, b) = (sim(&plain, p), sim(&flat, f));
+    assert_eq!(b.weld().particle_count(), GRID.vertex_count());
+    let (ta, tb) = (a.simulation().topology(), b.simulation().topology());
+    assert_eq!(ta.edges().len(), tb.edges().len());
+    assert_eq!(ta.bends().len(), tb.bends().len());
+    // The same constraints taken in another order: not to the bit, but the same drape
+    // (every vertex within 1 mm after 2 s; the bottom edge has stretched down).
+    let mut worst = 0.0f32;
+    for v in 0..GRID.vertex_count() as u32 {
+        worst = worst.max(a.position(v).distance(b.position(copy(v))));
+    }
+    let bottom = b.position(copy(GRID.index(8, 15)));
+    assert!(bottom.y < 1.5 - 1e-3, "did not hang: {bottom}");
+    assert!(
+        worst < 1e-3,
+        "not the indexed sheet's drape: {worst} m apart"
+    );
+    // Every copy is written back where its particle is.
+    let pos = attr3(mesh_of(&flat, f), Mesh::ATTRIBUTE_POSITION);
+    for (k, &v) in grid_indices.iter().enumerate() {
+        assert!(
+            pos[k] == pos[copy(v) as usize],
+            "copy {k} of vertex {v} apart"
+        );
+    }
+}
+
+#[test]
 fn hard_edges_keep_their_own_normals() {
     // Two 1 m panels at 90° along a crease, every vertex pinned so the shape holds. The crease
     // is split: with each panel's normal on its copies (a hard edge), and with the same normal
@@ -1687,6 +1758,44 @@ mod skinned_clothing {
         let mesh = mesh_of(&app, cloth);
         assert!(mesh.attribute(Mesh::ATTRIBUTE_JOINT_INDEX).is_none());
         assert!(app.world().get::<ClothInvalid>(cloth).is_none());
+    }
+
+    #[test]
+    fn a_plain_cloth_on_a_skinned_mesh_runs_free_and_the_skin_comes_back_without_it() {
+        let (mut app, cloth, _, _) = scene(None);
+        app.world_mut().entity_mut(cloth).remove::<ClothSkinning>();
+        let source = app.world().get::<Mesh3d>(cloth).unwrap().0.clone();
+        run(&mut app, 2);
+        let start = sim(&app, cloth).simulation().state().position(0);
+        run(&mut app, 30);
+        // Drawn as simulated, not skinned on top: no SkinnedMesh, no joints in its mesh.
+        assert!(app.world().get::<SkinnedMesh>(cloth).is_none());
+        assert!(
+            mesh_of(&app, cloth)
+                .attribute(Mesh::ATTRIBUTE_JOINT_INDEX)
+                .is_none()
+        );
+        assert!(app.world().get::<ClothInvalid>(cloth).is_none());
+        // Free: nothing holds it, it falls.
+        let now = sim(&app, cloth).simulation().state().position(0);
+        assert!(now.y < start.y - 0.05, "{start} → {now}");
+        // ClothSkinning added now holds it to the skin it took off.
+        app.world_mut().entity_mut(cloth).insert(ClothSkinning {
+            max_distance: MaxDistance::Uniform(0.0),
+            backstop: None,
+        });
+        run(&mut app, 5);
+        let s = sim(&app, cloth);
+        let p = s
+            .simulation()
+            .state()
+            .position(s.weld().particle(0) as usize);
+        assert!(p.distance(Vec3::new(-0.5, 2.0, 0.0)) < 1e-4, "{p}");
+        // Without the cloth the entity is its skinned mesh again.
+        app.world_mut().entity_mut(cloth).remove::<Cloth>();
+        run(&mut app, 1);
+        assert!(app.world().get::<SkinnedMesh>(cloth).is_some());
+        assert_eq!(app.world().get::<Mesh3d>(cloth).unwrap().0, source);
     }
 
     #[test]

@@ -2,7 +2,7 @@
 
 use bevy::prelude::*;
 
-use super::skinning::skin_cloths;
+use super::skinning::{skin_cloths, unskin_free_cloths};
 use super::systems::{init_cloths, on_cloth_removed, retry_cloths, step_cloths, sync_cloths};
 use super::writeback::write_back;
 use super::{
@@ -46,7 +46,13 @@ impl Plugin for ClothPlugin {
             .add_systems(
                 schedule,
                 (
-                    (retry_cloths, init_cloths, sync_cloths, skin_cloths)
+                    (
+                        retry_cloths,
+                        init_cloths,
+                        sync_cloths,
+                        unskin_free_cloths,
+                        skin_cloths,
+                    )
                         .chain()
                         .in_set(ClothSystems::Prepare),
                     step_cloths.in_set(ClothSystems::Simulate),

@@ -20,7 +20,12 @@ use crate::foundation::{EntityName, FixedPoses};
 /// ([`FixedPoses`]; with `ClothAnimationPlugin` the bones move on that clock too). The cloth takes over drawing: the entity's `SkinnedMesh`
 /// is removed and the cloth's own mesh drops its joint attributes, so what is drawn is the
 /// simulation. At the first step every vertex is placed where the skin puts it. Removing
-/// `ClothSkinning` lets the cloth run free (the `SkinnedMesh` is not put back).
+/// `ClothSkinning` lets the cloth run free (the `SkinnedMesh` is not put back); removing the
+/// `Cloth` puts the `SkinnedMesh` and the entity's own mesh back.
+///
+/// A `Cloth` on a skinned mesh *without* `ClothSkinning` runs free from the mesh's bind pose:
+/// the `SkinnedMesh` is taken off the same way (with one warning), and adding `ClothSkinning`
+/// later holds it to the skin.
 ///
 /// A `PerVertex` list of the wrong length, a mesh without joint attributes or vertex colours
 /// (where asked for), or a negative or non-finite distance is reported once as
@@ -88,6 +93,13 @@ pub(crate) struct ClothSkin {
     /// Whether the next targets start the motion afresh.
     snap: bool,
     error: Option<ClothError>,
+}
+
+impl ClothSkin {
+    /// The `SkinnedMesh` the cloth took off its entity, if it did.
+    pub(super) fn taken(&self) -> Option<&SkinnedMesh> {
+        self.skinned.as_ref()
+    }
 }
 
 fn attribute_f32x3(mesh: &Mesh, id: bevy::mesh::MeshVertexAttribute) -> Option<&[[f32; 3]]> {
@@ -252,6 +264,42 @@ impl ClothSkin {
     }
 }
 
+/// A plain [`Cloth`](super::Cloth) (no [`ClothSkinning`]) put on a skinned mesh: the entity's
+/// `SkinnedMesh`, taken off so that the renderer draws the simulation and not the simulation
+/// skinned a second time; kept for a `ClothSkinning` added later.
+#[derive(Component, Debug)]
+pub(crate) struct ClothUnskinned(pub(super) SkinnedMesh);
+
+/// A plain cloth on a skinned mesh runs free from the mesh's bind pose: takes the entity's
+/// `SkinnedMesh` off and the joint attributes off the cloth's own mesh (as [`ClothSkinning`]
+/// does), and says so once, naming what keeps a cloth on its skin.
+#[expect(clippy::type_complexity, reason = "a system's query")]
+pub(super) fn unskin_free_cloths(
+    mut commands: Commands,
+    cloths: Query<
+        (Entity, Option<&Name>, &SkinnedMesh, &ClothSim),
+        (Without<ClothSkinning>, Without<ClothSkin>),
+    >,
+    mut meshes: ResMut<Assets<Mesh>>,
+) {
+    for (entity, name, skinned, cloth) in &cloths {
+        warn!(
+            "cloth {}: the entity has a SkinnedMesh and no ClothSkinning: the cloth runs free from \
+             the mesh's bind pose and is no longer skinned; add ClothSkinning to keep it on \
+             the animated skin",
+            EntityName::new(entity, name)
+        );
+        if let Some(mut mesh) = meshes.get_mut(cloth.mesh()) {
+            mesh.remove_attribute(Mesh::ATTRIBUTE_JOINT_INDEX);
+            mesh.remove_attribute(Mesh::ATTRIBUTE_JOINT_WEIGHT);
+        }
+        commands
+            .entity(entity)
+            .remove::<SkinnedMesh>()
+            .insert(ClothUnskinned(skinned.clone()));
+    }
+}
+
 /// Applies [`ClothSkinning`]: builds each cloth's skin once (and after a change), takes the
 /// entity's `SkinnedMesh` over, and sets the cloth's motion targets for this step.
 #[expect(clippy::type_complexity, reason = "a system's queries")]
@@ -263,6 +311,7 @@ pub(super) fn skin_cloths(
             Option<&Name>,
             Ref<ClothSkinning>,
             Option<&SkinnedMesh>,
+            Option<&ClothUnskinned>,
             Option<&ClothSource>,
             Option<&mut ClothSkin>,
             &mut ClothSim,
@@ -281,7 +330,7 @@ pub(super) fn skin_cloths(
     }
     let no_bindposes = Assets::<SkinnedMeshInverseBindposes>::default();
     let bindposes = bindposes.as_deref().unwrap_or(&no_bindposes);
-    for (entity, name, settings, skinned, source, mut skin, mut cloth) in &mut cloths {
+    for (entity, name, settings, skinned, unskinned, source, mut skin, mut cloth) in &mut cloths {
         let who = EntityName::new(entity, name);
         // Built once, and again when the settings change.
         let fresh = skin.is_none() || settings.is_changed();
@@ -290,6 +339,7 @@ pub(super) fn skin_cloths(
             // The mesh as the user gave it (the cloth's copy holds simulated positions).
             let source = source.map_or_else(|| cloth.mesh().clone(), |s| s.source.clone());
             let skinned = skinned
+                .or(unskinned.map(|u| &u.0))
                 .cloned()
                 .or_else(|| skin.as_deref().and_then(|s| s.skinned.clone()));
             let built = meshes
@@ -318,7 +368,7 @@ pub(super) fn skin_cloths(
                     }
                     commands
                         .entity(entity)
-                        .remove::<SkinnedMesh>()
+                        .remove::<(SkinnedMesh, ClothUnskinned)>()
                         .insert(ClothSkin {
                             skinned,
                             joints,

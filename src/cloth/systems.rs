@@ -10,6 +10,7 @@ use super::build::{build, features};
 use super::error::report;
 use super::inertia::carry_unfelt_motion;
 use super::pins::{attach, follow_anchors, pin_list, repin};
+use super::skinning::{ClothSkin, ClothUnskinned};
 use super::{
     Cloth, ClothConfig, ClothError, ClothFailed, ClothInertia, ClothInvalid, ClothPins,
     ClothSelfCollision, ClothSim, ClothSource, ClothSteppedElsewhere, ClothTearing, ClothTethers,
@@ -161,19 +162,38 @@ pub(super) fn retry_cloths(
 pub(super) fn on_cloth_removed(
     removed: On<Remove, Cloth>,
     mut commands: Commands,
-    cloths: Query<(Option<&ClothSource>, Option<&Mesh3d>)>,
+    cloths: Query<(
+        Option<&ClothSource>,
+        Option<&Mesh3d>,
+        Option<&ClothSkin>,
+        Option<&ClothUnskinned>,
+    )>,
 ) {
     let entity = removed.entity;
-    if let Ok((Some(source), Some(mesh))) = cloths.get(entity)
+    let Ok((source, mesh, skin, unskinned)) = cloths.get(entity) else {
+        return;
+    };
+    if let (Some(source), Some(mesh)) = (source, mesh)
         && mesh.0 == source.copy
     {
         commands
             .entity(entity)
             .try_insert(Mesh3d(source.source.clone()));
     }
-    commands
-        .entity(entity)
-        .try_remove::<(ClothSim, ClothSource, ClothInvalid)>();
+    // The skin the cloth took over draws the entity's own mesh again.
+    if let Some(skinned) = unskinned
+        .map(|u| &u.0)
+        .or_else(|| skin.and_then(ClothSkin::taken))
+    {
+        commands.entity(entity).try_insert(skinned.clone());
+    }
+    commands.entity(entity).try_remove::<(
+        ClothSim,
+        ClothSource,
+        ClothInvalid,
+        ClothSkin,
+        ClothUnskinned,
+    )>();
 }
 
 /// The optional components of a cloth entity.

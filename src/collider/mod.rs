@@ -42,7 +42,8 @@ use crate::solver::{
 pub enum ColliderMesh {
     /// A triangle mesh asset, baked once into a signed distance field when it has loaded: the
     /// entity's own [`Mesh3d`] when `mesh` is `None`. `resolution` is the number of cells along
-    /// the mesh's longest side (48 is a good start). The mesh should be closed.
+    /// the mesh's longest side (48 is a good start). The mesh should be closed; an index buffer
+    /// is optional. A skinned mesh is baked in its bind pose and does not follow its bones.
     Asset {
         /// The mesh to bake, or `None` for the entity's `Mesh3d`.
         mesh: Option<Handle<Mesh>>,
@@ -279,6 +280,7 @@ type BakeQueryData = (
     &'static ClothCollider,
     Option<&'static Mesh3d>,
     Option<&'static mut ColliderRuntime>,
+    Has<bevy::mesh::skinning::SkinnedMesh>,
 );
 
 /// Bakes mesh colliders once their mesh is loaded.
@@ -287,7 +289,7 @@ fn bake_mesh_colliders(
     meshes: Option<Res<Assets<Mesh>>>,
     mut colliders: Query<BakeQueryData>,
 ) {
-    for ((entity, name), collider, mesh3d, runtime) in &mut colliders {
+    for ((entity, name), collider, mesh3d, runtime, skinned) in &mut colliders {
         let who = EntityName::new(entity, name);
         let ColliderShape::Mesh(ColliderMesh::Asset { mesh, resolution }) = &collider.shape else {
             continue;
@@ -329,6 +331,13 @@ fn bake_mesh_colliders(
         match baked {
             Ok(grid) => {
                 debug!("cloth collider {who}: baked a {} SDF", grid.dims());
+                if skinned {
+                    warn!(
+                        "cloth collider {who}: its mesh is skinned; the field is baked from the \
+                         bind pose and moves with the entity, not with the bones (put sphere or \
+                         capsule colliders on the bones of an animated body)"
+                    );
+                }
                 rt.baked = Some(Arc::new(grid));
             }
             Err(e) => {

@@ -278,7 +278,11 @@ fn mesh_of(world: &World, handle: &Handle<Mesh>) -> Option<SavedMesh> {
         Some(VertexAttributeValues::Float32x2(uv)) => Some(uv.clone()),
         _ => None,
     };
-    let indices = mesh.indices()?.iter().map(|i| i as u32).collect();
+    let indices = match mesh.indices() {
+        Some(ix) => ix.iter().map(|i| i as u32).collect(),
+        // A mesh without an index buffer: every three vertices are a triangle.
+        None => (0..p.len() as u32).collect(),
+    };
     Some(SavedMesh::Inline {
         positions: p.clone(),
         uvs,

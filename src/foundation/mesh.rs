@@ -16,8 +16,9 @@ pub enum MeshError {
     NoPositions,
     /// The positions are not `Float32x3` (the format found is given).
     PositionFormat(String),
-    /// The mesh has no index buffer.
-    NoIndices,
+    /// The mesh has no index buffer and its vertex count (given) is not a multiple of three,
+    /// so it is not a list of whole triangles.
+    PartialTriangle(usize),
     /// The mesh's vertex data lives only in the render world (`RenderAssetUsages::RENDER_WORLD`):
     /// the CPU cannot read it.
     NotInMainWorld,
@@ -29,7 +30,10 @@ impl core::fmt::Display for MeshError {
             MeshError::NotTriangleList(t) => write!(f, "mesh topology is {t}, not a triangle list"),
             MeshError::NoPositions => write!(f, "mesh has no POSITION attribute"),
             MeshError::PositionFormat(t) => write!(f, "mesh positions are {t}, not Float32x3"),
-            MeshError::NoIndices => write!(f, "mesh has no indices"),
+            MeshError::PartialTriangle(n) => write!(
+                f,
+                "mesh has no indices and {n} vertices, not a multiple of 3: not whole triangles"
+            ),
             MeshError::NotInMainWorld => write!(
                 f,
                 "mesh data is only in the render world; create it with RenderAssetUsages::MAIN_WORLD"
@@ -52,7 +56,7 @@ pub struct MeshData {
     pub normals: Option<Vec<Vec3>>,
     /// `TANGENT`, if present as `Float32x4`.
     pub tangents: Option<Vec<Vec4>>,
-    /// Triangle-list indices.
+    /// Triangle-list indices (`0, 1, 2, 3, …` for a mesh without an index buffer).
     pub indices: Vec<u32>,
     /// Whether the mesh stores its indices as `u16` (rewritten in the same format).
     pub u16_indices: bool,
@@ -74,7 +78,8 @@ impl MeshData {
 ///
 /// # Errors
 /// [`MeshError`] if the mesh is not a triangle list, its data has been moved to the render
-/// world, or it lacks `Float32x3` positions or indices.
+/// world, it lacks `Float32x3` positions, or it has no indices and a vertex count that is not
+/// a multiple of three.
 pub fn read_mesh(mesh: &Mesh) -> Result<MeshData, MeshError> {
     if mesh.primitive_topology() != PrimitiveTopology::TriangleList {
         return Err(MeshError::NotTriangleList(format!(
@@ -111,7 +116,15 @@ pub fn read_mesh(mesh: &Mesh) -> Result<MeshData, MeshError> {
     };
     let (indices, u16_indices) = match mesh.try_indices_option() {
         Err(_) => return Err(MeshError::NotInMainWorld),
-        Ok(None) => return Err(MeshError::NoIndices),
+        // No index buffer (glTF allows it; Bevy's Fox has none): every three vertices are a
+        // triangle. Welding then joins the copies each triangle has of its corners.
+        Ok(None) if positions.len() % 3 != 0 => {
+            return Err(MeshError::PartialTriangle(positions.len()));
+        }
+        Ok(None) => (
+            (0..positions.len() as u32).collect(),
+            positions.len() <= usize::from(u16::MAX) + 1,
+        ),
         Ok(Some(Indices::U16(i))) => (i.iter().map(|&v| u32::from(v)).collect(), true),
         Ok(Some(Indices::U32(i))) => (i.clone(), false),
     };
@@ -153,4 +166,30 @@ pub fn grid_mesh(grid: &Grid) -> Mesh {
     )
     .with_inserted_attribute(Mesh::ATTRIBUTE_TANGENT, vec![[1.0f32, 0.0, 0.0, 1.0]; n])
     .with_inserted_indices(Indices::U32(grid.indices()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn triangle_list(vertices: usize) -> Mesh {
+        let positions: Vec<[f32; 3]> = (0..vertices).map(|i| [i as f32, 0.0, 0.0]).collect();
+        Mesh::new(
+            PrimitiveTopology::TriangleList,
+            RenderAssetUsages::default(),
+        )
+        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+    }
+
+    #[test]
+    fn a_mesh_without_indices_is_read_as_consecutive_triangles() {
+        let data = read_mesh(&triangle_list(6)).unwrap();
+        assert_eq!(data.indices, [0, 1, 2, 3, 4, 5]);
+        assert!(data.u16_indices);
+        assert!(!read_mesh(&triangle_list(70_002)).unwrap().u16_indices);
+        assert_eq!(
+            read_mesh(&triangle_list(4)),
+            Err(MeshError::PartialTriangle(4))
+        );
+    }
 }
