@@ -916,6 +916,43 @@ fn an_invalid_config_keeps_the_last_good_one_reports_once_and_recovers() {
 }
 
 #[test]
+fn an_invalid_cloth_change_keeps_the_cloth_running_and_a_valid_one_rebuilds_it() {
+    let mut app = app();
+    app.init_resource::<Failures>()
+        .add_systems(Update, collect_failures);
+    let e = hang(&mut app, grid_mesh(&GRID), ());
+    run(&mut app, 60);
+    let low = sim(&app, e).position(GRID.index(8, 15)).y;
+    let steps = sim(&app, e).steps();
+    // A mass slider dragged through 0 and below for a few frames.
+    for mass in [0.0, -0.1, 0.0] {
+        app.world_mut().get_mut::<Cloth>(e).unwrap().mass = mass;
+        run(&mut app, 1);
+    }
+    run(&mut app, 3);
+    assert!(app.world().get::<ClothInvalid>(e).is_none());
+    let cloth = sim(&app, e);
+    assert!(
+        matches!(cloth.rejected(), Some(ClothError::BadMass(m)) if *m == 0.0),
+        "{:?}",
+        cloth.rejected()
+    );
+    assert!(cloth.steps() > steps + 5, "it stopped");
+    assert!(
+        cloth.position(GRID.index(8, 15)).y < low + 0.05,
+        "it restarted"
+    );
+    assert_eq!(app.world().resource::<Failures>().0.len(), 1);
+    // A valid mass rebuilds it (from its rest shape, with the new mass).
+    app.world_mut().get_mut::<Cloth>(e).unwrap().mass = 0.5;
+    run(&mut app, 2);
+    let cloth = sim(&app, e);
+    assert!(cloth.rejected().is_none());
+    assert!(cloth.steps() < 5, "not rebuilt: {} steps", cloth.steps());
+    assert_eq!(app.world().resource::<Failures>().0.len(), 1);
+}
+
+#[test]
 fn switching_solver_and_substeps_does_not_fling_the_cloth() {
     let lab = ClothConfig {
         solver: Solver::LAB,

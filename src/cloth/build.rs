@@ -45,6 +45,7 @@ impl Built {
             teleport: None,
             attached: self.attached,
             settings_error: None,
+            cloth_error: None,
             pins_error: None,
             carry: None,
             inertia_from: None,
@@ -68,15 +69,7 @@ fn build_unpinned(
     mesh: &Mesh,
     own: &GlobalTransform,
 ) -> Result<Unpinned, ClothError> {
-    if !limits::MASS.contains(cloth.mass) {
-        return Err(ClothError::BadMass(cloth.mass));
-    }
-    if !limits::TELEPORT_DISTANCE.contains(cloth.teleport_distance) {
-        return Err(ClothError::BadTeleportDistance(cloth.teleport_distance));
-    }
-    if !limits::WELD_TOLERANCE.contains(cloth.weld_tolerance) {
-        return Err(ClothError::BadWeldTolerance(cloth.weld_tolerance));
-    }
+    cloth.validate()?;
     let data = read_mesh(mesh)?;
     // Refused before welding allocates anything for it.
     if data.positions.len() > limits::MAX_VERTICES || data.indices.len() / 3 > limits::MAX_TRIANGLES

@@ -78,6 +78,30 @@ pub struct Cloth {
     pub weld_tolerance: f32,
 }
 
+impl Cloth {
+    /// Whether the mass, teleport distance and weld tolerance are within their limits (what
+    /// the mesh needs is checked when the cloth is built from it).
+    ///
+    /// # Errors
+    /// [`ClothError::BadMass`](super::ClothError::BadMass),
+    /// [`BadTeleportDistance`](super::ClothError::BadTeleportDistance) or
+    /// [`BadWeldTolerance`](super::ClothError::BadWeldTolerance), naming the value.
+    pub fn validate(&self) -> Result<(), super::ClothError> {
+        use super::ClothError;
+        use crate::solver::limits;
+        if !limits::MASS.contains(self.mass) {
+            return Err(ClothError::BadMass(self.mass));
+        }
+        if !limits::TELEPORT_DISTANCE.contains(self.teleport_distance) {
+            return Err(ClothError::BadTeleportDistance(self.teleport_distance));
+        }
+        if !limits::WELD_TOLERANCE.contains(self.weld_tolerance) {
+            return Err(ClothError::BadWeldTolerance(self.weld_tolerance));
+        }
+        Ok(())
+    }
+}
+
 impl Default for Cloth {
     /// 0.2 kg (a 1 m² cotton sheet), area-weighted, flat at rest, teleport beyond 2 m, welding
     /// copies within 1e-5 of the mesh's size.

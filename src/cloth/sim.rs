@@ -54,6 +54,9 @@ pub struct ClothSim {
     pub(super) settings_error: Option<ClothError>,
     /// A pin list that was refused (the last valid pins hold meanwhile).
     pub(super) pins_error: Option<ClothError>,
+    /// A [`Cloth`](super::Cloth) change that was refused (the cloth built from the last valid
+    /// one runs meanwhile).
+    pub(super) cloth_error: Option<ClothError>,
     /// The motion carried at the start of this fixed step
     /// ([`ClothInertia`](super::ClothInertia); a backend stepping elsewhere applies it to its
     /// own state).
@@ -351,12 +354,15 @@ impl ClothSim {
         self.recoveries
     }
 
-    /// Why the latest [`ClothConfig`](super::ClothConfig), opt-in feature or
-    /// [`ClothPins`](super::ClothPins) change was refused,
-    /// while the cloth runs on its last valid ones; `None` when everything asked for is in use.
+    /// Why the latest [`Cloth`](super::Cloth), [`ClothConfig`](super::ClothConfig), opt-in
+    /// feature or [`ClothPins`](super::ClothPins) change was refused, while the cloth runs on
+    /// its last valid ones; `None` when everything asked for is in use.
     #[must_use]
     pub fn rejected(&self) -> Option<&ClothError> {
-        self.settings_error.as_ref().or(self.pins_error.as_ref())
+        self.cloth_error
+            .as_ref()
+            .or(self.settings_error.as_ref())
+            .or(self.pins_error.as_ref())
     }
 
     /// Wall-clock seconds the last CPU step of this cloth took (0 before the first step and

@@ -120,7 +120,7 @@ pub(super) fn init_cloths(
 
 /// Clears [`ClothInvalid`] when the user changes what made the cloth invalid, so it is tried
 /// again; drops the simulation (to rebuild it) when the entity's mesh is replaced by another
-/// one or its [`Cloth`] changes.
+/// one or its [`Cloth`] changes to valid settings (invalid ones are refused while it runs on).
 #[expect(clippy::type_complexity, reason = "a query filter, read once")]
 pub(super) fn retry_cloths(
     mut commands: Commands,
@@ -139,19 +139,39 @@ pub(super) fn retry_cloths(
             )>,
         ),
     >,
-    swapped: Query<(Entity, &Mesh3d, &ClothSim), Changed<Mesh3d>>,
-    rebuilt: Query<Entity, (Changed<Cloth>, With<ClothSim>)>,
+    mut changed: Query<
+        (
+            Entity,
+            Option<&Name>,
+            Ref<Cloth>,
+            Option<Ref<Mesh3d>>,
+            &mut ClothSim,
+        ),
+        Or<(Changed<Cloth>, Changed<Mesh3d>)>,
+    >,
 ) {
-    // Mass, mass distribution, bend rest and welding are baked into the simulation: rebuild
-    // it (the cloth starts again from its rest shape).
-    for entity in &rebuilt {
-        commands.entity(entity).remove::<ClothSim>();
-    }
     for entity in &invalid {
         commands.entity(entity).remove::<(ClothInvalid, ClothSim)>();
     }
-    for (entity, mesh, sim) in &swapped {
-        if mesh.0 != sim.mesh {
+    for (entity, name, cloth, mesh, mut sim) in &mut changed {
+        // Another mesh put in: build the cloth from it.
+        let swapped = mesh.is_some_and(|m| m.is_changed() && m.0 != sim.mesh);
+        // Mass, mass distribution, bend rest and welding are baked into the simulation:
+        // rebuild it (the cloth starts again from its rest shape). A value out of its limits
+        // is refused (once) and the cloth built from the last valid one runs on.
+        let rebuild = cloth.is_changed() && {
+            let checked = cloth.validate();
+            let ok = checked.is_ok();
+            note_rejection(
+                &mut commands,
+                EntityName::new(entity, name),
+                &mut sim.cloth_error,
+                checked,
+                ("Cloth settings", "the last valid ones run meanwhile"),
+            );
+            ok
+        };
+        if swapped || rebuild {
             commands.entity(entity).remove::<ClothSim>();
         }
     }
