@@ -179,6 +179,7 @@ pub(super) fn retry_cloths(
 
 /// Removing [`Cloth`] stops the simulation and gives the entity its own mesh back; adding it
 /// again starts afresh.
+#[expect(clippy::type_complexity, reason = "an observer's query")]
 pub(super) fn on_cloth_removed(
     removed: On<Remove, Cloth>,
     mut commands: Commands,

@@ -118,7 +118,7 @@ pub fn read_mesh(mesh: &Mesh) -> Result<MeshData, MeshError> {
         Err(_) => return Err(MeshError::NotInMainWorld),
         // No index buffer (glTF allows it; Bevy's Fox has none): every three vertices are a
         // triangle. Welding then joins the copies each triangle has of its corners.
-        Ok(None) if positions.len() % 3 != 0 => {
+        Ok(None) if !positions.len().is_multiple_of(3) => {
             return Err(MeshError::PartialTriangle(positions.len()));
         }
         Ok(None) => (
