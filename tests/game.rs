@@ -2,6 +2,7 @@
 //! tangents without UVs, u16 indices), characters moved in `FixedUpdate`, and entities that
 //! come and go at runtime.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use bevy::asset::{AssetEvent, AssetEventSystems, RenderAssetUsages};
@@ -811,6 +812,78 @@ fn max_distance(a: &[Vec3], b: &[Vec3]) -> f32 {
         .zip(b)
         .map(|(p, q)| p.distance(*q))
         .fold(0.0, f32::max)
+}
+
+/// `mesh`'s positions scaled by `k` in place (as a hot reload or an edit through
+/// `Assets::get_mut` changes an asset).
+fn scale_mesh_asset(app: &mut App, mesh: &Handle<Mesh>, k: f32) {
+    let mut meshes = app.world_mut().resource_mut::<Assets<Mesh>>();
+    let mut m = meshes.get_mut(mesh).expect("loaded");
+    let scaled: Vec<[f32; 3]> = attr3(&m, Mesh::ATTRIBUTE_POSITION)
+        .iter()
+        .map(|p| (*p * k).to_array())
+        .collect();
+    m.insert_attribute(Mesh::ATTRIBUTE_POSITION, scaled);
+}
+
+#[test]
+fn a_changed_mesh_asset_rebuilds_its_cloth_and_rebakes_its_collider() {
+    let mut app = app();
+    let cloth = hang(&mut app, grid_mesh(&GRID), ());
+    let source = app.world().get::<Mesh3d>(cloth).unwrap().0.clone();
+    let ball_mesh = add_mesh(&mut app, Sphere::new(0.2).mesh().ico(3).unwrap());
+    let ball = app
+        .world_mut()
+        .spawn((
+            Mesh3d(ball_mesh.clone()),
+            ClothCollider::mesh(16),
+            Transform::from_xyz(3.0, 0.5, 0.0),
+        ))
+        .id();
+    run(&mut app, 30);
+    let width = |app: &App| {
+        let rest = sim(app, cloth).simulation().topology().rest_positions();
+        let xs = rest.iter().map(|p| p.x);
+        xs.clone().fold(f32::MIN, f32::max) - xs.fold(f32::MAX, f32::min)
+    };
+    let field = |app: &mut App| {
+        let colliders = &app
+            .world()
+            .resource::<bevy_cloth::collider::ClothColliders>()
+            .colliders;
+        assert_eq!(colliders.len(), 1);
+        match &colliders[0].shape {
+            bevy_cloth::solver::Shape::Mesh(sdf) => sdf.clone(),
+            other => panic!("{other:?}"),
+        }
+    };
+    assert!((width(&app) - 1.0).abs() < 1e-5);
+    assert!(sim(&app, cloth).steps() > 20);
+    let small = field(&mut app);
+    // The user's mesh assets change (a file reloaded from disk): both are built again from
+    // them; the cloth's own copy, which the plugin rewrites every frame, rebuilds nothing.
+    scale_mesh_asset(&mut app, &source, 2.0);
+    scale_mesh_asset(&mut app, &ball_mesh, 2.0);
+    run(&mut app, 3);
+    assert!((width(&app) - 2.0).abs() < 1e-5, "{}", width(&app));
+    assert!(sim(&app, cloth).steps() < 5, "not rebuilt");
+    let big = field(&mut app);
+    assert!(
+        (big.bounding_radius() / small.bounding_radius() - 2.0).abs() < 0.1,
+        "{} then {}",
+        small.bounding_radius(),
+        big.bounding_radius()
+    );
+    run(&mut app, 30);
+    assert!(
+        sim(&app, cloth).steps() > 20,
+        "rebuilt again by its own writes"
+    );
+    assert!(
+        Arc::ptr_eq(&field(&mut app), &big),
+        "baked again for nothing"
+    );
+    let _ = ball;
 }
 
 #[test]

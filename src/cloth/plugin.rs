@@ -3,7 +3,9 @@
 use bevy::prelude::*;
 
 use super::skinning::{skin_cloths, unskin_free_cloths};
-use super::systems::{init_cloths, on_cloth_removed, retry_cloths, step_cloths, sync_cloths};
+use super::systems::{
+    init_cloths, on_cloth_removed, rebuild_changed_meshes, retry_cloths, step_cloths, sync_cloths,
+};
 use super::writeback::write_back;
 use super::{
     Cloth, ClothConfig, ClothFailed, ClothInertia, ClothPin, ClothPins, ClothSelfCollision,
@@ -23,7 +25,9 @@ use crate::foundation::{ClothSchedule, ClothSystems};
 /// moved to their anchors), `unskin_free_cloths` (a `Cloth` without [`ClothSkinning`] on a
 /// skinned mesh takes its `SkinnedMesh` off), `skin_cloths` ([`ClothSkinning`]: the skin's
 /// targets for this step); in [`ClothSystems::Simulate`], `step_cloths` (every cloth not
-/// stepped elsewhere, in one `step_many`); in [`ClothSystems::Writeback`], `write_back`.
+/// stepped elsewhere, in one `step_many`); in [`ClothSystems::Writeback`], `write_back`; in
+/// `PreUpdate`, `rebuild_changed_meshes` (a cloth whose mesh asset changed, e.g. reloaded from
+/// disk, is built again from it).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ClothPlugin;
 
@@ -59,7 +63,11 @@ impl Plugin for ClothPlugin {
                     step_cloths.in_set(ClothSystems::Simulate),
                 ),
             )
-            .add_systems(PostUpdate, write_back.in_set(ClothSystems::Writeback));
+            .add_systems(PostUpdate, write_back.in_set(ClothSystems::Writeback))
+            .add_systems(
+                PreUpdate,
+                rebuild_changed_meshes.run_if(resource_exists::<Messages<AssetEvent<Mesh>>>),
+            );
     }
 
     fn finish(&self, app: &mut App) {

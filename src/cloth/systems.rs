@@ -177,6 +177,40 @@ pub(super) fn retry_cloths(
     }
 }
 
+/// A cloth whose mesh asset changed (reloaded from disk by Bevy's file watcher, or edited
+/// through `Assets::get_mut`) is built again from it: a running cloth from its source mesh (not
+/// its own copy, which the plugin rewrites every frame), a refused one tried again. Runs every
+/// frame, so no change is missed between fixed steps.
+pub(super) fn rebuild_changed_meshes(
+    mut commands: Commands,
+    mut events: MessageReader<AssetEvent<Mesh>>,
+    cloths: Query<(Entity, &Mesh3d, Option<&ClothSource>, Has<ClothInvalid>), With<Cloth>>,
+) {
+    let changed: Vec<AssetId<Mesh>> = events
+        .read()
+        .filter_map(|e| match e {
+            AssetEvent::Modified { id } => Some(*id),
+            _ => None,
+        })
+        .collect();
+    if changed.is_empty() {
+        return;
+    }
+    for (entity, mesh, source, invalid) in &cloths {
+        let user_mesh = match source {
+            Some(s) if s.copy == mesh.0 => s.source.id(),
+            _ => mesh.0.id(),
+        };
+        if changed.contains(&user_mesh) {
+            if invalid {
+                commands.entity(entity).remove::<ClothInvalid>();
+            } else {
+                commands.entity(entity).remove::<ClothSim>();
+            }
+        }
+    }
+}
+
 /// Removing [`Cloth`] stops the simulation and gives the entity its own mesh back; adding it
 /// again starts afresh.
 #[expect(clippy::type_complexity, reason = "an observer's query")]

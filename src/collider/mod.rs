@@ -40,8 +40,9 @@ use crate::solver::{
 /// What a mesh collider is made from.
 #[derive(TypePath, Clone, Debug, PartialEq)]
 pub enum ColliderMesh {
-    /// A triangle mesh asset, baked once into a signed distance field when it has loaded: the
-    /// entity's own [`Mesh3d`] when `mesh` is `None`. `resolution` is the number of cells along
+    /// A triangle mesh asset, baked into a signed distance field when it has loaded (and again
+    /// when the asset changes, e.g. reloaded from disk): the entity's own [`Mesh3d`] when
+    /// `mesh` is `None`. `resolution` is the number of cells along
     /// the mesh's longest side (48 is a good start). The mesh should be closed; an index buffer
     /// is optional. A skinned mesh is baked in its bind pose and does not follow its bones.
     Asset {
@@ -214,7 +215,34 @@ impl Plugin for ClothColliderPlugin {
                     .chain()
                     .in_set(ClothSystems::Prepare),
             )
-            .add_observer(on_collider_removed);
+            .add_observer(on_collider_removed)
+            .add_systems(
+                PreUpdate,
+                rebake_changed_meshes.run_if(resource_exists::<Messages<AssetEvent<Mesh>>>),
+            );
+    }
+}
+
+/// A mesh collider whose mesh asset changed (reloaded from disk, or edited through
+/// `Assets::get_mut`) is baked again at the next step; the old field acts until then.
+fn rebake_changed_meshes(
+    mut events: MessageReader<AssetEvent<Mesh>>,
+    mut colliders: Query<&mut ColliderRuntime>,
+) {
+    let changed: Vec<AssetId<Mesh>> = events
+        .read()
+        .filter_map(|e| match e {
+            AssetEvent::Modified { id } => Some(*id),
+            _ => None,
+        })
+        .collect();
+    if changed.is_empty() {
+        return;
+    }
+    for mut rt in &mut colliders {
+        if rt.baked_for.is_some_and(|(id, _)| changed.contains(&id)) {
+            rt.baked_for = None;
+        }
     }
 }
 
