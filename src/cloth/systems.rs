@@ -181,6 +181,7 @@ pub(super) fn retry_cloths(
 /// through `Assets::get_mut`) is built again from it: a running cloth from its source mesh (not
 /// its own copy, which the plugin rewrites every frame), a refused one tried again. Runs every
 /// frame, so no change is missed between fixed steps.
+#[expect(clippy::type_complexity, reason = "a system's query")]
 pub(super) fn rebuild_changed_meshes(
     mut commands: Commands,
     mut events: MessageReader<AssetEvent<Mesh>>,
