@@ -104,6 +104,9 @@ pub(crate) struct WorldLayout {
     pub group_at: u32,
     pub tri_offsets_at: u32,
     pub tri_at: u32,
+    /// Per vertex, the triangles whose first corner it is, in triangle order (self-collision
+    /// finds triangles through their first corner; only in a world with self-collision).
+    pub first_tri_at: u32,
     pub tether_at: u32,
     pub lab_at: u32,
     pub edges_at: u32,
@@ -439,6 +442,16 @@ impl WorldLayout {
         );
         out.tri_at = topo.len() as u32;
         topo.extend(triangles.iter().flatten());
+        if out.any_sc {
+            out.first_tri_at = append_lists(
+                &mut topo,
+                n,
+                triangles
+                    .iter()
+                    .enumerate()
+                    .map(|(i, t)| (t[0], [i as u32])),
+            );
+        }
         out.tether_at = append_lists(&mut topo, n, tethers.iter().copied());
         out.lab_at = append_lists(&mut topo, n, lab_edges.iter().copied());
         out.edges_at = topo.len() as u32;

@@ -72,6 +72,7 @@ pub(crate) struct WorldUniform {
     cloth_step_at: u32,
     tcount_at: u32,
     tlist_at: u32,
+    first_tri_at: u32,
 }
 
 #[repr(C)]
@@ -915,6 +916,7 @@ impl GpuWorld {
             cloth_step_at,
             tcount_at: s.tcount,
             tlist_at: s.tlist,
+            first_tri_at: l.first_tri_at,
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         // The per-frame words of every cloth's record: gravity·h and the damping factor (the

@@ -19,7 +19,8 @@
 //
 // `topo` (u32): per cloth its record (`CLOTH_WORDS`) | per vertex its cloth | per vertex its
 // pin (NO_PIN: none) | per group its record (`GROUP_WORDS`) and colour bounds | per vertex
-// the triangles it belongs to (offsets, list) and the triangles | tethers | the lab solver's
+// the triangles it belongs to (offsets, list) and the triangles | with self-collision, per
+// vertex the triangles whose first corner it is (offsets, list) | tethers | the lab solver's
 // edges | the tearing cloths' edges.
 //
 // `scratch` (atomic u32): per cloth the fastest squared speed of the step's start (bits) |
@@ -72,6 +73,7 @@ struct World {
     cloth_step_at: u32,
     tcount_at: u32,
     tlist_at: u32,
+    first_tri_at: u32,
 }
 
 // One substep of one step (binding 1, a dynamic offset per substep).

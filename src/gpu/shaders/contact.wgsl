@@ -143,12 +143,9 @@ struct ScVertex {
 // list (CPU twin: `self_collision::Query::triangles_through`).
 fn sc_triangles_of(v: ScVertex, j: u32, q: vec3<f32>, rest2: f32, tlist: ptr<function, array<u32, 64>>, tcount: ptr<function, u32>) {
     let r2 = v.reach * v.reach;
-    for (var m = topo[P.tri_offsets_at + j]; m < topo[P.tri_offsets_at + j + 1u]; m++) {
+    for (var m = topo[P.first_tri_at + j]; m < topo[P.first_tri_at + j + 1u]; m++) {
         let t = topo[m];
         let tb = P.tri_at + 3u * t;
-        if topo[tb] != j {
-            continue;
-        }
         let k1 = topo[tb + 1u];
         let k2 = topo[tb + 2u];
         let r1 = state[P.rest_at + k1].xyz - v.rest_i;
