@@ -17,7 +17,7 @@ use super::{
     ClothTorn, ClothWorkers, PinAnchor, TaskPoolParallel,
 };
 use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
-use crate::foundation::{EntityName, FixedPoses};
+use crate::foundation::{EntityName, FixedPoses, modified_meshes};
 use crate::solver::{Environment, ManyItem, Serial, SolverError, StepReport, step_many};
 use crate::wind::ClothWindField;
 
@@ -187,13 +187,7 @@ pub(super) fn rebuild_changed_meshes(
     mut events: MessageReader<AssetEvent<Mesh>>,
     cloths: Query<(Entity, &Mesh3d, Option<&ClothSource>, Has<ClothInvalid>), With<Cloth>>,
 ) {
-    let changed: Vec<AssetId<Mesh>> = events
-        .read()
-        .filter_map(|e| match e {
-            AssetEvent::Modified { id } => Some(*id),
-            _ => None,
-        })
-        .collect();
+    let changed = modified_meshes(&mut events);
     if changed.is_empty() {
         return;
     }

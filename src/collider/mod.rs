@@ -32,7 +32,9 @@ use std::sync::Arc;
 use bevy::prelude::*;
 use bevy::reflect::{TypePath, impl_reflect_opaque};
 
-use crate::foundation::{ClothSchedule, ClothSystems, EntityName, FixedPoses, read_mesh};
+use crate::foundation::{
+    ClothSchedule, ClothSystems, EntityName, FixedPoses, modified_meshes, read_mesh,
+};
 use crate::solver::{
     Collider, ContactImpulse, DEFAULT_TELEPORT_DISTANCE, Pose, SdfGrid, Shape, is_teleport, limits,
 };
@@ -229,13 +231,7 @@ fn rebake_changed_meshes(
     mut events: MessageReader<AssetEvent<Mesh>>,
     mut colliders: Query<&mut ColliderRuntime>,
 ) {
-    let changed: Vec<AssetId<Mesh>> = events
-        .read()
-        .filter_map(|e| match e {
-            AssetEvent::Modified { id } => Some(*id),
-            _ => None,
-        })
-        .collect();
+    let changed = modified_meshes(&mut events);
     if changed.is_empty() {
         return;
     }

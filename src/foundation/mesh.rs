@@ -138,6 +138,18 @@ pub fn read_mesh(mesh: &Mesh) -> Result<MeshData, MeshError> {
     })
 }
 
+/// The meshes whose asset changed since `events` last read (reloaded from disk, or edited
+/// through `Assets::get_mut`).
+pub(crate) fn modified_meshes(events: &mut MessageReader<AssetEvent<Mesh>>) -> Vec<AssetId<Mesh>> {
+    events
+        .read()
+        .filter_map(|e| match e {
+            AssetEvent::Modified { id } => Some(*id),
+            _ => None,
+        })
+        .collect()
+}
+
 /// A mesh for `grid`: positions, +Y normals, UVs, +X tangents, `u32` indices; kept in the main
 /// world so the cloth plugin can read and rewrite it.
 ///

@@ -15,6 +15,7 @@ mod pose;
 #[cfg(feature = "animation")]
 pub use animation::ClothAnimationPlugin;
 
+pub(crate) use mesh::modified_meshes;
 pub use mesh::{MeshData, MeshError, grid_mesh, read_mesh};
 pub use pose::FixedPoses;
 
