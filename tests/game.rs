@@ -860,6 +860,20 @@ fn a_changed_mesh_asset_rebuilds_its_cloth_and_rebakes_its_collider() {
     assert!((width(&app) - 1.0).abs() < 1e-5);
     assert!(sim(&app, cloth).steps() > 20);
     let small = field(&mut app);
+    // Touched without a change (as the engine does with a glTF's meshes in a window):
+    // nothing is built or baked again.
+    let steps = sim(&app, cloth).steps();
+    scale_mesh_asset(&mut app, &source, 1.0);
+    scale_mesh_asset(&mut app, &ball_mesh, 1.0);
+    run(&mut app, 3);
+    assert!(
+        sim(&app, cloth).steps() > steps,
+        "rebuilt for an unchanged mesh"
+    );
+    assert!(
+        Arc::ptr_eq(&field(&mut app), &small),
+        "baked again for an unchanged mesh"
+    );
     // The user's mesh assets change (a file reloaded from disk): both are built again from
     // them; the cloth's own copy, which the plugin rewrites every frame, rebuilds nothing.
     scale_mesh_asset(&mut app, &source, 2.0);
@@ -1822,6 +1836,7 @@ mod skinned_clothing {
     fn skinned_cloth_stays_within_its_max_distance_of_the_skin() {
         let (mut app, cloth, joints, verts) = scene(None);
         let mut farthest_hem = 0.0f32;
+        let mut last = [Vec3::ZERO; 2];
         for frame in 0..90 {
             // The top joint swings ±0.4 m sideways, the bottom one ±0.2 m forward.
             let t = frame as f32 / 60.0;
@@ -1829,6 +1844,7 @@ mod skinned_clothing {
                 Vec3::new(0.4 * (6.0 * t).sin(), 0.0, 0.0),
                 Vec3::new(0.0, 0.0, 0.2 * (4.0 * t).sin()),
             ];
+            last = offsets;
             let rest = [Vec3::new(0.0, 2.0, 0.0), Vec3::new(0.0, 1.0, 0.0)];
             for (k, j) in joints.iter().enumerate() {
                 app.world_mut()
@@ -1868,6 +1884,26 @@ mod skinned_clothing {
         let mesh = mesh_of(&app, cloth);
         assert!(mesh.attribute(Mesh::ATTRIBUTE_JOINT_INDEX).is_none());
         assert!(app.world().get::<ClothInvalid>(cloth).is_none());
+        // Built again (a new mass): its new copy of the mesh loses its joints too (a skinned
+        // pipeline without a skin fails validation in the renderer), and the top row is
+        // back on the skin.
+        let copy = sim(&app, cloth).mesh().clone();
+        app.world_mut().get_mut::<Cloth>(cloth).unwrap().mass = 0.5;
+        run(&mut app, 3);
+        let s = sim(&app, cloth);
+        assert_ne!(s.mesh(), &copy, "not built again");
+        assert!(
+            mesh_of(&app, cloth)
+                .attribute(Mesh::ATTRIBUTE_JOINT_INDEX)
+                .is_none()
+        );
+        assert!(app.world().get::<SkinnedMesh>(cloth).is_none());
+        let top = s
+            .simulation()
+            .state()
+            .position(s.weld().particle(0) as usize);
+        let skin = skinned(&verts, last)[0];
+        assert!(top.distance(skin) < 1e-4, "{top} against {skin}");
     }
 
     #[test]
@@ -1889,6 +1925,16 @@ mod skinned_clothing {
         // Free: nothing holds it, it falls.
         let now = sim(&app, cloth).simulation().state().position(0);
         assert!(now.y < start.y - 0.05, "{start} → {now}");
+        // Built again (a new mass): the new copy of the mesh loses its joints as well.
+        let copy = sim(&app, cloth).mesh().clone();
+        app.world_mut().get_mut::<Cloth>(cloth).unwrap().mass = 0.5;
+        run(&mut app, 3);
+        assert_ne!(sim(&app, cloth).mesh(), &copy, "not built again");
+        assert!(
+            mesh_of(&app, cloth)
+                .attribute(Mesh::ATTRIBUTE_JOINT_INDEX)
+                .is_none()
+        );
         // ClothSkinning added now holds it to the skin it took off.
         app.world_mut().entity_mut(cloth).insert(ClothSkinning {
             max_distance: MaxDistance::Uniform(0.0),

@@ -406,4 +406,6 @@ pub struct ClothSource {
     pub source: Handle<Mesh>,
     /// The cloth's own copy.
     pub copy: Handle<Mesh>,
+    /// `source`'s contents when the cloth was built from it (a changed asset rebuilds it).
+    pub(crate) fingerprint: u64,
 }

@@ -277,26 +277,37 @@ pub(crate) struct ClothUnskinned(pub(super) SkinnedMesh);
 pub(super) fn unskin_free_cloths(
     mut commands: Commands,
     cloths: Query<
-        (Entity, Option<&Name>, &SkinnedMesh, &ClothSim),
-        (Without<ClothSkinning>, Without<ClothSkin>),
+        (Entity, Option<&Name>, Option<&SkinnedMesh>, Ref<ClothSim>),
+        (
+            Without<ClothSkinning>,
+            Without<ClothSkin>,
+            Or<(With<SkinnedMesh>, With<ClothUnskinned>)>,
+        ),
     >,
     mut meshes: ResMut<Assets<Mesh>>,
 ) {
     for (entity, name, skinned, cloth) in &cloths {
-        warn!(
-            "cloth {}: the entity has a SkinnedMesh and no ClothSkinning: the cloth runs free from \
-             the mesh's bind pose and is no longer skinned; add ClothSkinning to keep it on \
-             the animated skin",
-            EntityName::new(entity, name)
-        );
+        // Taken over once; a cloth built again (a changed `Cloth`, mesh) has a new copy of
+        // the mesh, with joints again.
+        if skinned.is_none() && !cloth.is_added() {
+            continue;
+        }
+        if let Some(skinned) = skinned {
+            warn!(
+                "cloth {}: the entity has a SkinnedMesh and no ClothSkinning: the cloth runs \
+                 free from the mesh's bind pose and is no longer skinned; add ClothSkinning to \
+                 keep it on the animated skin",
+                EntityName::new(entity, name)
+            );
+            commands
+                .entity(entity)
+                .remove::<SkinnedMesh>()
+                .insert(ClothUnskinned(skinned.clone()));
+        }
         if let Some(mut mesh) = meshes.get_mut(cloth.mesh()) {
             mesh.remove_attribute(Mesh::ATTRIBUTE_JOINT_INDEX);
             mesh.remove_attribute(Mesh::ATTRIBUTE_JOINT_WEIGHT);
         }
-        commands
-            .entity(entity)
-            .remove::<SkinnedMesh>()
-            .insert(ClothUnskinned(skinned.clone()));
     }
 }
 
@@ -332,8 +343,9 @@ pub(super) fn skin_cloths(
     let bindposes = bindposes.as_deref().unwrap_or(&no_bindposes);
     for (entity, name, settings, skinned, unskinned, source, mut skin, mut cloth) in &mut cloths {
         let who = EntityName::new(entity, name);
-        // Built once, and again when the settings change.
-        let fresh = skin.is_none() || settings.is_changed();
+        // Built once, and again when the settings change or the cloth was built again (its
+        // new copy of the mesh has the joints again).
+        let fresh = skin.is_none() || settings.is_changed() || cloth.is_added();
         if fresh {
             let mut slot = skin.as_deref_mut().and_then(|s| s.error.take());
             // The mesh as the user gave it (the cloth's copy holds simulated positions).

@@ -17,7 +17,7 @@ use super::{
     ClothTorn, ClothWorkers, PinAnchor, TaskPoolParallel,
 };
 use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
-use crate::foundation::{EntityName, FixedPoses, modified_meshes};
+use crate::foundation::{EntityName, FixedPoses, mesh_fingerprint, modified_meshes};
 use crate::solver::{Environment, ManyItem, Serial, SolverError, StepReport, step_many};
 use crate::wind::ClothWindField;
 
@@ -90,6 +90,7 @@ pub(super) fn init_cloths(
             still_waiting.insert(entity, (since, said));
             continue;
         };
+        let fingerprint = mesh_fingerprint(mesh);
         // Where the entity is at this step, even if it was spawned in this fixed step and
         // has no propagated GlobalTransform yet.
         let own = poses.get(entity).unwrap_or_default();
@@ -108,6 +109,7 @@ pub(super) fn init_cloths(
                     ClothSource {
                         source: source_handle,
                         copy: handle,
+                        fingerprint,
                     },
                     sim,
                 ));
@@ -186,17 +188,24 @@ pub(super) fn rebuild_changed_meshes(
     mut commands: Commands,
     mut events: MessageReader<AssetEvent<Mesh>>,
     cloths: Query<(Entity, &Mesh3d, Option<&ClothSource>, Has<ClothInvalid>), With<Cloth>>,
+    meshes: Res<Assets<Mesh>>,
 ) {
     let changed = modified_meshes(&mut events);
     if changed.is_empty() {
         return;
     }
     for (entity, mesh, source, invalid) in &cloths {
-        let user_mesh = match source {
-            Some(s) if s.copy == mesh.0 => s.source.id(),
-            _ => mesh.0.id(),
+        let (user_mesh, built_from) = match source {
+            Some(s) if s.copy == mesh.0 => (s.source.id(), Some(s.fingerprint)),
+            _ => (mesh.0.id(), None),
         };
-        if changed.contains(&user_mesh) {
+        // Only a change of contents: the engine may touch an asset without changing it.
+        let differs = || {
+            meshes
+                .get(user_mesh)
+                .is_some_and(|m| built_from != Some(mesh_fingerprint(m)))
+        };
+        if changed.contains(&user_mesh) && differs() {
             if invalid {
                 commands.entity(entity).remove::<ClothInvalid>();
             } else {

@@ -33,7 +33,8 @@ use bevy::prelude::*;
 use bevy::reflect::{TypePath, impl_reflect_opaque};
 
 use crate::foundation::{
-    ClothSchedule, ClothSystems, EntityName, FixedPoses, modified_meshes, read_mesh,
+    ClothSchedule, ClothSystems, EntityName, FixedPoses, mesh_fingerprint, modified_meshes,
+    read_mesh,
 };
 use crate::solver::{
     Collider, ContactImpulse, DEFAULT_TELEPORT_DISTANCE, Pose, SdfGrid, Shape, is_teleport, limits,
@@ -187,6 +188,8 @@ pub struct ColliderRuntime {
     failed: bool,
     /// The mesh and resolution the field was baked (or refused) for: a change bakes again.
     baked_for: Option<(AssetId<Mesh>, u32)>,
+    /// The mesh's contents when baked (a changed asset bakes again).
+    fingerprint: u64,
 }
 
 /// Every collider of this step, ready for the solver, with its entity.
@@ -230,13 +233,20 @@ impl Plugin for ClothColliderPlugin {
 fn rebake_changed_meshes(
     mut events: MessageReader<AssetEvent<Mesh>>,
     mut colliders: Query<&mut ColliderRuntime>,
+    meshes: Res<Assets<Mesh>>,
 ) {
     let changed = modified_meshes(&mut events);
     if changed.is_empty() {
         return;
     }
     for mut rt in &mut colliders {
-        if rt.baked_for.is_some_and(|(id, _)| changed.contains(&id)) {
+        // Only a change of contents: the engine may touch an asset without changing it.
+        if let Some((id, _)) = rt.baked_for
+            && changed.contains(&id)
+            && meshes
+                .get(id)
+                .is_some_and(|m| mesh_fingerprint(m) != rt.fingerprint)
+        {
             rt.baked_for = None;
         }
     }
@@ -340,6 +350,7 @@ fn bake_mesh_colliders(
         let Some(source) = meshes.as_ref().and_then(|m| m.get(handle)) else {
             continue; // not loaded yet
         };
+        let fingerprint = mesh_fingerprint(source);
         let baked = limits::SDF_RESOLUTION
             .check_count(*resolution)
             .map_err(|e| e.to_string())
@@ -350,6 +361,7 @@ fn bake_mesh_colliders(
             });
         let mut rt = ColliderRuntime {
             baked_for: Some(key),
+            fingerprint,
             ..default()
         };
         match baked {
@@ -374,6 +386,7 @@ fn bake_mesh_colliders(
                 r.baked = rt.baked;
                 r.failed = rt.failed;
                 r.baked_for = rt.baked_for;
+                r.fingerprint = rt.fingerprint;
             }
             None => {
                 commands.entity(entity).insert(rt);

@@ -138,6 +138,24 @@ pub fn read_mesh(mesh: &Mesh) -> Result<MeshData, MeshError> {
     })
 }
 
+/// A hash of everything in `mesh` (topology, every attribute, indices): an asset event that
+/// leaves it the same (the engine touching an asset it did not change) rebuilds nothing.
+pub(crate) fn mesh_fingerprint(mesh: &Mesh) -> u64 {
+    use core::hash::{Hash, Hasher};
+    let mut h = std::hash::DefaultHasher::new();
+    format!("{:?}", mesh.primitive_topology()).hash(&mut h);
+    for (attribute, values) in mesh.attributes() {
+        attribute.id.hash(&mut h);
+        values.get_bytes().hash(&mut h);
+    }
+    match mesh.indices() {
+        Some(Indices::U16(i)) => i.hash(&mut h),
+        Some(Indices::U32(i)) => i.hash(&mut h),
+        None => 0u8.hash(&mut h),
+    }
+    h.finish()
+}
+
 /// The meshes whose asset changed since `events` last read (reloaded from disk, or edited
 /// through `Assets::get_mut`).
 pub(crate) fn modified_meshes(events: &mut MessageReader<AssetEvent<Mesh>>) -> Vec<AssetId<Mesh>> {

@@ -15,8 +15,8 @@ mod pose;
 #[cfg(feature = "animation")]
 pub use animation::ClothAnimationPlugin;
 
-pub(crate) use mesh::modified_meshes;
 pub use mesh::{MeshData, MeshError, grid_mesh, read_mesh};
+pub(crate) use mesh::{mesh_fingerprint, modified_meshes};
 pub use pose::FixedPoses;
 
 use bevy::asset::AssetEventSystems;
