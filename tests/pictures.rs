@@ -1,7 +1,8 @@
 //! The velvet material rendered for real (offscreen, llvmpipe in CI): the pictures are not
 //! empty, the flag's front shows the velvet colour and its back the lining colour, the sunlit
 //! front is brighter than the back, the drape shows its velvet and (lying upside down) casts a
-//! shadow from its back faces, and a normal map shades a cloth through the solver's tangents.
+//! shadow from its back faces, and a normal map shades a cloth through the solver's tangents;
+//! skinned cloths built again still draw.
 
 mod common;
 #[path = "../examples/support/shots.rs"]
@@ -199,4 +200,119 @@ fn velvet_pictures_show_both_sides() {
         point.1 > 1.2 * middle.1,
         "the point light does not light the velvet"
     );
+}
+
+/// Two skinned sheets, one held by `ClothSkinning` and one a plain `Cloth`, built again after
+/// a few steps (a new mass), then drawn: a cloth's new copy of a skinned mesh must not keep
+/// its joints once the entity has no `SkinnedMesh` (the renderer refuses such a draw — a wgpu
+/// validation error that quits the app — as the `cape` example did in a window).
+#[test]
+fn skinned_cloths_built_again_still_draw() {
+    use bevy::asset::RenderAssetUsages;
+    use bevy::mesh::skinning::{SkinnedMesh, SkinnedMeshInverseBindposes};
+    use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
+    use bevy_cloth::prelude::{Cloth, ClothSkinning, MaxDistance};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    if common::gpu_or_skip("skinned_cloths_built_again_still_draw").is_none() {
+        return;
+    }
+    const N: u32 = 8;
+    fn sheet(x: f32) -> Mesh {
+        let mut positions = Vec::new();
+        let mut weights = Vec::new();
+        for j in 0..N {
+            for i in 0..N {
+                let y = 2.0 - j as f32 / (N - 1) as f32;
+                positions.push([x + i as f32 / (N - 1) as f32 - 0.5, y, 0.0]);
+                weights.push([y - 1.0, 2.0 - y, 0.0, 0.0]);
+            }
+        }
+        let mut indices = Vec::new();
+        for j in 0..N - 1 {
+            for i in 0..N - 1 {
+                let a = j * N + i;
+                indices.extend([a, a + N, a + 1, a + 1, a + N, a + N + 1]);
+            }
+        }
+        Mesh::new(
+            PrimitiveTopology::TriangleList,
+            RenderAssetUsages::default(),
+        )
+        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+        .with_inserted_attribute(
+            Mesh::ATTRIBUTE_JOINT_INDEX,
+            VertexAttributeValues::Uint16x4(vec![[0, 1, 0, 0]; (N * N) as usize]),
+        )
+        .with_inserted_attribute(Mesh::ATTRIBUTE_JOINT_WEIGHT, weights)
+        .with_computed_normals()
+        .with_inserted_indices(Indices::U32(indices))
+    }
+    fn setup(
+        mut commands: Commands,
+        mut meshes: ResMut<Assets<Mesh>>,
+        mut materials: ResMut<Assets<StandardMaterial>>,
+        mut bindposes: ResMut<Assets<SkinnedMeshInverseBindposes>>,
+    ) {
+        let bones = [Vec3::new(0.0, 2.0, 0.0), Vec3::new(0.0, 1.0, 0.0)];
+        let joints = bones.map(|b| commands.spawn(Transform::from_translation(b)).id());
+        let inverse = bindposes.add(SkinnedMeshInverseBindposes::from(
+            bones.map(|b| Mat4::from_translation(-b)).to_vec(),
+        ));
+        let material = materials.add(Color::srgb(0.8, 0.1, 0.1));
+        commands.spawn(DirectionalLight::default());
+        for (x, skinning) in [(-0.6, true), (0.6, false)] {
+            let mut e = commands.spawn((
+                Mesh3d(meshes.add(sheet(x))),
+                MeshMaterial3d(material.clone()),
+                Cloth::default(),
+                SkinnedMesh {
+                    inverse_bindposes: inverse.clone(),
+                    joints: joints.to_vec(),
+                },
+            ));
+            if skinning {
+                e.insert(ClothSkinning {
+                    max_distance: MaxDistance::Uniform(0.05),
+                    backstop: None,
+                });
+            }
+        }
+    }
+    fn rebuild(mut steps: Local<u32>, mut cloths: Query<&mut Cloth>) {
+        *steps += 1;
+        if *steps == 10 {
+            for mut c in &mut cloths {
+                c.mass = 0.5;
+            }
+        }
+    }
+    let quit = Arc::new(AtomicBool::new(false));
+    let flag = quit.clone();
+    let pictures = shots::render(
+        UVec2::new(160, 100),
+        30,
+        move |app: &mut App| {
+            app.add_systems(Startup, setup)
+                .add_systems(FixedUpdate, rebuild)
+                .add_systems(Last, move |mut exits: MessageReader<AppExit>| {
+                    if exits.read().next().is_some() {
+                        flag.store(true, Ordering::SeqCst);
+                    }
+                });
+        },
+        &[shots::Shot {
+            name: "skinned_rebuilt",
+            eye: Vec3::new(0.0, 1.5, 4.0),
+            target: Vec3::new(0.0, 1.5, 0.0),
+        }],
+        None,
+    );
+    assert!(
+        !quit.load(Ordering::SeqCst),
+        "the app quit (a render error, see the log)"
+    );
+    let red = matching(&pictures[0], |v| v[0] > v[1] + 0.2 && v[0] > v[2] + 0.2).len();
+    assert!(red > 200, "the sheets were not drawn ({red} red pixels)");
 }
