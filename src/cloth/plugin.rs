@@ -20,9 +20,9 @@ use crate::foundation::{ClothSchedule, ClothSystems};
 /// does not depend on the frame rate. Set the rate with `Time::<Fixed>::from_hz(..)`.
 ///
 /// Its systems, in [`ClothSystems::Prepare`]: `retry_cloths` (cloths whose settings were
-/// fixed, or whose mesh or [`Cloth`] changed to valid settings, are rebuilt), `init_cloths` (new cloths are
-/// built once their mesh has loaded) and `sync_cloths` (changed settings and pins applied, pins
-/// moved to their anchors), `unskin_free_cloths` (a `Cloth` without [`ClothSkinning`] on a
+/// fixed, or whose mesh or [`Cloth`] changed to valid settings, are rebuilt), `init_cloths`
+/// (new cloths are built once their mesh has loaded) and `sync_cloths` (changed settings and
+/// pins applied, pins moved to their anchors), `unskin_free_cloths` (a `Cloth` without [`ClothSkinning`] on a
 /// skinned mesh takes its `SkinnedMesh` off), `skin_cloths` ([`ClothSkinning`]: the skin's
 /// targets for this step); in [`ClothSystems::Simulate`], `step_cloths` (every cloth not
 /// stepped elsewhere, in one `step_many`); in [`ClothSystems::Writeback`], `write_back`; in

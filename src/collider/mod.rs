@@ -45,9 +45,9 @@ use crate::solver::{
 pub enum ColliderMesh {
     /// A triangle mesh asset, baked into a signed distance field when it has loaded (and again
     /// when the asset changes, e.g. reloaded from disk): the entity's own [`Mesh3d`] when
-    /// `mesh` is `None`. `resolution` is the number of cells along
-    /// the mesh's longest side (48 is a good start). The mesh should be closed; an index buffer
-    /// is optional. A skinned mesh is baked in its bind pose and does not follow its bones.
+    /// `mesh` is `None`. `resolution` is the number of cells along the mesh's longest side (48
+    /// is a good start). The mesh should be closed; an index buffer is optional. A skinned mesh
+    /// is baked in its bind pose and does not follow its bones.
     Asset {
         /// The mesh to bake, or `None` for the entity's `Mesh3d`.
         mesh: Option<Handle<Mesh>>,

@@ -14,7 +14,7 @@
 //! children) and the [`Wind`] resource.
 
 use bevy::asset::RenderAssetUsages;
-use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
+use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -25,7 +25,7 @@ use crate::cloth::{
     ClothSim, ClothSource, ClothTearing, ClothTethers, PinAnchor, check_cloth,
 };
 use crate::collider::{ClothCollider, ColliderMesh, ColliderShape};
-use crate::foundation::{EntityName, grid_mesh};
+use crate::foundation::{EntityName, grid_mesh, read_mesh};
 use crate::gpu::ClothBackend;
 use crate::render::VelvetMaterial;
 use crate::solver::{MAX_COORDINATE, Shape, WindParams, limits};
@@ -271,22 +271,14 @@ fn mesh_of(world: &World, handle: &Handle<Mesh>) -> Option<SavedMesh> {
         return Some(SavedMesh::Asset(path.to_string()));
     }
     let mesh = world.get_resource::<Assets<Mesh>>()?.get(handle)?;
-    let Some(VertexAttributeValues::Float32x3(p)) = mesh.attribute(Mesh::ATTRIBUTE_POSITION) else {
-        return None;
-    };
-    let uvs = match mesh.attribute(Mesh::ATTRIBUTE_UV_0) {
-        Some(VertexAttributeValues::Float32x2(uv)) => Some(uv.clone()),
-        _ => None,
-    };
-    let indices = match mesh.indices() {
-        Some(ix) => ix.iter().map(|i| i as u32).collect(),
-        // A mesh without an index buffer: every three vertices are a triangle.
-        None => (0..p.len() as u32).collect(),
-    };
+    // What the cloth reads of it (a mesh without an index buffer gets its implied indices).
+    let data = read_mesh(mesh).ok()?;
     Some(SavedMesh::Inline {
-        positions: p.clone(),
-        uvs,
-        indices,
+        positions: data.positions.iter().map(|p| p.to_array()).collect(),
+        uvs: data
+            .uvs
+            .map(|uvs| uvs.iter().map(|uv| uv.to_array()).collect()),
+        indices: data.indices,
     })
 }
 

@@ -143,7 +143,7 @@ pub fn read_mesh(mesh: &Mesh) -> Result<MeshData, MeshError> {
 pub(crate) fn mesh_fingerprint(mesh: &Mesh) -> u64 {
     use core::hash::{Hash, Hasher};
     let mut h = std::hash::DefaultHasher::new();
-    format!("{:?}", mesh.primitive_topology()).hash(&mut h);
+    mesh.primitive_topology().hash(&mut h);
     for (attribute, values) in mesh.attributes() {
         attribute.id.hash(&mut h);
         values.get_bytes().hash(&mut h);
