@@ -23,9 +23,12 @@
 //!
 //! The CPU's hash keeps the cells of a row along x in consecutive buckets and the positions,
 //! rest positions and positions two steps ahead in separate lanes, so that a query reads a
-//! few runs of entries in sequence and tests eight at a time (vectorised); the GPU's
-//! (`contact.wgsl`, `sc_query`) is a linked list per bucket. Both find the same vertices and
-//! keep the same lowest-numbered ones.
+//! few runs of entries in sequence and tests eight at a time (vectorised), in one walk: the
+//! groups of eight holding some of the vertex's own neighbourhood are kept for the fold test
+//! and its triangles after it, and a triangle is first tested against a bound from its
+//! centroid (most of those looked at lie beside the vertex, farther than it can slide)
+//! before it is projected. The GPU's (`contact.wgsl`, `sc_query`) is a linked list per bucket.
+//! Both find the same vertices and triangles and keep the same lowest-numbered ones.
 //!
 //! Parts of the cloth that rest close together (a vertex and a vertex or triangle corner
 //! closer than 2.5 thicknesses in the rest shape) are left to the distance and bending
@@ -123,6 +126,32 @@ const AHEAD: f32 = 2.0;
 /// Padding after the grid's entries: the query reads them eight at a time.
 const LANES: usize = 8;
 
+/// Groups of eight grid entries with some of the own neighbourhood in them that a query keeps
+/// from its walk (see [`Query::vertex`]).
+const NEAR_GROUPS: usize = 64;
+
+/// Eight grid entries from `k` on, in `range` of the query's ranges, and the lanes of them of
+/// the own neighbourhood (`near`) and folded (`fold`).
+#[derive(Clone, Copy, Default)]
+struct Group {
+    k: u32,
+    range: u8,
+    near: u8,
+    fold: u8,
+}
+
+/// The set bits of a lane mask.
+#[inline]
+fn bits(mut mask: u8) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let l = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            l
+        })
+    })
+}
+
 /// Vertices handled by one parallel work item.
 const CHUNK: usize = 512;
 
@@ -206,6 +235,10 @@ struct Frame {
     area2: f32,
     /// The longest edge.
     longest: f32,
+    /// The centroid, and the farthest a corner lies from it: every point of the triangle lies
+    /// within `spread` of `centre`.
+    centre: Vec3,
+    spread: f32,
 }
 
 impl Frame {
@@ -220,6 +253,12 @@ impl Frame {
         let d01 = e1.dot(e2);
         let d11 = e2.dot(e2);
         let denom = d00 * d11 - d01 * d01;
+        let centre = (a + b + c) / 3.0;
+        let spread = a
+            .distance_squared(centre)
+            .max(b.distance_squared(centre))
+            .max(c.distance_squared(centre))
+            .sqrt();
         let ok = !(len.is_nan() || len <= 1e-12 || denom.is_nan() || denom <= 0.0);
         let longest2 = a
             .distance_squared(b)
@@ -235,7 +274,22 @@ impl Frame {
             denom,
             area2: if ok { len } else { f32::NAN },
             longest: longest2.sqrt(),
+            centre,
+            spread,
         }
+    }
+
+    /// Whether `p` is certainly more than `reach` from the triangle's plane or more than
+    /// `slide` beside the triangle along it (measured from the centre: a conservative bound
+    /// with slack for rounding, so it never rejects what [`Query::triangles_through`]'s exact
+    /// tests keep). Cheaper than projecting; about half the triangles a query looks at end here.
+    #[inline]
+    fn surely_apart(&self, p: Vec3, slide: f32, reach: f32) -> bool {
+        let dc = p - self.centre;
+        let dn = dc.dot(self.n);
+        let along2 = dc.length_squared() - dn * dn;
+        let limit = slide + self.spread;
+        along2 > limit * limit * 1.001 + 1e-4 * reach * reach || dn.abs() > 1.001 * reach
     }
 
     /// `p`'s signed distance along the normal and its projection's barycentric weights (all
@@ -331,8 +385,9 @@ struct Lanes {
 
 impl Query<'_> {
     /// Vertex `i`'s neighbours and triangles into its slots; returns their counts. `ranges`
-    /// is working space.
-    fn vertex(
+    /// is working space. `WALK_TWICE` takes the path of a crowd too big for [`NEAR_GROUPS`]
+    /// (a second walk for the own neighbourhood) for every vertex, as the tests compare.
+    fn vertex<const WALK_TWICE: bool>(
         &self,
         i: usize,
         neighbours: &mut [u32],
@@ -355,7 +410,12 @@ impl Query<'_> {
         let ahead = AHEAD * self.dt;
         let pa = p + self.vel[i].xyz() * ahead;
         let rest_i = self.rest[i];
-        for &(row, k0, k1) in ranges.iter() {
+        // The groups of eight entries with some of the own neighbourhood in them, kept for
+        // after the walk (stored whether or not they have, to keep the walk free of branches);
+        // more than the buffer holds and the walk is repeated for them.
+        let mut groups = [Group::default(); NEAR_GROUPS];
+        let mut ng = 0usize;
+        for (r, &(row, k0, k1)) in ranges.iter().enumerate() {
             let mut k = k0;
             while k < k1 {
                 let m = (k1 - k).min(LANES);
@@ -367,35 +427,86 @@ impl Query<'_> {
                     far &= far - 1;
                     self.far_hit(i, p, row, k + l, &mut found);
                 }
-                let mut fold = lanes.fold & keep;
-                while fold != 0 && !found.folded {
-                    let l = fold.trailing_zeros() as usize;
-                    fold &= fold - 1;
-                    found.folded |= self.in_row(i, row, k + l).is_some();
+                let near = lanes.near & keep;
+                if let Some(g) = groups.get_mut(ng) {
+                    *g = Group {
+                        k: k as u32,
+                        range: r as u8,
+                        near: near as u8,
+                        fold: (lanes.fold & keep) as u8,
+                    };
                 }
+                ng += usize::from(near != 0);
                 k += LANES;
             }
         }
         // The own neighbourhood's triangles, where it has folded.
-        if found.folded {
-            for &(row, k0, k1) in ranges.iter() {
-                let mut k = k0;
-                while k < k1 {
-                    let m = (k1 - k).min(LANES);
-                    let mut near = self.lanes(k, p, pa, rest_i).near & ((1u32 << m) - 1);
-                    while near != 0 {
-                        let l = near.trailing_zeros() as usize;
-                        near &= near - 1;
-                        if let Some(j) = self.in_row(i, row, k + l) {
-                            let rest2 = (self.rest[j] - rest_i).length_squared();
-                            self.triangles_through(i, p, j, rest2, &mut found);
-                        }
+        if !WALK_TWICE && ng <= NEAR_GROUPS && ranges.len() <= 256 {
+            let groups = &groups[..ng];
+            let row = |g: &Group| ranges[g.range as usize].0;
+            found.folded = groups
+                .iter()
+                .any(|g| bits(g.fold).any(|l| self.in_row(i, row(g), g.k as usize + l).is_some()));
+            if found.folded {
+                for g in groups {
+                    for l in bits(g.near) {
+                        self.near_hit(i, p, rest_i, row(g), g.k as usize + l, &mut found);
                     }
-                    k += LANES;
                 }
             }
+        } else {
+            self.near_walk(i, p, pa, rest_i, ranges, &mut found);
         }
         (found.nc, found.tc)
+    }
+
+    /// The triangles through the own-neighbourhood vertex of grid entry `k`, when it is read
+    /// through its own row.
+    #[inline]
+    fn near_hit(&self, i: usize, p: Vec3, rest_i: Vec3, row: Row, k: usize, found: &mut Found) {
+        if let Some(j) = self.in_row(i, row, k) {
+            let rest2 = (self.rest[j] - rest_i).length_squared();
+            self.triangles_through(i, p, j, rest2, found);
+        }
+    }
+
+    /// The own neighbourhood's fold test and triangles from a second walk (a crowd too big
+    /// for [`NEAR_GROUPS`]).
+    fn near_walk(
+        &self,
+        i: usize,
+        p: Vec3,
+        pa: Vec3,
+        rest_i: Vec3,
+        ranges: &[(Row, usize, usize)],
+        found: &mut Found,
+    ) {
+        let each = |f: &mut dyn FnMut(Row, usize, Lanes)| {
+            for &(row, k0, k1) in ranges {
+                for k in (k0..k1).step_by(LANES) {
+                    let keep = (1u32 << (k1 - k).min(LANES)) - 1;
+                    let lanes = self.lanes(k, p, pa, rest_i);
+                    let masked = Lanes {
+                        far: lanes.far & keep,
+                        near: lanes.near & keep,
+                        fold: lanes.fold & keep,
+                    };
+                    f(row, k, masked);
+                }
+            }
+        };
+        let mut folded = false;
+        each(&mut |row, k, lanes| {
+            folded |= bits(lanes.fold as u8).any(|l| self.in_row(i, row, k + l).is_some());
+        });
+        found.folded = folded;
+        if folded {
+            each(&mut |row, k, lanes| {
+                for l in bits(lanes.near as u8) {
+                    self.near_hit(i, p, rest_i, row, k + l, found);
+                }
+            });
+        }
     }
 
     /// The grid ranges within the radius of `p`: rows (cells along x) whose y–z square comes
@@ -540,6 +651,10 @@ impl Query<'_> {
         let first =
             &self.first_tris[self.first_start[j] as usize..self.first_start[j + 1] as usize];
         for &t in first {
+            let frame = &self.frames[t as usize];
+            if frame.surely_apart(p, margin, self.reach) {
+                continue;
+            }
             let tri = self.triangles[t as usize];
             if !tri[1..]
                 .iter()
@@ -553,7 +668,6 @@ impl Query<'_> {
             }
             // Over the triangle, or beside it by no more than it can slide over in the step
             // (the sheet's own triangles around the vertex are beside it, in its plane).
-            let frame = &self.frames[t as usize];
             let Some((d, bary)) = frame.project(p, corners[0]) else {
                 continue;
             };
@@ -696,9 +810,9 @@ struct QueryChunk<'a> {
 
 impl SelfCollisionScratch {
     /// Fills the grid with the current positions and every vertex's lists (see the module
-    /// docs), the vertices in parallel.
+    /// docs), the vertices in parallel (`WALK_TWICE`: see [`Query::vertex`]).
     #[expect(clippy::too_many_arguments)]
-    fn find(
+    fn find<const WALK_TWICE: bool>(
         &mut self,
         pos: &[Vec4],
         vel: &[Vec4],
@@ -793,7 +907,7 @@ impl SelfCollisionScratch {
         par.for_each_mut(&mut chunks, |c| {
             let mut ranges = Vec::new();
             for k in 0..c.neighbour_count.len() {
-                let (nc, tc) = query.vertex(
+                let (nc, tc) = query.vertex::<WALK_TWICE>(
                     c.first + k,
                     &mut c.neighbours[k * MAX_SELF_NEIGHBOURS..(k + 1) * MAX_SELF_NEIGHBOURS],
                     &mut c.triangles[k * MAX_SELF_TRIANGLES..(k + 1) * MAX_SELF_TRIANGLES],
@@ -1004,7 +1118,7 @@ pub(crate) fn find_self_collision_candidates(
     par: &impl Parallel,
 ) {
     if let Some(reach) = reach(vel, params, dt) {
-        scratch.find(pos, vel, dt, rest, triangles, params.thickness, reach, par);
+        scratch.find::<false>(pos, vel, dt, rest, triangles, params.thickness, reach, par);
     } else {
         scratch.neighbour_count.clear();
         scratch.neighbour_count.resize(pos.len(), 0);
@@ -1291,6 +1405,66 @@ mod tests {
             }
             assert!(total > 0, "{n} at {at}: no pairs to compare");
         }
+    }
+
+    /// The own neighbourhood's groups of entries kept from the walk give the lists a second
+    /// walk gives, in a sheet crumpled to half its size (folded everywhere) with a thickness
+    /// of three edges (some vertices see more than [`NEAR_GROUPS`] groups of their own
+    /// neighbourhood, and take the second walk either way).
+    #[test]
+    fn the_kept_groups_find_what_a_second_walk_finds() {
+        let mut seed = 11u32;
+        let mut next = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32 - 0.5
+        };
+        let side = 40;
+        let h = 0.01;
+        let at = |i: usize| Vec3::new((i % side) as f32, (i / side) as f32, 0.0) * h;
+        let rest: Vec<Vec3> = (0..side * side).map(at).collect();
+        let pos: Vec<Vec4> = rest
+            .iter()
+            .map(|r| (*r * 0.5 + Vec3::new(next(), next(), next()) * h).extend(1.0))
+            .collect();
+        let vel: Vec<Vec4> = (0..pos.len())
+            .map(|_| Vec3::new(next(), next(), next()).extend(0.0))
+            .collect();
+        let mut tris = Vec::new();
+        for y in 0..side - 1 {
+            for x in 0..side - 1 {
+                let i = (y * side + x) as u32;
+                let s = side as u32;
+                tris.push([i, i + 1, i + s + 1]);
+                tris.push([i, i + s + 1, i + s]);
+            }
+        }
+        let params = SelfCollision {
+            thickness: 3.0 * h,
+            friction: 0.0,
+        };
+        let dt = 1.0 / 60.0;
+        let reach = reach(&vel, params, dt).unwrap();
+        let t = params.thickness;
+        let mut kept = SelfCollisionScratch::default();
+        kept.find::<false>(&pos, &vel, dt, &rest, &tris, t, reach, &Serial);
+        let mut walked = SelfCollisionScratch::default();
+        walked.find::<true>(&pos, &vel, dt, &rest, &tris, t, reach, &Serial);
+        assert_eq!(kept.neighbour_count, walked.neighbour_count);
+        assert_eq!(kept.triangle_count, walked.triangle_count);
+        let mut found = 0;
+        for (i, &count) in kept.triangle_count.iter().enumerate() {
+            let slots = i * MAX_SELF_TRIANGLES..i * MAX_SELF_TRIANGLES + count as usize;
+            assert_eq!(
+                kept.triangles[slots.clone()],
+                walked.triangles[slots],
+                "vertex {i}"
+            );
+            found += count;
+        }
+        assert!(
+            found > 1000,
+            "only {found} triangles found: the sheet did not fold"
+        );
     }
 
     #[test]
