@@ -73,6 +73,10 @@ pub struct SelfCollisionScratch {
     /// the triangles it is over first.
     triangle_count: Vec<u32>,
     triangles: Vec<u32>,
+    /// The vertices with something in their lists (a fifth of a crumpled cloth's): the only
+    /// ones a pass looks at.
+    active: Vec<u32>,
+    /// Per active vertex, its correction in the current pass.
     corrections: Vec<Vec3>,
 }
 
@@ -917,6 +921,12 @@ impl SelfCollisionScratch {
                 c.triangle_count[k] = tc as u32;
             }
         });
+        self.active.clear();
+        self.active.extend(
+            (0..n as u32).filter(|&i| {
+                self.neighbour_count[i as usize] + self.triangle_count[i as usize] > 0
+            }),
+        );
     }
 }
 
@@ -1030,9 +1040,9 @@ fn triangle_correction(
     da.is_finite().then_some(da)
 }
 
-/// One parallel work item of a pass: a run of vertices' corrections.
+/// One parallel work item of a pass: a run of active vertices' corrections.
 struct PassChunk<'a> {
-    first: usize,
+    active: &'a [u32],
     corrections: &'a mut [Vec3],
 }
 
@@ -1052,23 +1062,23 @@ pub(crate) fn self_collide(
     if scratch.neighbour_count.len() != n || scratch.triangle_count.len() != n {
         return;
     }
+    let active = &scratch.active;
     scratch.corrections.clear();
-    scratch.corrections.resize(n, Vec3::ZERO);
+    scratch.corrections.resize(active.len(), Vec3::ZERO);
     let (nc, nl) = (&scratch.neighbour_count, &scratch.neighbours);
     let (tc, tl) = (&scratch.triangle_count, &scratch.triangles);
     let read: &[Vec4] = pos;
-    let mut chunks: Vec<PassChunk> = scratch
-        .corrections
-        .chunks_mut(CHUNK)
-        .enumerate()
-        .map(|(k, corrections)| PassChunk {
-            first: k * CHUNK,
+    let mut chunks: Vec<PassChunk> = active
+        .chunks(CHUNK)
+        .zip(scratch.corrections.chunks_mut(CHUNK))
+        .map(|(active, corrections)| PassChunk {
+            active,
             corrections,
         })
         .collect();
     par.for_each_mut(&mut chunks, |c| {
-        for (k, out) in c.corrections.iter_mut().enumerate() {
-            let i = c.first + k;
+        for (&i, out) in c.active.iter().zip(c.corrections.iter_mut()) {
+            let i = i as usize;
             let (a, prev_a) = (read[i], prev[i]);
             let mut sum = Vec3::ZERO;
             let mut touching = 0u32;
@@ -1098,8 +1108,8 @@ pub(crate) fn self_collide(
         }
     });
     drop(chunks);
-    for (x, c) in pos.iter_mut().zip(&scratch.corrections) {
-        *x += c.extend(0.0);
+    for (&i, c) in active.iter().zip(&scratch.corrections) {
+        pos[i as usize] += c.extend(0.0);
     }
 }
 
@@ -1124,6 +1134,7 @@ pub(crate) fn find_self_collision_candidates(
         scratch.neighbour_count.resize(pos.len(), 0);
         scratch.triangle_count.clear();
         scratch.triangle_count.resize(pos.len(), 0);
+        scratch.active.clear();
     }
 }
 
