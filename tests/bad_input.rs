@@ -492,6 +492,65 @@ fn every_bad_input_gets_a_typed_error_once_and_nothing_else_changes() {
     assert_eq!(good_positions(&app, good), reference);
 }
 
+/// A self-collision thickness of more than `MAX_SELF_COLLISION_EDGES` mean rest edges (which
+/// would make the search grow with its square) is brought down to that when the cloth is built
+/// and when it is changed at runtime; the cloth runs and nothing is reported as failed. A
+/// thinner one is used as it is.
+#[test]
+fn a_self_collision_thicker_than_a_few_edges_is_brought_down() {
+    let mut app = app();
+    let mesh = add_mesh(&mut app, grid_mesh(&GRID));
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Cloth::default(),
+            ClothSelfCollision {
+                thickness: Some(1.0),
+                friction: 0.2,
+            },
+        ))
+        .id();
+    run(&mut app, 5);
+    let used = |app: &App| {
+        let sim = app.world().get::<ClothSim>(e).expect("simulated");
+        let edges = sim.simulation().topology().edges();
+        let mean = edges.iter().map(|e| e.rest).sum::<f32>() / edges.len() as f32;
+        let thickness = sim
+            .simulation()
+            .features()
+            .self_collision
+            .unwrap()
+            .thickness;
+        (thickness, mean, sim.steps())
+    };
+    let (thickness, mean, steps) = used(&app);
+    assert!(
+        mean > 0.1,
+        "the 8 × 8 grid of 1 m has edges of 1/7 m and more: {mean}"
+    );
+    assert_eq!(
+        thickness,
+        bevy_cloth::solver::MAX_SELF_COLLISION_EDGES * mean
+    );
+    assert!(steps > 0);
+    // Thicker still at runtime: the same; then thinner: as asked.
+    app.world_mut()
+        .get_mut::<ClothSelfCollision>(e)
+        .unwrap()
+        .thickness = Some(100.0);
+    run(&mut app, 2);
+    assert_eq!(used(&app).0, thickness);
+    app.world_mut()
+        .get_mut::<ClothSelfCollision>(e)
+        .unwrap()
+        .thickness = Some(0.05);
+    run(&mut app, 2);
+    assert_eq!(used(&app).0, 0.05);
+    assert!(app.world().get::<ClothInvalid>(e).is_none());
+    assert!(app.world().resource::<Failures>().0.is_empty());
+}
+
 #[test]
 fn broken_colliders_and_wind_are_ignored_and_the_cloth_runs_as_without_them() {
     const FRAMES: usize = 30;

@@ -11,8 +11,8 @@ use super::{
 };
 use crate::foundation::{FixedPoses, read_mesh};
 use crate::solver::{
-    Features, MeshBinding, SelfCollision, Simulation, SolverError, TetherParams, TopologyError,
-    TopologyOptions, limits,
+    Features, MAX_SELF_COLLISION_EDGES, MeshBinding, SelfCollision, Simulation, SolverError,
+    TetherParams, TopologyError, TopologyOptions, limits,
 };
 
 /// A cloth built from its mesh, before its own mesh asset exists.
@@ -190,6 +190,39 @@ pub(super) fn build(
     })
 }
 
+/// The self-collision thickness a cloth uses: its own, or the mean rest edge length; at most
+/// [`MAX_SELF_COLLISION_EDGES`] mean edges (the solver refuses more). Also the thickness
+/// asked for when it was more than that.
+pub(super) fn self_collision_thickness(
+    sim: &Simulation,
+    sc: &ClothSelfCollision,
+) -> (f32, Option<f32>) {
+    let e = sim.topology().edges();
+    let mean = e.iter().map(|e| e.rest).sum::<f32>() / e.len().max(1) as f32;
+    let asked = sc.thickness.unwrap_or(mean);
+    let most = MAX_SELF_COLLISION_EDGES * mean;
+    // Not `min`: a NaN stays, to be refused with the other values out of range.
+    if asked > most {
+        (most, Some(asked))
+    } else {
+        (asked, None)
+    }
+}
+
+/// The warning for a cloth whose self-collision thickness was brought down to
+/// [`MAX_SELF_COLLISION_EDGES`] mean edges, if it was.
+pub(super) fn thickness_note(sim: &Simulation, sc: Option<&ClothSelfCollision>) -> Option<String> {
+    let (used, asked) = self_collision_thickness(sim, sc?);
+    asked.map(|asked| {
+        format!(
+            "its self-collision thickness {asked} m is more than {MAX_SELF_COLLISION_EDGES} \
+             mean rest edges: {used} m is used (the search grows with the square of thickness \
+             over edge, and a vertex's lists cannot hold what a thicker layer brings); use a \
+             coarser mesh for a thicker layer"
+        )
+    })
+}
+
 /// The solver features a cloth's opt-in components ask for.
 pub(super) fn features(
     sim: &Simulation,
@@ -199,10 +232,7 @@ pub(super) fn features(
 ) -> Features {
     Features {
         self_collision: self_collision.map(|sc| SelfCollision {
-            thickness: sc.thickness.unwrap_or_else(|| {
-                let e = sim.topology().edges();
-                e.iter().map(|e| e.rest).sum::<f32>() / e.len().max(1) as f32
-            }),
+            thickness: self_collision_thickness(sim, sc).0,
             friction: sc.friction,
         }),
         tethers: tethers.map(|t| TetherParams {

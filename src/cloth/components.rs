@@ -123,7 +123,10 @@ impl Default for Cloth {
 #[reflect(Component, Default, Clone, PartialEq)]
 pub struct ClothSelfCollision {
     /// Distance kept between any two vertices; `None` uses the mean rest edge length, which
-    /// stops edges slipping between vertices.
+    /// stops edges slipping between vertices. At most
+    /// [`MAX_SELF_COLLISION_EDGES`](crate::solver::MAX_SELF_COLLISION_EDGES) mean rest edges
+    /// are used (more is brought down to that, with a warning): the cost grows with the
+    /// square of thickness over edge length.
     pub thickness: Option<f32>,
     /// Friction between touching parts of the cloth.
     pub friction: f32,

@@ -6,7 +6,7 @@ use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::tasks::ComputeTaskPool;
 
-use super::build::{build, features};
+use super::build::{build, features, thickness_note};
 use super::error::report;
 use super::inertia::carry_unfelt_motion;
 use super::pins::{attach, follow_anchors, pin_list, repin};
@@ -102,6 +102,9 @@ pub(super) fn init_cloths(
         });
         match built {
             Ok(b) => {
+                if let Some(note) = thickness_note(&b.sim, sc) {
+                    warn!("cloth {who}: {note}");
+                }
                 let sim = b.into_sim(meshes);
                 let handle = sim.mesh().clone();
                 commands.entity(entity).try_insert((
@@ -331,10 +334,12 @@ pub(super) fn sync_cloths(
             }
             .and_then(|()| {
                 if features_due {
-                    cs.sim.set_features(wanted)
-                } else {
-                    Ok(())
+                    cs.sim.set_features(wanted)?;
+                    if let Some(note) = thickness_note(&cs.sim, sc) {
+                        warn!("cloth {who}: {note}");
+                    }
                 }
+                Ok(())
             })
             .map_err(|e| ClothError::Solver(SolverError::Params(e)));
             note_rejection(

@@ -533,7 +533,12 @@ fn features_section(ui: &mut egui::Ui, world: &mut World, e: Entity) {
                             .checkbox(&mut auto, "thickness: mean edge length")
                             .changed()
                         {
-                            sc.thickness = if auto { None } else { Some(0.01) };
+                            // Unticked: start from the thickness in use (the mean edge).
+                            let in_use = world
+                                .get::<ClothSim>(e)
+                                .and_then(|s| s.simulation().features().self_collision)
+                                .map_or(0.01, |s| s.thickness);
+                            sc.thickness = if auto { None } else { Some(in_use) };
                             world.entity_mut(e).insert(sc);
                         }
                     }

@@ -71,7 +71,9 @@ pub use constraints::{
     IMPLICIT_BENDING_MAX_SATURATION, IMPLICIT_BENDING_MAX_WORK, IMPLICIT_BENDING_SATURATION,
     LAB_WEIGHT, MotionConstraints, Solver, TetherParams, Tethers, default_part_count,
 };
-pub use limits::{MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES, ParamError};
+pub use limits::{
+    MAX_COORDINATE, MAX_SELF_COLLISION_EDGES, MAX_TRIANGLES, MAX_VERTICES, ParamError,
+};
 pub use mesh::{
     Bend, BendRest, BendingModel, Edge, EdgeKind, Grid, HARD_EDGE_COS, MassDistribution,
     MeshAttributes, MeshBinding, MeshShading, Topology, TopologyError, TopologyOptions, Weld,

@@ -512,3 +512,29 @@ fn motion_targets_hold_the_cloth_and_refuse_bad_input() {
     let now = sim.state().positions[n - 1].y;
     assert!(now < y - 0.1, "{y} → {now}");
 }
+
+/// A self-collision thickness up to [`MAX_SELF_COLLISION_EDGES`] mean rest edges is taken; a
+/// thicker one is refused with a reason that names the ratio, and the features stay.
+#[test]
+fn a_self_collision_thicker_than_a_few_edges_is_refused() {
+    let mut sim = HangingCloth::on(Grid::new(11, 11, 1.0, 1.0))
+        .build()
+        .unwrap();
+    let edges = sim.topology().edges();
+    let mean = edges.iter().map(|e| e.rest).sum::<f32>() / edges.len() as f32;
+    let with = |thickness: f32| Features {
+        self_collision: Some(SelfCollision {
+            thickness,
+            friction: 0.2,
+        }),
+        ..Features::default()
+    };
+    let thick = 0.99 * MAX_SELF_COLLISION_EDGES * mean;
+    sim.set_features(with(thick)).unwrap();
+    let err = sim
+        .set_features(with(1.01 * MAX_SELF_COLLISION_EDGES * mean))
+        .unwrap_err();
+    assert_eq!(err.name, "self_collision.thickness");
+    assert!(err.reason.contains("4.0 times"), "{err}");
+    assert_eq!(sim.features().self_collision.unwrap().thickness, thick);
+}

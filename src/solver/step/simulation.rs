@@ -13,7 +13,7 @@ use crate::solver::collision::{Collider, ContactImpulse};
 use crate::solver::constraints::{
     ConstraintBatches, ImplicitBending, MotionConstraints, Solver, Tethers, default_part_count,
 };
-use crate::solver::limits::{ParamError, within_range};
+use crate::solver::limits::{MAX_SELF_COLLISION_EDGES, ParamError, within_range};
 use crate::solver::mesh::{BendingModel, Edge, Topology, TopologyError};
 use crate::solver::metrics::{StrainStats, edge_strain};
 use crate::solver::parallel::Parallel;
@@ -431,9 +431,30 @@ impl Simulation {
     /// Sets the optional capabilities (cheap; tethers are rebuilt on the next step).
     ///
     /// # Errors
-    /// [`ParamError`] if a thickness, friction, slack or tear threshold is out of range.
+    /// [`ParamError`] if a thickness, friction, slack or tear threshold is out of range, or
+    /// the self-collision thickness is more than [`MAX_SELF_COLLISION_EDGES`] times the
+    /// cloth's mean rest edge.
     pub fn set_features(&mut self, features: Features) -> Result<(), ParamError> {
         features.validate()?;
+        if let Some(sc) = features.self_collision {
+            let edges = self.topology.edges();
+            let mean = edges.iter().map(|e| e.rest).sum::<f32>() / edges.len().max(1) as f32;
+            let most = MAX_SELF_COLLISION_EDGES * mean;
+            if mean > 0.0 && sc.thickness > most {
+                return Err(ParamError {
+                    name: "self_collision.thickness",
+                    reason: format!(
+                        "{} m is {:.1} times the cloth's mean rest edge ({mean} m); at most \
+                         {MAX_SELF_COLLISION_EDGES} times ({most} m): a vertex keeps too few \
+                         neighbours and triangles for a layer that thick, and the search grows \
+                         with the square of the ratio (use a thinner layer, a finer mesh, or \
+                         no thickness for the mean edge)",
+                        sc.thickness,
+                        sc.thickness / mean
+                    ),
+                });
+            }
+        }
         if features != self.features {
             self.sleep.wake();
         }
