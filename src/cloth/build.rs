@@ -45,6 +45,7 @@ impl Built {
             teleport: None,
             attached: self.attached,
             settings_error: None,
+            thickness_warned: None,
             cloth_error: None,
             pins_error: None,
             carry: None,
@@ -209,17 +210,21 @@ pub(super) fn self_collision_thickness(
     }
 }
 
-/// The warning for a cloth whose self-collision thickness was brought down to
-/// [`MAX_SELF_COLLISION_EDGES`] mean edges, if it was.
-pub(super) fn thickness_note(sim: &Simulation, sc: Option<&ClothSelfCollision>) -> Option<String> {
+/// The thickness asked for and the warning for a cloth whose self-collision thickness was
+/// brought down to [`MAX_SELF_COLLISION_EDGES`] mean edges, if it was.
+pub(super) fn thickness_note(
+    sim: &Simulation,
+    sc: Option<&ClothSelfCollision>,
+) -> Option<(f32, String)> {
     let (used, asked) = self_collision_thickness(sim, sc?);
     asked.map(|asked| {
-        format!(
+        let note = format!(
             "its self-collision thickness {asked} m is more than {MAX_SELF_COLLISION_EDGES} \
              mean rest edges: {used} m is used (the search grows with the square of thickness \
              over edge, and a vertex's lists cannot hold what a thicker layer brings); use a \
              coarser mesh for a thicker layer"
-        )
+        );
+        (asked, note)
     })
 }
 

@@ -52,6 +52,10 @@ pub struct ClothSim {
     pub(super) attached: Vec<(u32, Entity, Vec3)>,
     /// A config or feature change that was refused (the last valid settings run meanwhile).
     pub(super) settings_error: Option<ClothError>,
+    /// The self-collision thickness last warned about as too thick (brought down to
+    /// [`MAX_SELF_COLLISION_EDGES`](crate::solver::MAX_SELF_COLLISION_EDGES) mean edges): a
+    /// tear, which changes the mean edge, does not warn again.
+    pub(super) thickness_warned: Option<f32>,
     /// A pin list that was refused (the last valid pins hold meanwhile).
     pub(super) pins_error: Option<ClothError>,
     /// A [`Cloth`](super::Cloth) change that was refused (the cloth built from the last valid

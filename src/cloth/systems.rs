@@ -102,10 +102,12 @@ pub(super) fn init_cloths(
         });
         match built {
             Ok(b) => {
-                if let Some(note) = thickness_note(&b.sim, sc) {
+                let note = thickness_note(&b.sim, sc);
+                if let Some((_, note)) = &note {
                     warn!("cloth {who}: {note}");
                 }
-                let sim = b.into_sim(meshes);
+                let mut sim = b.into_sim(meshes);
+                sim.thickness_warned = note.map(|(asked, _)| asked);
                 let handle = sim.mesh().clone();
                 commands.entity(entity).try_insert((
                     Mesh3d(handle.clone()),
@@ -335,9 +337,13 @@ pub(super) fn sync_cloths(
             .and_then(|()| {
                 if features_due {
                     cs.sim.set_features(wanted)?;
-                    if let Some(note) = thickness_note(&cs.sim, sc) {
+                    let note = thickness_note(&cs.sim, sc);
+                    if let Some((asked, note)) = &note
+                        && cs.thickness_warned != Some(*asked)
+                    {
                         warn!("cloth {who}: {note}");
                     }
+                    cs.thickness_warned = note.map(|(asked, _)| asked);
                 }
                 Ok(())
             })
