@@ -514,8 +514,7 @@ fn a_self_collision_thicker_than_a_few_edges_is_brought_down() {
     run(&mut app, 5);
     let used = |app: &App| {
         let sim = app.world().get::<ClothSim>(e).expect("simulated");
-        let edges = sim.simulation().topology().edges();
-        let mean = edges.iter().map(|e| e.rest).sum::<f32>() / edges.len() as f32;
+        let mean = sim.simulation().topology().mean_rest_edge();
         let thickness = sim
             .simulation()
             .features()

@@ -198,8 +198,7 @@ pub(super) fn self_collision_thickness(
     sim: &Simulation,
     sc: &ClothSelfCollision,
 ) -> (f32, Option<f32>) {
-    let e = sim.topology().edges();
-    let mean = e.iter().map(|e| e.rest).sum::<f32>() / e.len().max(1) as f32;
+    let mean = sim.topology().mean_rest_edge();
     let asked = sc.thickness.unwrap_or(mean);
     let most = MAX_SELF_COLLISION_EDGES * mean;
     // Not `min`: a NaN stays, to be refused with the other values out of range.

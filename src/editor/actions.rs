@@ -454,11 +454,11 @@ fn top_edge(sim: &ClothSim, own: &GlobalTransform) -> Vec<u32> {
         .collect();
     let top = height.iter().copied().fold(f32::MIN, f32::max);
     // Within a quarter of a mean edge of the top: one row of a grid, not the next.
-    let edges = sim.simulation().topology().edges();
-    let mean_edge = if edges.is_empty() {
+    let topology = sim.simulation().topology();
+    let mean_edge = if topology.edges().is_empty() {
         diagonal
     } else {
-        edges.iter().map(|e| e.rest).sum::<f32>() / edges.len() as f32
+        topology.mean_rest_edge()
     };
     let scale = if level {
         // Heights are in mesh units then.

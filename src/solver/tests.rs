@@ -521,7 +521,7 @@ fn a_self_collision_thicker_than_a_few_edges_is_refused() {
         .build()
         .unwrap();
     let edges = sim.topology().edges();
-    let mean = edges.iter().map(|e| e.rest).sum::<f32>() / edges.len() as f32;
+    let mean = edges.iter().map(|e| f64::from(e.rest)).sum::<f64>() as f32 / edges.len() as f32;
     let with = |thickness: f32| Features {
         self_collision: Some(SelfCollision {
             thickness,

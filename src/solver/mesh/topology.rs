@@ -227,6 +227,8 @@ pub struct Topology {
     corner_uvs: Option<Vec<[Vec2; 3]>>,
     edges: Vec<Edge>,
     bends: Vec<Bend>,
+    /// The mean rest length of `edges`.
+    mean_edge: f32,
     skipped_triangles: usize,
     options: TopologyOptions,
 }
@@ -425,6 +427,7 @@ impl Topology {
             i = j;
         }
 
+        let mean_edge = edges.iter().map(|e| e.rest).sum::<f32>() / edges.len().max(1) as f32;
         Self {
             rest_positions: positions,
             uvs,
@@ -432,6 +435,7 @@ impl Topology {
             corner_uvs,
             edges,
             bends,
+            mean_edge,
             skipped_triangles: 0,
             options,
         }
@@ -506,6 +510,13 @@ impl Topology {
     #[must_use]
     pub fn triangles(&self) -> &[[u32; 3]] {
         &self.triangles
+    }
+
+    /// The mean rest length of the edges (0 without edges): the default self-collision
+    /// thickness.
+    #[must_use]
+    pub fn mean_rest_edge(&self) -> f32 {
+        self.mean_edge
     }
 
     /// Unique triangle edges, sorted by `(v[0], v[1])`.

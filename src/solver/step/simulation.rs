@@ -437,8 +437,7 @@ impl Simulation {
     pub fn set_features(&mut self, features: Features) -> Result<(), ParamError> {
         features.validate()?;
         if let Some(sc) = features.self_collision {
-            let edges = self.topology.edges();
-            let mean = edges.iter().map(|e| e.rest).sum::<f32>() / edges.len().max(1) as f32;
+            let mean = self.topology.mean_rest_edge();
             let most = MAX_SELF_COLLISION_EDGES * mean;
             if mean > 0.0 && sc.thickness > most {
                 return Err(ParamError {
