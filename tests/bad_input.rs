@@ -499,18 +499,17 @@ fn every_bad_input_gets_a_typed_error_once_and_nothing_else_changes() {
 #[test]
 fn a_self_collision_thicker_than_a_few_edges_is_brought_down() {
     let mut app = app();
-    let mesh = add_mesh(&mut app, grid_mesh(&GRID));
-    let e = app
-        .world_mut()
-        .spawn((
-            Mesh3d(mesh),
+    let spawn = spawn_with(
+        grid_mesh(&GRID),
+        (
             Cloth::default(),
             ClothSelfCollision {
                 thickness: Some(1.0),
                 friction: 0.2,
             },
-        ))
-        .id();
+        ),
+    );
+    let e = spawn(&mut app);
     run(&mut app, 5);
     let used = |app: &App| {
         let sim = app.world().get::<ClothSim>(e).expect("simulated");

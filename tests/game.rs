@@ -176,16 +176,8 @@ fn a_mesh_without_an_index_buffer_hangs_like_the_indexed_one() {
     // A curtain: the sheet stood up, its whole top row pinned (a sheet held at two corners
     // buckles one way or the other, and the constraints' order decides which).
     let curtain = |app: &mut App, mesh: Mesh, vertex: &dyn Fn(u32) -> u32| {
-        let mesh = add_mesh(app, mesh);
-        app.world_mut()
-            .spawn((
-                Mesh3d(mesh),
-                Transform::from_xyz(0.0, 2.0, 0.0)
-                    .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2)),
-                Cloth::default(),
-                ClothPins::rest((0..16).map(|i| vertex(GRID.index(i, 0)))),
-            ))
-            .id()
+        let top = (0..16).map(|i| vertex(GRID.index(i, 0)));
+        spawn_hanging(app, mesh, top, 2.0)
     };
     let mut plain = app();
     let p = curtain(&mut plain, grid_mesh(&GRID), &|v| v);
@@ -791,14 +783,29 @@ fn replacing_the_mesh_rebuilds_the_cloth_from_it() {
 /// A 1 m × 1 m, 12 × 12 curtain hanging in the XY plane from its top edge.
 fn spawn_curtain(app: &mut App) -> Entity {
     let grid = Grid::new(12, 12, 1.0, 1.0);
-    let mesh = add_mesh(app, grid_mesh(&grid));
+    spawn_hanging(
+        app,
+        grid_mesh(&grid),
+        (0..12).map(|i| grid.index(i, 0)),
+        1.0,
+    )
+}
+
+/// A grid `mesh` stood up in the XY plane at `height`, hanging from the `top` vertices.
+fn spawn_hanging(
+    app: &mut App,
+    mesh: Mesh,
+    top: impl IntoIterator<Item = u32>,
+    height: f32,
+) -> Entity {
+    let mesh = add_mesh(app, mesh);
     app.world_mut()
         .spawn((
             Mesh3d(mesh),
-            Transform::from_xyz(0.0, 1.0, 0.0)
+            Transform::from_xyz(0.0, height, 0.0)
                 .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2)),
             Cloth::default(),
-            ClothPins::rest((0..12).map(|i| grid.index(i, 0))),
+            ClothPins::rest(top),
         ))
         .id()
 }
