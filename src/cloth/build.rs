@@ -9,7 +9,7 @@ use super::{
     Cloth, ClothConfig, ClothError, ClothPins, ClothSelfCollision, ClothSim, ClothTearing,
     ClothTethers,
 };
-use crate::foundation::{FixedPoses, read_mesh};
+use crate::foundation::{EntityName, FixedPoses, read_mesh};
 use crate::solver::{
     Features, MAX_SELF_COLLISION_EDGES, MeshBinding, SelfCollision, Simulation, SolverError,
     TetherParams, TopologyError, TopologyOptions, limits,
@@ -192,15 +192,12 @@ pub(super) fn build(
 }
 
 /// The self-collision thickness a cloth uses: its own, or the mean rest edge length; at most
-/// [`MAX_SELF_COLLISION_EDGES`] mean edges (the solver refuses more). Also the thickness
-/// asked for when it was more than that.
-pub(super) fn self_collision_thickness(
-    sim: &Simulation,
-    sc: &ClothSelfCollision,
-) -> (f32, Option<f32>) {
-    let mean = sim.topology().mean_rest_edge();
-    let asked = sc.thickness.unwrap_or(mean);
-    let most = MAX_SELF_COLLISION_EDGES * mean;
+/// [`Topology::thickest_self_collision`](crate::solver::Topology::thickest_self_collision) (the
+/// solver refuses more). Also the thickness asked for when it was more than that.
+fn self_collision_thickness(sim: &Simulation, sc: &ClothSelfCollision) -> (f32, Option<f32>) {
+    let topology = sim.topology();
+    let asked = sc.thickness.unwrap_or(topology.mean_rest_edge());
+    let most = topology.thickest_self_collision();
     // Not `min`: a NaN stays, to be refused with the other values out of range.
     if asked > most {
         (most, Some(asked))
@@ -209,22 +206,23 @@ pub(super) fn self_collision_thickness(
     }
 }
 
-/// The thickness asked for and the warning for a cloth whose self-collision thickness was
-/// brought down to [`MAX_SELF_COLLISION_EDGES`] mean edges, if it was.
-pub(super) fn thickness_note(
-    sim: &Simulation,
-    sc: Option<&ClothSelfCollision>,
-) -> Option<(f32, String)> {
-    let (used, asked) = self_collision_thickness(sim, sc?);
-    asked.map(|asked| {
-        let note = format!(
-            "its self-collision thickness {asked} m is more than {MAX_SELF_COLLISION_EDGES} \
-             mean rest edges: {used} m is used (the search grows with the square of thickness \
-             over edge, and a vertex's lists cannot hold what a thicker layer brings); use a \
-             coarser mesh for a thicker layer"
+/// Warns when a cloth's self-collision thickness was brought down to
+/// [`MAX_SELF_COLLISION_EDGES`] mean edges, once per thickness asked (a tear changes the mean
+/// edge, and with it the thickness used, without warning again).
+pub(super) fn warn_thickness(cs: &mut ClothSim, sc: Option<&ClothSelfCollision>, who: EntityName) {
+    let asked = sc.and_then(|sc| self_collision_thickness(&cs.sim, sc).1);
+    if let Some(asked) = asked
+        && cs.thickness_warned != Some(asked)
+    {
+        let used = cs.sim.topology().thickest_self_collision();
+        warn!(
+            "cloth {who}: its self-collision thickness {asked} m is more than \
+             {MAX_SELF_COLLISION_EDGES} mean rest edges: {used} m is used (the search grows with \
+             the square of thickness over edge, and a vertex's lists cannot hold what a thicker \
+             layer brings); use a coarser mesh for a thicker layer"
         );
-        (asked, note)
-    })
+    }
+    cs.thickness_warned = asked;
 }
 
 /// The solver features a cloth's opt-in components ask for.

@@ -6,7 +6,7 @@ use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::tasks::ComputeTaskPool;
 
-use super::build::{build, features, thickness_note};
+use super::build::{build, features, warn_thickness};
 use super::error::report;
 use super::inertia::carry_unfelt_motion;
 use super::pins::{attach, follow_anchors, pin_list, repin};
@@ -102,12 +102,8 @@ pub(super) fn init_cloths(
         });
         match built {
             Ok(b) => {
-                let note = thickness_note(&b.sim, sc);
-                if let Some((_, note)) = &note {
-                    warn!("cloth {who}: {note}");
-                }
                 let mut sim = b.into_sim(meshes);
-                sim.thickness_warned = note.map(|(asked, _)| asked);
+                warn_thickness(&mut sim, sc, who);
                 let handle = sim.mesh().clone();
                 commands.entity(entity).try_insert((
                     Mesh3d(handle.clone()),
@@ -337,13 +333,7 @@ pub(super) fn sync_cloths(
             .and_then(|()| {
                 if features_due {
                     cs.sim.set_features(wanted)?;
-                    let note = thickness_note(&cs.sim, sc);
-                    if let Some((asked, note)) = &note
-                        && cs.thickness_warned != Some(*asked)
-                    {
-                        warn!("cloth {who}: {note}");
-                    }
-                    cs.thickness_warned = note.map(|(asked, _)| asked);
+                    warn_thickness(cs, sc, who);
                 }
                 Ok(())
             })

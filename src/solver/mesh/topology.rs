@@ -519,6 +519,14 @@ impl Topology {
         self.mean_edge
     }
 
+    /// The thickest self-collision this cloth takes:
+    /// [`MAX_SELF_COLLISION_EDGES`](crate::solver::limits::MAX_SELF_COLLISION_EDGES) mean rest
+    /// edges.
+    #[must_use]
+    pub fn thickest_self_collision(&self) -> f32 {
+        crate::solver::limits::MAX_SELF_COLLISION_EDGES * self.mean_edge
+    }
+
     /// Unique triangle edges, sorted by `(v[0], v[1])`.
     #[must_use]
     pub fn edges(&self) -> &[Edge] {

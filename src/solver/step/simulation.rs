@@ -438,7 +438,7 @@ impl Simulation {
         features.validate()?;
         if let Some(sc) = features.self_collision {
             let mean = self.topology.mean_rest_edge();
-            let most = MAX_SELF_COLLISION_EDGES * mean;
+            let most = self.topology.thickest_self_collision();
             if mean > 0.0 && sc.thickness > most {
                 return Err(ParamError {
                     name: "self_collision.thickness",
@@ -446,8 +446,8 @@ impl Simulation {
                         "{} m is {:.1} times the cloth's mean rest edge ({mean} m); at most \
                          {MAX_SELF_COLLISION_EDGES} times ({most} m): a vertex keeps too few \
                          neighbours and triangles for a layer that thick, and the search grows \
-                         with the square of the ratio (use a thinner layer, a finer mesh, or \
-                         no thickness for the mean edge)",
+                         with the square of the ratio (use a thinner layer, a coarser mesh, \
+                         or no thickness for the mean edge)",
                         sc.thickness,
                         sc.thickness / mean
                     ),
