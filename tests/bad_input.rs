@@ -492,12 +492,12 @@ fn every_bad_input_gets_a_typed_error_once_and_nothing_else_changes() {
     assert_eq!(good_positions(&app, good), reference);
 }
 
-/// A self-collision thickness of more than `MAX_SELF_COLLISION_EDGES` mean rest edges (which
-/// would make the search grow with its square) is brought down to that when the cloth is built
+/// A self-collision thickness of more than `MAX_SELF_COLLISION_EDGES` mean rest edges (where
+/// layers would pass through each other) is brought down to that when the cloth is built
 /// and when it is changed at runtime; the cloth runs and nothing is reported as failed. A
 /// thinner one is used as it is.
 #[test]
-fn a_self_collision_thicker_than_a_few_edges_is_brought_down() {
+fn a_self_collision_thicker_than_an_edge_is_brought_down() {
     let mut app = app();
     let spawn = spawn_with(
         grid_mesh(&GRID),

@@ -223,6 +223,10 @@ struct Case {
     carry: Box<dyn Fn(usize) -> Carry>,
     /// Where the skin holds each vertex in each step (skinned clothing), if anywhere.
     motion: Box<dyn Fn(usize) -> Option<MotionTargets>>,
+    /// How many CPU runs of every frame, each from the frame's start nudged by a few ulp, tell
+    /// whether rounding alone splits that frame beyond the bound ([`rounding_splits`]); 0:
+    /// every frame is compared.
+    ensemble: u32,
 }
 
 impl Case {
@@ -240,6 +244,7 @@ impl Case {
             teleport: None,
             carry: Box::new(|_| Carry::IDENTITY),
             motion: Box::new(|_| None),
+            ensemble: 0,
         }
     }
 }
@@ -263,6 +268,64 @@ struct Outcome {
     frames_gpu: Vec<Vec<Vec4>>,
     /// How far the first cloth moved from its start over the run.
     moved: f32,
+    /// Per cloth, the frames that rounding alone split beyond the bound on the CPU
+    /// ([`rounding_splits`]): not compared beyond bit identity on llvmpipe.
+    split: Vec<Vec<usize>>,
+}
+
+/// How many ulp of each coordinate [`rounding_splits`] nudges a frame's start by: more than a
+/// GPU's rounding of the state it is sent (none) and of one operation (a few ulp).
+const NUDGE_ULP: f32 = 8.0;
+
+/// Whether rounding alone can take the frame from `start` beyond `bound` of `reference` (the
+/// CPU twin's result) at some vertex: `members` CPU runs of the frame's steps, each from
+/// `start` with every coordinate moved by up to [`NUDGE_ULP`] ulp in a pseudo-random
+/// direction. Where contact decides discretely (a vertex over a triangle or beside it, on one
+/// side of a layer or the other, touching or not) a GPU that rounds otherwise can take either
+/// side, and the frame says nothing about the kernels.
+#[expect(clippy::too_many_arguments)]
+fn rounding_splits(
+    case: &Case,
+    start: &ClothState,
+    first_step: usize,
+    step_colliders: &[Vec<Collider>],
+    jumps: &[Vec3],
+    members: u32,
+    bound: f32,
+    reference: &[Vec4],
+) -> bool {
+    (1..=members).any(|m| {
+        let mut twin = Twin::new(&case.sim);
+        twin.state = start.clone();
+        let mut seed =
+            0x9e37_79b9_u32.wrapping_mul(m) ^ (first_step as u32).wrapping_mul(0x85eb_ca6b);
+        for p in &mut twin.state.positions {
+            for axis in 0..3 {
+                // xorshift32: a sign and a size in [0, 1) per coordinate.
+                seed ^= seed << 13;
+                seed ^= seed >> 17;
+                seed ^= seed << 5;
+                let u = (seed >> 8) as f32 / (1u32 << 24) as f32;
+                p[axis] += (2.0 * u - 1.0) * NUDGE_ULP * f32::EPSILON * p[axis].abs();
+            }
+        }
+        for (s, cols) in step_colliders.iter().enumerate() {
+            let k = first_step + s;
+            twin.step_carried(
+                &(case.carry)(k),
+                &(case.targets)(k),
+                jumps[s],
+                cols,
+                &(case.air)(k),
+                (case.motion)(k).as_ref(),
+            );
+        }
+        twin.state
+            .positions
+            .iter()
+            .zip(reference)
+            .any(|(a, b)| (a.truncate() - b.truncate()).length() > bound)
+    })
 }
 
 /// Runs `frames` frames of `steps_per_frame` steps of every case, on the CPU (each on its
@@ -283,17 +346,23 @@ fn compare(
     let mut out = Outcome {
         ratios: vec![Vec::new(); cases.len()],
         errors: vec![Vec::new(); cases.len()],
+        split: vec![Vec::new(); cases.len()],
         ..Default::default()
     };
     let start = twins[0].state.positions.clone();
     let mut k = 0;
-    for _ in 0..frames {
+    for frame_index in 0..frames {
         if resync {
             for (i, t) in twins.iter().enumerate() {
                 world.upload(&g.queue, i, &t.state.positions, &t.state.velocities);
             }
         }
         let before: Vec<Vec<Vec4>> = twins.iter().map(|t| t.state.positions.clone()).collect();
+        let starts: Vec<Option<ClothState>> = cases
+            .iter()
+            .zip(&twins)
+            .map(|(c, t)| (c.ensemble > 0).then(|| t.state.clone()))
+            .collect();
         let step_colliders: Vec<Vec<Collider>> = (k..k + steps_per_frame).map(&colliders).collect();
         let mut targets = vec![Vec::new(); cases.len()];
         let mut jumps = vec![Vec::new(); cases.len()];
@@ -369,8 +438,23 @@ fn compare(
                 &before[i],
                 if held { 2.0 } else { 0.0 },
             );
+            let split = starts[i].as_ref().is_some_and(|start| {
+                rounding_splits(
+                    &cases[i],
+                    start,
+                    k - steps_per_frame,
+                    &step_colliders,
+                    &jumps[i],
+                    cases[i].ensemble,
+                    bound,
+                    &twin.state.positions,
+                )
+            });
+            if split {
+                out.split[i].push(frame_index);
+            }
             out.errors[i].push(worst);
-            out.ratios[i].push(worst / bound);
+            out.ratios[i].push(if split { 0.0 } else { worst / bound });
             if i == 0 {
                 out.frames_cpu.push(twin.state.positions.clone());
                 out.frames_gpu.push(pos);
@@ -829,51 +913,44 @@ fn self_collision_matches_the_cpu_twin() {
     let Some(g) = gpu("self_collision_matches_the_cpu_twin") else {
         return;
     };
-    folded_cloth_self_collides(&g, 1.0, "self-collision");
+    folded_cloth_self_collides(&g, Some(1.0), "self-collision", 0, 0);
 }
 
-/// The same with layers 1.6 edges thick (full lists, and a vertex's own neighbourhood of about
-/// 50 vertices: more than the GPU's query holds back while it finds out whether the
-/// neighbourhood folded, `SC_PEND`, so it walks the cells again for the rest).
+/// The same with the thickest layers a cloth takes (`MAX_SELF_COLLISION_EDGES`: one mean rest
+/// edge, 1.14 grid spacings here).
+///
+/// Layers piled up make a frame's outcome hang on rounding: contact decides discretely (a
+/// vertex over a triangle or beside it, on one side of a layer or the other, touching or not),
+/// and each way differs by up to two thicknesses. On the CPU alone, a frame from a start 4 ulp
+/// away ended beyond the rounding bound at 14 % of the vertex-frames of this run at 1.6
+/// spacings (before such layers were refused); on an H100 (fused multiply–adds) the
+/// frame-by-frame comparison failed there at 351 × the bound with every kernel right. So
+/// frames that four CPU runs from starts [`NUDGE_ULP`] ulp away split beyond the bound
+/// ([`rounding_splits`], the same on any machine) are compared bit for bit on llvmpipe and
+/// not at all on other GPUs; the rest within the bound everywhere.
 #[test]
-fn self_collision_of_a_thick_cloth_matches_the_cpu_twin() {
-    let Some(g) = gpu("self_collision_of_a_thick_cloth_matches_the_cpu_twin") else {
+fn self_collision_of_the_thickest_cloth_matches_the_cpu_twin() {
+    let Some(g) = gpu("self_collision_of_the_thickest_cloth_matches_the_cpu_twin") else {
         return;
     };
-    folded_cloth_self_collides(&g, 1.6, "thick self-collision");
+    folded_cloth_self_collides(&g, None, "thickest self-collision", 4, 40);
 }
 
-/// 2.5 edges thick: cells of 8 edges, a few hundred vertices walked and thousands of loop
-/// turns per query where the layers pile up. llvmpipe stops a shader's loops after 65 535
-/// turns in all for each group of invocations it runs together (Mesa's gallivm loop limiter,
-/// `LP_MAX_TGSI_LOOP_ITERATIONS`): there the walk is cut short and the lists miss
-/// neighbours (shown by putting a loop of 61 440 harmless turns before the query: then every
-/// list at 1.6 edges comes out wrong too). A GPU has no such limit, so this runs on GPUs only.
-#[test]
-fn self_collision_of_a_thicker_cloth_matches_the_cpu_twin_on_a_gpu() {
-    let Some(g) = gpu("self_collision_of_a_thicker_cloth_matches_the_cpu_twin_on_a_gpu") else {
-        return;
-    };
-    if g.llvmpipe {
-        println!(
-            "skipped on llvmpipe: its loop limiter (65 535 loop turns per group of \
-             invocations) cuts this query short; runs on a GPU"
-        );
-        return;
-    }
-    folded_cloth_self_collides(&g, 2.5, "thicker self-collision");
-}
+/// Frames the folded cloths are compared over.
+const FOLDED_FRAMES: usize = 45;
 
-/// A 32² cloth folded in two, thickness `edges` × its edge length, dropped on a sphere, 45
-/// frames on both sides.
-fn folded_cloth_self_collides(g: &Gpu, edges: f32, label: &str) {
+/// A 32² cloth folded in two, thickness `spacings` × its grid spacing (the most it takes if
+/// `None`; returned), over a sphere and the ground (the colliders, returned).
+fn folded_cloth(spacings: Option<f32>) -> (Simulation, Vec<Collider>, f32) {
     let n = 32;
     let params = SolverParams {
         substeps: 8,
         ..Default::default()
     };
-    let thickness = edges * 1.2 / (n - 1) as f32;
     let mut s = sim(n, params, |p| p * 1.2 + Vec3::new(0.0, 0.3, 0.0));
+    let thickness = spacings.map_or(s.topology().thickest_self_collision(), |k| {
+        k * 1.2 / (n - 1) as f32
+    });
     s.set_features(Features {
         self_collision: Some(SelfCollision {
             thickness,
@@ -907,10 +984,39 @@ fn folded_cloth_self_collides(g: &Gpu, edges: f32, label: &str) {
         })
         .collect();
     s.reset_to(&folded);
+    (s, shapes, thickness)
+}
+
+/// The folded cloth dropped on the sphere, [`FOLDED_FRAMES`] frames on both sides; with an
+/// `ensemble`, frames that rounding alone splits on the CPU are compared bit for bit on
+/// llvmpipe only, and at least `min_compared` frames must be left to compare.
+fn folded_cloth_self_collides(
+    g: &Gpu,
+    spacings: Option<f32>,
+    label: &str,
+    ensemble: u32,
+    min_compared: usize,
+) {
+    let (s, shapes, thickness) = folded_cloth(spacings);
     let rest = s.topology().rest_positions().to_vec();
     let tris = s.topology().triangles().to_vec();
-    let out = compare(g, &[Case::new(s)], 45, 1, |_| shapes.clone(), true);
+    let mut case = Case::new(s);
+    case.ensemble = ensemble;
+    let out = compare(g, &[case], FOLDED_FRAMES, 1, |_| shapes.clone(), true);
     check(g, label, &out, true);
+    if ensemble > 0 {
+        let split = &out.split[0];
+        println!(
+            "{label}: {} of {FOLDED_FRAMES} frames split by rounding alone (compared bit for \
+             bit on llvmpipe only): {split:?}",
+            split.len()
+        );
+        assert!(
+            FOLDED_FRAMES - split.len() >= min_compared,
+            "{label}: only {} frames compared",
+            FOLDED_FRAMES - split.len()
+        );
+    }
     // The cloth ends folded layer on layer: vertices lie over triangles of other layers, so
     // the vertex–triangle contacts were compared, not only the vertex–vertex ones.
     let over = layered_contacts(&out.cpu[0], &rest, &tris, thickness);
@@ -1073,7 +1179,7 @@ fn a_substep_takes_a_few_dispatches_for_every_cloth() {
         scene.options.bending = bending;
         scene.features = Features {
             self_collision: Some(SelfCollision {
-                thickness: 0.02,
+                thickness: 0.01,
                 friction: 0.2,
             }),
             tethers: Some(TetherParams::default()),

@@ -150,6 +150,42 @@ fn a_cloth_folded_three_times_over_a_bar_keeps_its_layers_apart() {
     );
 }
 
+/// The same scenes with the thickest layers a cloth takes (`MAX_SELF_COLLISION_EDGES`, one mean
+/// rest edge; the tests above keep one grid spacing, 0.88 of it) end without a crossing too.
+/// (Thicker layers crossed: 48 and 127 pairs at the end at 1.05 and 1.1 mean edges; they are
+/// refused now.)
+#[test]
+fn the_thickest_layers_a_cloth_takes_hold_too() {
+    let thickest = |sim: &mut Simulation| {
+        let thickness = sim.topology().thickest_self_collision();
+        sim.set_features(Features {
+            self_collision: Some(SelfCollision {
+                thickness,
+                friction: 0.3,
+            }),
+            ..Features::default()
+        })
+        .expect("the thickest is taken");
+        thickness
+    };
+    let mut sim = crumpled();
+    let t = thickest(&mut sim);
+    let (end, most) = run(&mut sim, &[floor()], 240, &Workers::new(1));
+    println!("crumpled, {t} m thick: {end} crossings at the end, at most {most}");
+    assert_eq!(
+        end, 0,
+        "crumpled: {end} pairs cross at the end (at most {most})"
+    );
+    let (mut sim, bar) = folded_over_a_bar();
+    let t = thickest(&mut sim);
+    let (end, most) = run(&mut sim, &[bar, floor()], 300, &Workers::new(1));
+    println!("folded, {t} m thick: {end} crossings at the end, at most {most}");
+    assert_eq!(
+        end, 0,
+        "folded: {end} pairs cross at the end (at most {most})"
+    );
+}
+
 /// Without self-collision the same scenes do pass through themselves: the tests above can
 /// fail.
 #[test]

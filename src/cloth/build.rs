@@ -217,9 +217,9 @@ pub(super) fn warn_thickness(cs: &mut ClothSim, sc: Option<&ClothSelfCollision>,
         let used = cs.sim.topology().thickest_self_collision();
         warn!(
             "cloth {who}: its self-collision thickness {asked} m is more than \
-             {MAX_SELF_COLLISION_EDGES} mean rest edges: {used} m is used (the search grows with \
-             the square of thickness over edge, and a vertex's lists cannot hold what a thicker \
-             layer brings); use a coarser mesh for a thicker layer"
+             {MAX_SELF_COLLISION_EDGES} mean rest edge: {used} m is used (layers thicker than an \
+             edge pass through each other where the cloth crumples); use a coarser mesh for a \
+             thicker layer"
         );
     }
     cs.thickness_warned = asked;

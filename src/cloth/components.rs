@@ -124,9 +124,9 @@ impl Default for Cloth {
 pub struct ClothSelfCollision {
     /// Distance kept between any two vertices; `None` uses the mean rest edge length, which
     /// stops edges slipping between vertices. At most
-    /// [`MAX_SELF_COLLISION_EDGES`](crate::solver::MAX_SELF_COLLISION_EDGES) mean rest edges
-    /// are used (more is brought down to that, with a warning): the cost grows with the
-    /// square of thickness over edge length.
+    /// [`MAX_SELF_COLLISION_EDGES`](crate::solver::MAX_SELF_COLLISION_EDGES) mean rest edge
+    /// is used (more is brought down to that, with a warning): layers thicker than an edge
+    /// pass through each other where the cloth crumples. For a thicker layer, a coarser mesh.
     pub thickness: Option<f32>,
     /// Friction between touching parts of the cloth.
     pub friction: f32,

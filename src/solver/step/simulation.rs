@@ -444,10 +444,9 @@ impl Simulation {
                     name: "self_collision.thickness",
                     reason: format!(
                         "{} m is {:.1} times the cloth's mean rest edge ({mean} m); at most \
-                         {MAX_SELF_COLLISION_EDGES} times ({most} m): a vertex keeps too few \
-                         neighbours and triangles for a layer that thick, and the search grows \
-                         with the square of the ratio (use a thinner layer, a coarser mesh, \
-                         or no thickness for the mean edge)",
+                         {MAX_SELF_COLLISION_EDGES} times ({most} m): layers thicker than an \
+                         edge pass through each other where the cloth crumples (use a thinner \
+                         layer, a coarser mesh, or no thickness for the mean edge)",
                         sc.thickness,
                         sc.thickness / mean
                     ),
