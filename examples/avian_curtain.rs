@@ -53,7 +53,7 @@ fn measure(
 }
 
 fn main() {
-    let args = Args::parse();
+    let args = Args::parse(include_str!("avian_curtain.rs"));
     let mut app = curtain::app(&args, "bevy_cloth: avian curtain");
     // Avian steps in FixedPostUpdate (its default), one step per fixed step, like the cloth,
     // which the bridge runs right after it.

@@ -422,7 +422,7 @@ fn report(world: &mut World) -> support::Json {
 }
 
 fn main() {
-    let args = Args::parse();
+    let args = Args::parse(include_str!("cape.rs"));
     let mut app = support::app(&args, "bevy_cloth: cape", 1.0 / 60.0);
     // A skinned glTF scene and its animations, also without a renderer.
     support::add_gltf_support(&mut app);

@@ -122,7 +122,7 @@ fn report(world: &mut World) -> support::Json {
 }
 
 fn main() {
-    let args = Args::parse();
+    let args = Args::parse(include_str!("drape.rs"));
     let mut app = support::app(&args, "bevy_cloth: drape", 1.0 / 60.0);
     app.add_systems(Startup, setup);
     support::run(app, &args, report);

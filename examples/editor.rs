@@ -164,7 +164,7 @@ fn report(world: &mut World) -> support::Json {
 }
 
 fn main() {
-    let args = Args::parse();
+    let args = Args::parse(include_str!("editor.rs"));
     let mut app = support::app(&args, "bevy_cloth editor", 1.0 / 60.0);
     app.add_plugins(ClothEditorPlugin::default())
         .add_systems(Startup, setup)

@@ -79,7 +79,7 @@ fn report(world: &mut World) -> support::Json {
 }
 
 fn main() {
-    let args = Args::parse();
+    let args = Args::parse(include_str!("flag.rs"));
     let grid = Grid::new(args.get("columns", 48), args.get("rows", 32), 3.0, 2.0);
     let config = ClothConfig {
         substeps: args.get("substeps", 12),

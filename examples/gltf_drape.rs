@@ -165,7 +165,7 @@ fn report(world: &mut World) -> support::Json {
 }
 
 fn main() {
-    let args = Args::parse();
+    let args = Args::parse(include_str!("gltf_drape.rs"));
     let mut app = support::app(&args, "bevy_cloth: glTF banner on a statue", 1.0 / 60.0);
     // Loading glTF also without a renderer: its asset types and loader.
     support::add_gltf_support(&mut app);

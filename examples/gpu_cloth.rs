@@ -119,7 +119,7 @@ fn report(world: &mut World) -> support::Json {
 }
 
 fn main() {
-    let mut args = Args::parse();
+    let mut args = Args::parse(include_str!("gpu_cloth.rs"));
     args.rest
         .entry("backend".into())
         .or_insert_with(|| "gpu".into());

@@ -114,7 +114,7 @@ fn report(world: &mut World) -> support::Json {
 struct OutFile(Option<String>);
 
 fn main() {
-    let args = Args::parse();
+    let args = Args::parse(include_str!("lab.rs"));
     let mut app = support::app(&args, "bevy_cloth: seed 000 lab", DT);
     app.insert_resource(OutFile(args.rest.get("out").cloned()))
         .add_systems(Startup, setup);

@@ -53,7 +53,7 @@ fn brightness(p: &shots::Picture) -> f32 {
 }
 
 fn main() {
-    let args = Args::parse();
+    let args = Args::parse(include_str!("pictures.rs"));
     let out = PathBuf::from(args.get("out", "docs".to_string()));
     let size = UVec2::new(args.get("width", 960), args.get("height", 600));
     let frames = args.frames.unwrap_or(200);

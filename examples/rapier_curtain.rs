@@ -53,7 +53,7 @@ fn measure(
 }
 
 fn main() {
-    let args = Args::parse();
+    let args = Args::parse(include_str!("rapier_curtain.rs"));
     let mut app = curtain::app(&args, "bevy_cloth: rapier curtain");
     // Rapier steps in FixedUpdate, one 1/60 s step per fixed step, like the cloth: when frames
     // are slow both catch up together (rapier's default, a variable step of at most 1/60 s

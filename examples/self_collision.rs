@@ -93,7 +93,7 @@ fn report(world: &mut World) -> support::Json {
 }
 
 fn main() {
-    let args = Args::parse();
+    let args = Args::parse(include_str!("self_collision.rs"));
     let mut app = support::app(&args, "bevy_cloth: self-collision", 1.0 / 60.0);
     app.insert_resource(Off(args.rest.contains_key("off")))
         .init_resource::<Crossings>()

@@ -132,7 +132,7 @@ fn report(world: &mut World) -> support::Json {
 }
 
 fn main() {
-    let args = Args::parse();
+    let args = Args::parse(include_str!("tearing.rs"));
     let mut app = support::app(&args, "bevy_cloth: tearing", 1.0 / 60.0);
     app.init_resource::<Torn>()
         .add_systems(Startup, setup)

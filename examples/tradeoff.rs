@@ -732,7 +732,7 @@ fn sleep_cost(args: &Args, par: &Workers, bending: Bending) {
 }
 
 fn main() {
-    let args = Args::parse();
+    let args = Args::parse(include_str!("tradeoff.rs"));
     let quick = args.rest.contains_key("quick");
     let sizes: Vec<u32> = list(
         &args,

@@ -313,7 +313,7 @@ fn report(world: &mut World) -> support::Json {
 }
 
 fn main() {
-    let args = Args::parse();
+    let args = Args::parse(include_str!("velvet.rs"));
     let mut app = support::app(&args, "bevy_cloth: velvet gallery", 1.0 / 60.0);
     app.add_systems(Startup, setup)
         .add_systems(Update, (drag_sliders, show_values).chain());

@@ -18,6 +18,27 @@ use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured, save_to_dis
 use bevy::time::TimeUpdateStrategy;
 use bevy_cloth::prelude::*;
 
+/// This module's source: the flags every example reads (`--headless`, `--frames`,
+/// `--backend`, `--screenshot`, `--at`) are among its quoted words.
+const SUPPORT: &str = include_str!("mod.rs");
+
+/// Prints the leading `//!` lines of an example's source, and the flags every example takes.
+fn print_help(source: &str) {
+    for line in source.lines() {
+        let Some(doc) = line.strip_prefix("//!") else {
+            break;
+        };
+        println!("{}", doc.strip_prefix(' ').unwrap_or(doc));
+    }
+    println!();
+    for line in SUPPORT.lines() {
+        let Some(doc) = line.strip_prefix("//!") else {
+            break;
+        };
+        println!("{}", doc.strip_prefix(' ').unwrap_or(doc));
+    }
+}
+
 /// Parsed command line.
 #[derive(Clone, Debug, Default)]
 pub struct Args {
@@ -30,15 +51,27 @@ pub struct Args {
 }
 
 impl Args {
-    /// Reads `std::env::args`.
-    pub fn parse() -> Self {
+    /// Reads `std::env::args` for the example whose source is `source` (`include_str!` of its
+    /// file): `--help` prints the example's `//!` documentation and exits; a flag that neither
+    /// the example nor this module reads is refused (exit code 2), so a mistyped one is not
+    /// silently ignored.
+    pub fn parse(source: &str) -> Self {
         let mut out = Args::default();
         let mut it = std::env::args().skip(1).peekable();
         while let Some(a) = it.next() {
+            if a == "--help" || a == "-h" {
+                print_help(source);
+                std::process::exit(0);
+            }
             let Some(key) = a.strip_prefix("--") else {
-                eprintln!("ignoring argument {a:?}");
+                eprintln!("ignoring argument {a:?} (flags start with --; --help lists them)");
                 continue;
             };
+            let quoted = format!("\"{key}\"");
+            if !source.contains(&quoted) && !SUPPORT.contains(&quoted) {
+                eprintln!("--{key}: not a flag of this example (--help lists them)");
+                std::process::exit(2);
+            }
             let value = match it.peek() {
                 Some(v) if !v.starts_with("--") => it.next().unwrap(),
                 _ => "true".to_string(),
