@@ -11,8 +11,8 @@ use super::{
 };
 use crate::foundation::{EntityName, FixedPoses, read_mesh};
 use crate::solver::{
-    Features, MAX_SELF_COLLISION_EDGES, MeshBinding, SelfCollision, Simulation, SolverError,
-    TetherParams, TopologyError, TopologyOptions, limits,
+    EVEN_EDGE_SPREAD, Features, MAX_SELF_COLLISION_EDGES, MeshBinding, SelfCollision, Simulation,
+    SolverError, TetherParams, TopologyError, TopologyOptions, limits,
 };
 
 /// A cloth built from its mesh, before its own mesh asset exists.
@@ -46,6 +46,7 @@ impl Built {
             attached: self.attached,
             settings_error: None,
             thickness_warned: None,
+            uneven_warned: false,
             cloth_error: None,
             pins_error: None,
             carry: None,
@@ -208,8 +209,14 @@ fn self_collision_thickness(sim: &Simulation, sc: &ClothSelfCollision) -> (f32, 
 
 /// Warns when a cloth's self-collision thickness was brought down to
 /// [`MAX_SELF_COLLISION_EDGES`] mean edges, once per thickness asked (a tear changes the mean
-/// edge, and with it the thickness used, without warning again).
-pub(super) fn warn_thickness(cs: &mut ClothSim, sc: Option<&ClothSelfCollision>, who: EntityName) {
+/// edge, and with it the thickness used, without warning again); and, once per cloth built,
+/// when its edges are more uneven than [`EVEN_EDGE_SPREAD`] for self-collision's one
+/// thickness.
+pub(super) fn warn_self_collision(
+    cs: &mut ClothSim,
+    sc: Option<&ClothSelfCollision>,
+    who: EntityName,
+) {
     let asked = sc.and_then(|sc| self_collision_thickness(&cs.sim, sc).1);
     if let Some(asked) = asked
         && cs.thickness_warned != Some(asked)
@@ -223,6 +230,16 @@ pub(super) fn warn_thickness(cs: &mut ClothSim, sc: Option<&ClothSelfCollision>,
         );
     }
     cs.thickness_warned = asked;
+    let spread = cs.sim.topology().rest_edge_spread();
+    if sc.is_some() && !cs.uneven_warned && spread > EVEN_EDGE_SPREAD {
+        cs.uneven_warned = true;
+        warn!(
+            "cloth {who}: its edges are uneven for self-collision (the 90th percentile of their \
+             lengths is {spread:.2} times the 10th; measured to hold up to {EVEN_EDGE_SPREAD}): \
+             one thickness for the whole cloth can let layers pass through each other where the \
+             edges differ most from it; a mesh remeshed to even edges holds"
+        );
+    }
 }
 
 /// The solver features a cloth's opt-in components ask for.

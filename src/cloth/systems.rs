@@ -6,7 +6,7 @@ use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::tasks::ComputeTaskPool;
 
-use super::build::{build, features, warn_thickness};
+use super::build::{build, features, warn_self_collision};
 use super::error::report;
 use super::inertia::carry_unfelt_motion;
 use super::pins::{attach, follow_anchors, pin_list, repin};
@@ -103,7 +103,7 @@ pub(super) fn init_cloths(
         match built {
             Ok(b) => {
                 let mut sim = b.into_sim(meshes);
-                warn_thickness(&mut sim, sc, who);
+                warn_self_collision(&mut sim, sc, who);
                 let handle = sim.mesh().clone();
                 commands.entity(entity).try_insert((
                     Mesh3d(handle.clone()),
@@ -333,7 +333,7 @@ pub(super) fn sync_cloths(
             .and_then(|()| {
                 if features_due {
                     cs.sim.set_features(wanted)?;
-                    warn_thickness(cs, sc, who);
+                    warn_self_collision(cs, sc, who);
                 }
                 Ok(())
             })

@@ -513,6 +513,51 @@ fn motion_targets_hold_the_cloth_and_refuse_bad_input() {
     assert!(now < y - 0.1, "{y} → {now}");
 }
 
+/// How uneven a mesh's edges are: √2 for a grid of squares (sides and diagonals), 1 for a
+/// triangle of equal sides, and over [`EVEN_EDGE_SPREAD`] for a grid squeezed towards its
+/// middle (the mesh self-collision was measured to cross on).
+#[test]
+fn the_edge_spread_tells_even_meshes_from_uneven_ones() {
+    let g = Grid::new(30, 30, 1.0, 1.0);
+    let even = Topology::from_triangles(
+        &g.positions(),
+        None,
+        &g.indices(),
+        TopologyOptions::default(),
+    )
+    .unwrap();
+    assert!(
+        (even.rest_edge_spread() - 2f32.sqrt()).abs() < 1e-4,
+        "{}",
+        even.rest_edge_spread()
+    );
+    let squeezed: Vec<Vec3> = g
+        .positions()
+        .iter()
+        .map(|p| {
+            let t = 2.0 * p.x;
+            Vec3::new(0.5 * (0.5 * t + 0.5 * t * t * t), p.y, p.z)
+        })
+        .collect();
+    let uneven =
+        Topology::from_triangles(&squeezed, None, &g.indices(), TopologyOptions::default())
+            .unwrap();
+    assert!(
+        uneven.rest_edge_spread() > EVEN_EDGE_SPREAD,
+        "{}",
+        uneven.rest_edge_spread()
+    );
+    let h = 3f32.sqrt() / 2.0;
+    let equal = Topology::from_triangles(
+        &[Vec3::ZERO, Vec3::X, Vec3::new(0.5, 0.0, h)],
+        None,
+        &[0, 1, 2],
+        TopologyOptions::default(),
+    )
+    .unwrap();
+    assert!((equal.rest_edge_spread() - 1.0).abs() < 1e-5);
+}
+
 /// A self-collision thickness up to [`MAX_SELF_COLLISION_EDGES`] mean rest edges is taken; a
 /// thicker one is refused with a reason that names the ratio, and the features stay.
 #[test]

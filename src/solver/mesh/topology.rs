@@ -229,6 +229,8 @@ pub struct Topology {
     bends: Vec<Bend>,
     /// The mean rest length of `edges`.
     mean_edge: f32,
+    /// The 90th over the 10th percentile of the edges' rest lengths.
+    edge_spread: f32,
     skipped_triangles: usize,
     options: TopologyOptions,
 }
@@ -428,6 +430,7 @@ impl Topology {
         }
 
         let mean_edge = edges.iter().map(|e| e.rest).sum::<f32>() / edges.len().max(1) as f32;
+        let edge_spread = edge_spread(&edges);
         Self {
             rest_positions: positions,
             uvs,
@@ -436,6 +439,7 @@ impl Topology {
             edges,
             bends,
             mean_edge,
+            edge_spread,
             skipped_triangles: 0,
             options,
         }
@@ -519,6 +523,16 @@ impl Topology {
         self.mean_edge
     }
 
+    /// How uneven the edges are: the 90th percentile of their rest lengths over the 10th (1 for
+    /// equal edges, √2 for a grid of squares with a diagonal each, 1 without edges). Self-
+    /// collision keeps one thickness for the whole cloth; above
+    /// [`EVEN_EDGE_SPREAD`](crate::solver::limits::EVEN_EDGE_SPREAD) layers can pass through
+    /// each other where the edges differ most from it.
+    #[must_use]
+    pub fn rest_edge_spread(&self) -> f32 {
+        self.edge_spread
+    }
+
     /// The thickest self-collision this cloth takes:
     /// [`MAX_SELF_COLLISION_EDGES`](crate::solver::limits::MAX_SELF_COLLISION_EDGES) mean rest
     /// edges.
@@ -583,6 +597,25 @@ impl Topology {
                     .collect()
             }
         }
+    }
+}
+
+/// The 90th over the 10th percentile of `edges`' rest lengths; 1 without edges or with a
+/// zero 10th percentile's edge (degenerate edges are the solver's concern, not this ratio's).
+fn edge_spread(edges: &[Edge]) -> f32 {
+    if edges.is_empty() {
+        return 1.0;
+    }
+    let mut lengths: Vec<f32> = edges.iter().map(|e| e.rest).collect();
+    let last = lengths.len() - 1;
+    let (lo, hi) = (last / 10, last * 9 / 10);
+    let p10 = *lengths.select_nth_unstable_by(lo, f32::total_cmp).1;
+    let p90 = *lengths.select_nth_unstable_by(hi, f32::total_cmp).1;
+    let spread = p90 / p10;
+    if spread.is_finite() && spread >= 1.0 {
+        spread
+    } else {
+        1.0
     }
 }
 
