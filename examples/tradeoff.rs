@@ -32,7 +32,9 @@
 //! (XPBD 10 × 1): nothing, a sphere collider under the cloth, wind, self-collision, tethers,
 //! tearing (threshold never reached), and everything at once; with a feature off, its code
 //! does not run, so `plain` is the cost of every scene without it. Tethers also report their
-//! effect on `max_strain`. `--variants plain,self_collision` runs only those rows.
+//! effect on `max_strain`. `--variants plain,self_collision` runs only those rows;
+//! `--parts N` steps each cloth in N parts instead of `solver::default_part_count`'s
+//! (to see what the partition costs on a machine's cores).
 //!
 //! `--many`: 64 cloths of 16² against one of 128² (the same vertex count) stepped together
 //! with `step_many`, and one 128² with 64 × 16² on all threads against one thread.
@@ -277,6 +279,10 @@ fn scene_costs(args: &Args, par: &Workers, threads: usize) {
     )];
     let wind = WindField::new([(WindParams::default(), None)]);
     let wanted: Vec<String> = list(args, "variants", &[]);
+    let parts: Option<usize> = args
+        .rest
+        .contains_key("parts")
+        .then(|| args.get("parts", 1));
     for n in list(args, "sizes", &[64u32, 256]) {
         for v in variants
             .into_iter()
@@ -301,6 +307,9 @@ fn scene_costs(args: &Args, par: &Workers, threads: usize) {
                         ..*sim.params()
                     };
                     sim.set_params(params).unwrap();
+                }
+                if let Some(parts) = parts {
+                    sim.set_part_count(parts);
                 }
                 sim
             };
@@ -337,6 +346,7 @@ fn scene_costs(args: &Args, par: &Workers, threads: usize) {
                     .num("max_strain", sim.strain().max)
                     .num("nan_count", sim.state().non_finite_count() as f64)
                     .num("threads", threads as f64)
+                    .num("parts", sim.batches().part_count() as f64)
             );
         }
     }
