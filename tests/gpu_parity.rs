@@ -277,6 +277,20 @@ struct Outcome {
 /// GPU's rounding of the state it is sent (none) and of one operation (a few ulp).
 const NUDGE_ULP: f32 = 8.0;
 
+/// Moves every coordinate `x` of `positions` by up to `size(x)` in a pseudo-random direction
+/// (xorshift32 from `seed`: a sign and a size in [0, 1) per coordinate).
+fn nudge(positions: &mut [Vec4], seed: &mut u32, size: impl Fn(f32) -> f32) {
+    for p in positions {
+        for axis in 0..3 {
+            *seed ^= *seed << 13;
+            *seed ^= *seed >> 17;
+            *seed ^= *seed << 5;
+            let u = (*seed >> 8) as f32 / (1u32 << 24) as f32;
+            p[axis] += (2.0 * u - 1.0) * size(p[axis]);
+        }
+    }
+}
+
 /// Whether rounding alone can take the frame from `start` beyond `bound` of `reference` (the
 /// CPU twin's result) at some vertex: `members` CPU runs of the frame's steps, each from
 /// `start` with every coordinate moved by up to [`NUDGE_ULP`] ulp in a pseudo-random
@@ -299,16 +313,9 @@ fn rounding_splits(
         twin.state = start.clone();
         let mut seed =
             0x9e37_79b9_u32.wrapping_mul(m) ^ (first_step as u32).wrapping_mul(0x85eb_ca6b);
-        for p in &mut twin.state.positions {
-            for axis in 0..3 {
-                // xorshift32: a sign and a size in [0, 1) per coordinate.
-                seed ^= seed << 13;
-                seed ^= seed >> 17;
-                seed ^= seed << 5;
-                let u = (seed >> 8) as f32 / (1u32 << 24) as f32;
-                p[axis] += (2.0 * u - 1.0) * NUDGE_ULP * f32::EPSILON * p[axis].abs();
-            }
-        }
+        nudge(&mut twin.state.positions, &mut seed, |x| {
+            NUDGE_ULP * f32::EPSILON * x.abs()
+        });
         for (s, cols) in step_colliders.iter().enumerate() {
             let k = first_step + s;
             twin.step_carried(
@@ -1362,16 +1369,7 @@ fn rounding_ensemble(
             let mut series = Vec::with_capacity(frames);
             for k in 0..frames {
                 let bound = rounding_bound(&case.sim, 1, &twin.state.positions);
-                for p in &mut twin.state.positions {
-                    for axis in 0..3 {
-                        // xorshift32: a sign and a size in [0, 1) per coordinate.
-                        seed ^= seed << 13;
-                        seed ^= seed >> 17;
-                        seed ^= seed << 5;
-                        let u = (seed >> 8) as f32 / (1u32 << 24) as f32;
-                        p[axis] += (2.0 * u - 1.0) * bound;
-                    }
-                }
+                nudge(&mut twin.state.positions, &mut seed, |_| bound);
                 let targets = (case.targets)(k);
                 twin.step_carried(
                     &(case.carry)(k),

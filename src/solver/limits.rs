@@ -267,10 +267,10 @@ pub const SELF_COLLISION_THICKNESS: Limit = Limit::new(
 /// neighbourhood that rest closer than that, which pushes it through the sheet wherever the
 /// cloth crumples (measured on the CPU in the crumpled-cloth and folded-over-a-bar scenes of
 /// the `self_collision` tests: no edge–triangle pair crossing at the end at 0.88 and 1 mean
-/// edge; up to 48 and 127 at 1.05 and 1.1; 851 at 1.4; 6847 at 1.76). The
-/// query also grows with the square of thickness over edge (a 256² cloth of 1 m with a 5 cm
-/// thickness, 13 edges, took over a second a frame). The default thickness, the mean rest
-/// edge, is the most.
+/// edge; up to 48 and 127 at 1.05 and 1.1; 851 at 1.4; 6847 at 1.76). The query also grows
+/// with the square of thickness over edge (a 256² cloth of 1 m with a 5 cm thickness, 13
+/// edges, took over a second a frame). The default thickness, the mean rest edge, is the
+/// most.
 pub const MAX_SELF_COLLISION_EDGES: f32 = 1.0;
 /// The most uneven edges ([`Topology::rest_edge_spread`](crate::solver::Topology::rest_edge_spread):
 /// the 90th over the 10th percentile of the rest lengths) self-collision was measured to hold
