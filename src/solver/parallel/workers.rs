@@ -22,12 +22,14 @@ use super::Parallel;
 /// claim items one at a time until none are left, so the call never waits for a worker that
 /// has not started (a worker the system does not schedule costs nothing but its share of the
 /// speed-up). The call returns once every claimed item is done. A call of `k` items wakes at
-/// most `k − 1` sleeping helpers, and a helper that found no seat goes back to sleep at once:
-/// on a 16-core machine a cloth of two parts keeps two threads busy, not sixteen spinning on
-/// the same counters (work grows the threads a step uses, not the core count). A helper that
-/// worked spins for [`Workers::SPIN`] after its last item and then sleeps until a call wakes
-/// it, so an idle pool costs no CPU. A call made while another runs (from inside it, or from another thread)
-/// runs serially on its own thread.
+/// most `k − 1` sleeping helpers, and a helper that never worked, or not for [`Workers::SPIN`],
+/// sleeps until a call wakes it: on a 16-core machine a cloth of two parts keeps two threads
+/// busy, not sixteen spinning on the same counters (work grows the threads a step uses, not
+/// the core count), and an idle pool costs no CPU. A helper that worked spins until
+/// [`Workers::SPIN`] after its last item, through calls with no seat for it: a substep's
+/// seams (eight items on sixteen threads) do not send half the helpers to sleep, to be woken
+/// again by the next substep's parts. A call made while another runs (from inside it, or
+/// from another thread) runs serially on its own thread.
 ///
 /// The solver itself never starts threads: create one `Workers` (the Bevy plugin keeps one
 /// as a resource) and pass it where a [`Parallel`] is asked for.
@@ -61,6 +63,8 @@ struct Shared {
     wakes: AtomicUsize,
     /// Set while a call runs (a nested call runs serially).
     active: AtomicBool,
+    /// How long a helper spins after its last item ([`Workers::SPIN`]).
+    spin: Duration,
     stop: AtomicBool,
     lock: Mutex<()>,
     wake: Condvar,
@@ -75,6 +79,11 @@ impl Workers {
     /// refuses to start are left out (the pool still works, with fewer threads).
     #[must_use]
     pub fn new(helpers: usize) -> Self {
+        Self::with_spin(helpers, Self::SPIN)
+    }
+
+    /// [`Workers::new`] with helpers that spin for `spin` after their last item (tests).
+    fn with_spin(helpers: usize, spin: Duration) -> Self {
         let shared = Arc::new(Shared {
             job: AtomicPtr::new(core::ptr::null_mut()),
             epoch: AtomicU64::new(0),
@@ -82,6 +91,7 @@ impl Workers {
             sleepers: AtomicUsize::new(0),
             wakes: AtomicUsize::new(0),
             active: AtomicBool::new(false),
+            spin,
             stop: AtomicBool::new(false),
             lock: Mutex::new(()),
             wake: Condvar::new(),
@@ -160,17 +170,12 @@ impl Job<'_> {
 
 fn worker(shared: &Shared) {
     let mut seen = 0u64;
-    // Whether the last call seated this helper: only a helper that worked spins for the next
-    // call; one that was not needed sleeps at once.
-    let mut worked = true;
+    // When this helper last finished an item (`None`: never, or before it last slept): it
+    // spins for a new call until `spin` after that, through calls that had no seat for it;
+    // one that was not needed sleeps at once.
+    let mut worked: Option<Instant> = None;
     loop {
         // Wait for a new call: spin, then sleep.
-        let spin = if worked {
-            Workers::SPIN
-        } else {
-            Duration::ZERO
-        };
-        let start = Instant::now();
         let mut spins = 0u32;
         loop {
             if shared.stop.load(SeqCst) {
@@ -180,7 +185,8 @@ fn worker(shared: &Shared) {
                 break;
             }
             spins += 1;
-            if spins.is_multiple_of(64) && start.elapsed() >= spin {
+            if spins.is_multiple_of(64) && worked.is_none_or(|t| t.elapsed() >= shared.spin) {
+                worked = None;
                 let guard = shared.lock.lock().unwrap_or_else(PoisonError::into_inner);
                 shared.sleepers.fetch_add(1, SeqCst);
                 let guard = shared
@@ -199,14 +205,13 @@ fn worker(shared: &Shared) {
         seen = shared.epoch.load(SeqCst);
         shared.busy.fetch_add(1, SeqCst);
         let job = shared.job.load(SeqCst);
-        worked = false;
         if !job.is_null() {
             // SAFETY: the caller keeps the job alive until `busy` is back to zero after it
             // withdrew the pointer, and this thread counted itself in `busy` before loading it.
             let job = unsafe { &*job };
             if job.take_seat() {
                 drain(job);
-                worked = true;
+                worked = Some(Instant::now());
             }
         }
         shared.busy.fetch_sub(1, SeqCst);
@@ -366,6 +371,44 @@ mod tests {
             }
         }
         assert!(seen.len() > 2, "only {} threads took items", seen.len());
+    }
+
+    #[test]
+    fn helpers_that_worked_stay_awake_through_calls_with_no_seat_for_them() {
+        // A spin longer than the test: a helper that worked never sleeps in it.
+        let workers = Workers::with_spin(3, Duration::from_secs(60));
+        let asleep = || workers.shared.sleepers.load(SeqCst);
+        let settle = || std::thread::sleep(Duration::from_millis(20));
+        // Calls of many slow items until every helper has taken one (and so spins).
+        let start = Instant::now();
+        loop {
+            let mut items = vec![0u8; 16];
+            workers.for_each_mut(&mut items, |x| {
+                std::thread::sleep(Duration::from_micros(500));
+                *x = 1;
+            });
+            settle();
+            if asleep() == 0 {
+                break;
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(20),
+                "a helper never took an item"
+            );
+        }
+        // Calls of two items (a substep's seams on a big machine) seat one helper: the others
+        // are not needed, but worked a moment ago and the next call may need them.
+        for round in 0..50 {
+            let mut items = vec![0u8; 2];
+            workers.for_each_mut(&mut items, |x| *x += 1);
+            assert_eq!(items, [1, 1], "round {round}");
+        }
+        settle();
+        assert_eq!(
+            asleep(),
+            0,
+            "helpers slept after calls that had no seat for them"
+        );
     }
 
     #[test]
