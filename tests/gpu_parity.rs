@@ -1282,6 +1282,23 @@ fn a_substep_takes_a_few_dispatches_for_every_cloth() {
         "{with_motion:?}"
     );
     assert_eq!(with_motion.per_substep, alone.per_substep + 1);
+    // On the GPU a 256² cloth has 64 parts of four rows (the 64² one 4), whose seams do not
+    // overlap: all of them in one dispatch, so a substep costs the same two solve dispatches.
+    assert_eq!(world.part_count(0), 4);
+    let big = HangingCloth::new(256).build().unwrap();
+    let mut world = GpuWorld::new(&g.device, &g.queue, &g.kernels, &[&big]).unwrap();
+    assert_eq!(world.part_count(0), 64);
+    let pins = vec![vec![big.state().pins().iter().map(|p| p.target).collect()]];
+    world.prepare(
+        &g.device,
+        &g.queue,
+        &g.kernels,
+        &GpuFrame::uniform(DT, 1, &[], &pins),
+    );
+    let big = world.dispatches(&g.kernels);
+    eprintln!("256², no contacts: {big:?}");
+    assert_eq!(big, alone);
+    assert_eq!(alone.per_substep, 2, "parts, then seams: {alone:?}");
 }
 
 /// The standard scene (1 m², 1 kg, two corner pins, XPBD 10 × 1) stretches on the GPU no more

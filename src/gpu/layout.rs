@@ -111,7 +111,8 @@ pub(crate) struct WorldLayout {
     pub lab_at: u32,
     pub edges_at: u32,
     pub edges: u32,
-    /// The levels: parts, even seams, odd seams, boundaries.
+    /// The levels: parts, seams (all of a cloth's, or its even ones), odd seams (where a
+    /// cloth's seams overlap), boundaries.
     pub levels: [LevelRange; 4],
     /// Words of self-collision hash heads (2 per vertex of each self-colliding cloth).
     pub head_words: u32,

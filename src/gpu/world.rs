@@ -4,8 +4,9 @@
 //! A frame records, per step: `step_begin` (pins' starts, area vectors, the self-collision
 //! hash; `teleport` first in a step where a cloth is carried or teleports), `sc_query` with
 //! self-collision; per substep and iteration: `solve` over every cloth's parts (their
-//! vertices integrated first), then over the even seams, the odd seams and the boundaries
-//! (each only if some cloth has one); `sc_collide` with self-collision; `finish_substep`
+//! vertices integrated first), then over the seams (the even ones, then the odd ones, in a
+//! world with a cloth whose neighbouring seams overlap) and the boundaries (each only if some
+//! cloth has one); `sc_collide` with self-collision; `finish_substep`
 //! (tethers, the self-collision correction, colliders) when any of those acts; per step
 //! `step_end` (velocities, the NaN guard) and `tear_check` with tearing. That is at most 6
 //! dispatches a substep however many colours, parts or cloths there are
@@ -968,7 +969,8 @@ impl GpuWorld {
         if !gpu_colliders.is_empty() {
             queue.write_buffer(&self.colliders, 0, bytemuck::cast_slice(&gpu_colliders));
         }
-        // Levels: parts, even seams, odd seams, boundaries; first iteration, then later ones.
+        // Levels: parts, seams (or even seams), odd seams, boundaries; first iteration, then
+        // later ones.
         let mut levels = vec![0u8; (self.level_capacity as u64 * TABLE_STRIDE) as usize];
         let mut put = |i: usize, e: LevelEntry| {
             let at = i * TABLE_STRIDE as usize;

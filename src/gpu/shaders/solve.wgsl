@@ -3,7 +3,8 @@
 // further apart — every colour of the group in turn with a barrier between colours, so a
 // substep costs a few dispatches whatever the colour count and however many cloths the world
 // holds. Groups of one dispatch share no vertex. The CPU twin is `solver::step` with the same
-// `ConstraintBatches` (`Part::project`): parts, then even seams, odd seams, the boundary.
+// `ConstraintBatches` (`Part::project`): parts, then seams (all, or even then odd ones where
+// neighbouring seams overlap), the boundary.
 //
 // A part of at most `TILE` vertices is projected in workgroup memory (loaded, projected,
 // stored); larger parts, seams and the boundary are projected in place with storage barriers.

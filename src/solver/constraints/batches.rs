@@ -6,9 +6,10 @@
 //!    grid). A constraint whose vertices all lie in one range belongs to that *part*; the
 //!    others straddle parts. Parts touch disjoint vertices, so they are projected on
 //!    different threads with no locks. A straddling constraint whose vertices lie in two
-//!    neighbouring parts `s` and `s + 1` belongs to *seam* `s`; seams of one parity (every
-//!    even seam, then every odd one) touch disjoint vertices too, so they also run in
-//!    parallel, after the parts. What is left (constraints across more than two parts, on a
+//!    neighbouring parts `s` and `s + 1` belongs to *seam* `s`, which spans the vertices from
+//!    the first to the last its constraints touch. Where no two seams overlap (parts more
+//!    than a few grid rows deep), every seam runs in parallel after the parts; otherwise
+//!    every even seam, then every odd one (those never overlap). What is left (constraints across more than two parts, on a
 //!    mesh whose vertex order jumps) is the *boundary*, projected last on one thread. `K`
 //!    depends only on the vertex count, never on the thread count, so results are
 //!    bit-identical however many threads run.
@@ -614,8 +615,8 @@ pub fn default_part_count(n: usize) -> usize {
 #[derive(Clone, Debug, PartialEq)]
 pub struct ConstraintBatches {
     pub(crate) parts: Vec<Part>,
-    /// Seams between neighbouring parts: `[even, odd]`, each in vertex order. Seams of one
-    /// parity share no vertex.
+    /// Seams between neighbouring parts, each in vertex order and sharing no vertex with
+    /// another of its list: `[all, empty]` when no two seams overlap, else `[even, odd]`.
     pub(crate) seams: [Vec<Part>; 2],
     pub(crate) boundary: Part,
     pub(crate) bending: bool,
@@ -672,9 +673,37 @@ impl ConstraintBatches {
             .enumerate()
             .map(|(p, r)| build(r.clone(), p))
             .collect();
+        // A seam's vertices: from the first to the last its constraints touch (within its
+        // two parts); empty where it has none.
+        let seam_range = |s: usize| -> Range<usize> {
+            let slot = k + s;
+            let vertices = edges[slot]
+                .iter()
+                .flat_map(|&e| topology.edges()[e as usize].v)
+                .chain(
+                    bends[slot]
+                        .iter()
+                        .flat_map(|&b| topology.bends()[b as usize].v),
+                );
+            let (lo, hi) = vertices.fold((usize::MAX, 0), |(lo, hi), v| {
+                (lo.min(v as usize), hi.max(v as usize + 1))
+            });
+            if lo < hi {
+                lo..hi
+            } else {
+                ranges[s].end..ranges[s].end
+            }
+        };
+        let seam_ranges: Vec<Range<usize>> = (0..k - 1).map(seam_range).collect();
+        // Seams whose vertices do not overlap (parts more than a few rows deep) all run at
+        // once: one parallel region (one GPU level) instead of two. Otherwise even seams,
+        // then odd ones, which never share a vertex. Either way no two seams of one list
+        // share a vertex, so the order within a list changes nothing.
+        let disjoint = seam_ranges.windows(2).all(|w| w[0].end <= w[1].start);
         let mut seams = [Vec::new(), Vec::new()];
-        for s in 0..k - 1 {
-            seams[s % 2].push(build(ranges[s].start..ranges[s + 1].end, k + s));
+        for (s, r) in seam_ranges.into_iter().enumerate() {
+            let list = if disjoint { 0 } else { s % 2 };
+            seams[list].push(build(r, k + s));
         }
         let boundary = build(0..n, 2 * k - 1);
         let mut batches = Self {
@@ -874,7 +903,9 @@ mod tests {
     fn parts_only_hold_their_own_vertices() {
         let (t, b) = batches(20, 4);
         assert_eq!(b.part_count(), 4);
-        assert_eq!((b.seams[0].len(), b.seams[1].len()), (2, 1));
+        // Parts of five rows: the seams (rows 3–6 of each pair of parts) do not overlap and
+        // run at once.
+        assert_eq!((b.seams[0].len(), b.seams[1].len()), (3, 0));
         for p in b.all_parts() {
             for (&a, &bb) in p.distance.a.iter().zip(&p.distance.b) {
                 assert!((a as usize) < p.range.len() && (bb as usize) < p.range.len());
@@ -883,12 +914,13 @@ mod tests {
                 assert!(v.iter().all(|&v| (v as usize) < p.range.len()));
             }
         }
-        // Seams of one parity cover disjoint vertex ranges, each two neighbouring parts.
-        for (parity, seams) in b.seams.iter().enumerate() {
-            for (i, seam) in seams.iter().enumerate() {
-                let s = 2 * i + parity;
-                assert_eq!(seam.range, b.parts[s].range.start..b.parts[s + 1].range.end);
-            }
+        // Each seam lies within its two parts: the last two rows of one, the first two of
+        // the next.
+        for (s, seam) in b.seams[0].iter().enumerate() {
+            assert_eq!(
+                seam.range,
+                b.parts[s].range.end - 40..b.parts[s + 1].range.start + 40
+            );
         }
         let count =
             |it: &mut dyn Iterator<Item = &Part>| -> usize { it.map(|p| p.distance.a.len()).sum() };
@@ -904,6 +936,81 @@ mod tests {
         // Row strips: the seams are a few rows' worth, not the whole cloth.
         assert!(b.boundary_len() > 0);
         assert!(b.boundary_len() < (t.edges().len() + t.bends().len()) / 4);
+    }
+
+    #[test]
+    fn overlapping_seams_take_turns_and_none_shares_a_vertex_in_its_list() {
+        // A seam spans four rows (hinges reach a row past the two its edges join): parts of
+        // two or three rows make neighbouring seams overlap, and they run as even, then odd.
+        for (rows, parts, split) in [
+            (20, 10, true),
+            (21, 7, true),
+            (20, 5, false),
+            (64, 16, false),
+        ] {
+            let (_, b) = batches(rows, parts);
+            let [even, odd] = &b.seams;
+            assert_eq!(
+                !odd.is_empty(),
+                split,
+                "{rows} rows in {parts} parts: {} and {} seams",
+                even.len(),
+                odd.len()
+            );
+            assert_eq!(even.len() + odd.len(), parts - 1);
+            for list in &b.seams {
+                for w in list.windows(2) {
+                    assert!(w[0].range.end <= w[1].range.start, "{rows}/{parts}");
+                }
+                for seam in list {
+                    for (&a, &bb) in seam.distance.a.iter().zip(&seam.distance.b) {
+                        assert!((a as usize) < seam.range.len());
+                        assert!((bb as usize) < seam.range.len());
+                    }
+                    for v in &seam.bending.v {
+                        assert!(v.iter().all(|&v| (v as usize) < seam.range.len()));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn seams_at_once_move_the_cloth_as_even_then_odd_seams_do() {
+        let (t, b) = batches(64, 16);
+        assert!(
+            b.seams[1].is_empty(),
+            "a 64² grid in 16 parts has its seams at once"
+        );
+        // Every vertex off its rest place: every seam constraint corrects something.
+        let start: Vec<Vec4> = t
+            .rest_positions()
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let k = i as f32;
+                let jitter = glam::Vec3::new((k * 0.37).sin(), (k * 0.11).cos(), (k * 0.73).sin());
+                (*p + jitter * 0.004).extend(1.0)
+            })
+            .collect();
+        let mode = Mode::Xpbd { inv_h2: 360_000.0 };
+        let project = |order: &[usize]| {
+            let mut pos = start.clone();
+            let mut seams = b.seams[0].clone();
+            for &s in order {
+                let seam = &mut seams[s];
+                seam.project(&mut pos[seam.range.clone()], mode, true, false);
+            }
+            pos
+        };
+        let count = b.seams[0].len();
+        let at_once = project(&(0..count).collect::<Vec<_>>());
+        let even_then_odd: Vec<usize> =
+            (0..count).step_by(2).chain((1..count).step_by(2)).collect();
+        assert_eq!(at_once, project(&even_then_odd));
+        let reversed: Vec<usize> = (0..count).rev().collect();
+        assert_eq!(at_once, project(&reversed));
+        assert_ne!(at_once, start);
     }
 
     #[test]

@@ -8,8 +8,9 @@
 //!    [`air_velocity_change`]), then `x ← x + v·h`;
 //!    If bending is solved implicitly (see [`BendingSolve`](super::BendingSolve)), one banded
 //!    solve `(M + h²K) δ = −h²K x̃` follows, and the projections below skip bending;
-//! 3. `iterations` times: each part's constraints (in parallel), then the even seams' and
-//!    the odd seams' (each in parallel), then the boundary's;
+//! 3. `iterations` times: each part's constraints (in parallel), then the seams' (in
+//!    parallel; where neighbouring seams overlap, the even ones, then the odd ones), then the
+//!    boundary's;
 //! 4. tethers, then self-collision (if on; one pass each). Tethers move only free vertices,
 //!    toward copies of the pins' positions, so they run part by part at the start of the
 //!    next parallel region (before self-collision in a region of their own; otherwise in
@@ -20,8 +21,8 @@
 //! 6. `v ← (x − x_prev)/h` (done at the start of the next substep, or at the end).
 //!
 //! Step 2 and the parts' first iteration of step 3 share one parallel region, so a substep
-//! with one iteration and no colliders costs three fork–joins (parts, even seams, odd
-//! seams; a cloth of one part has no seams and costs one). Everything a scene does not use costs
+//! with one iteration and no colliders costs two fork–joins (parts, seams; three where the
+//! seams take turns; a cloth of one part has no seams and costs one). Everything a scene does not use costs
 //! nothing: no collider pass without colliders, no tether or self-collision pass unless set,
 //! no air term with [`Aerodynamics::NONE`], no bending pass at zero bending stiffness. Each
 //! vertex's area vector is computed once per step, from the positions at its start.
@@ -137,7 +138,7 @@ fn split<'a>(
     out
 }
 
-/// Each seam of one parity with the positions of its vertex range (the ranges are disjoint
+/// Each seam of one list with the positions of its vertex range (the ranges are disjoint
 /// and in order).
 fn split_seams<'a>(
     seams: &'a mut [Part],
@@ -455,7 +456,8 @@ pub fn step(
                 collide: false,
             };
             run_parts(&mut batches.parts, state, scratch, phase);
-            // Then what straddles parts: even seams in parallel, odd seams, the rest.
+            // Then what straddles parts: the seams in parallel (all, or even then odd), the
+            // rest.
             for seams in &mut batches.seams {
                 let mut work = split_seams(seams, &mut state.positions);
                 par.for_each_mut(&mut work, |(seam, pos)| {
