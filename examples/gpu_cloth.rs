@@ -10,8 +10,8 @@
 //! `--backend gpu|cpu|auto` (default gpu); `--headless` runs with a renderer but no window
 //! when the backend is not the CPU. The JSON line says which backend ran (`"backend"`).
 //!
-//! `--no-self-collision` leaves self-collision out. On the GPU it runs in its parallel form
-//! (each vertex moved by the mean of its contacts' corrections), on the CPU pair by pair.
+//! `--no-self-collision` leaves self-collision out. Both backends run the same model: each
+//! substep, every vertex moves by the mean of its contacts' corrections.
 
 #[path = "support/mod.rs"]
 mod support;
