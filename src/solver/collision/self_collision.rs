@@ -21,6 +21,11 @@
 //!   own triangles over it within the step; testing them anyway cost five times the rest of
 //!   the query.
 //!
+//! The triangles by first corner and the longest rest edge depend on the mesh alone: they are
+//! kept from step to step (rebuilt when the triangles or rest positions differ, as after a
+//! tear). The grid's lanes are gathered in parallel, one lane a work item; only the buckets'
+//! counts and order are made on one thread.
+//!
 //! The CPU's hash keeps the cells of a row along x in consecutive buckets and the positions,
 //! rest positions and positions two steps ahead in separate lanes, so that a query reads a
 //! few runs of entries in sequence and tests eight at a time (vectorised), in one walk: the
@@ -61,9 +66,8 @@ pub struct SelfCollision {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SelfCollisionScratch {
     grid: Grid,
-    /// Triangles by their first corner (offsets per vertex, then triangle indices).
-    first_start: Vec<u32>,
-    first_tris: Vec<u32>,
+    /// What depends on the mesh alone, kept while the mesh stays the same.
+    mesh: MeshLists,
     /// Every triangle's [`Frame`] at the step's start.
     frames: Vec<Frame>,
     /// Per vertex: its neighbours' count and [`MAX_SELF_NEIGHBOURS`] slots.
@@ -78,6 +82,51 @@ pub struct SelfCollisionScratch {
     active: Vec<u32>,
     /// Per active vertex, its correction in the current pass.
     corrections: Vec<Vec3>,
+}
+
+/// A mesh's triangles by their first corner and its longest rest edge, with the triangles and
+/// rest positions they were made from (compared each step: a step with another mesh, or the
+/// same cloth after a tear, rebuilds them).
+#[derive(Clone, Debug, Default, PartialEq)]
+struct MeshLists {
+    triangles: Vec<[u32; 3]>,
+    rest: Vec<Vec3>,
+    /// Offsets per vertex into `first_tris`, then triangle indices.
+    first_start: Vec<u32>,
+    first_tris: Vec<u32>,
+    longest: f32,
+}
+
+impl MeshLists {
+    /// Brings the lists up to date with `rest` and `triangles`.
+    fn update(&mut self, rest: &[Vec3], triangles: &[[u32; 3]]) {
+        if self.triangles == triangles && self.rest == rest {
+            return;
+        }
+        let n = rest.len();
+        self.triangles.clear();
+        self.triangles.extend_from_slice(triangles);
+        self.rest.clear();
+        self.rest.extend_from_slice(rest);
+        self.longest = longest_rest_edge(rest, triangles);
+        // Triangles by first corner, in triangle order.
+        self.first_start.clear();
+        self.first_start.resize(n + 1, 0);
+        let valid = |t: &[u32; 3]| t.iter().all(|&k| (k as usize) < n);
+        for t in triangles.iter().filter(|t| valid(t)) {
+            self.first_start[t[0] as usize + 1] += 1;
+        }
+        for k in 0..n {
+            self.first_start[k + 1] += self.first_start[k];
+        }
+        self.first_tris.resize(self.first_start[n] as usize, 0);
+        let mut fill = self.first_start.clone();
+        for (ti, t) in triangles.iter().enumerate().filter(|(_, t)| valid(t)) {
+            let at = &mut fill[t[0] as usize];
+            self.first_tris[*at as usize] = ti as u32;
+            *at += 1;
+        }
+    }
 }
 
 /// Most vertices a vertex keeps as neighbours (the GPU's fixed-size lists); further ones in a
@@ -207,6 +256,17 @@ fn gap(v: f32, lo: f32, hi: f32) -> f32 {
 /// same value in the cloth's record.
 #[must_use]
 pub fn triangle_reach(rest: &[Vec3], triangles: &[[u32; 3]], thickness: f32) -> f32 {
+    reach_of_longest(longest_rest_edge(rest, triangles), thickness)
+}
+
+/// [`triangle_reach`] from the longest rest edge.
+#[inline]
+fn reach_of_longest(longest: f32, thickness: f32) -> f32 {
+    (1.25 * longest).min(4.0 * thickness)
+}
+
+/// The longest finite rest edge of the triangles (0 for none).
+fn longest_rest_edge(rest: &[Vec3], triangles: &[[u32; 3]]) -> f32 {
     let at = |i: u32| rest.get(i as usize).copied().unwrap_or(Vec3::ZERO);
     let longest2 = triangles
         .iter()
@@ -220,7 +280,7 @@ pub fn triangle_reach(rest: &[Vec3], triangles: &[[u32; 3]], thickness: f32) -> 
         })
         .filter(|d| d.is_finite())
         .fold(0.0f32, f32::max);
-    (1.25 * longest2.sqrt()).min(4.0 * thickness)
+    longest2.sqrt()
 }
 
 /// What projecting onto a triangle needs of it, computed once a step for the query (the same
@@ -746,18 +806,38 @@ struct Grid {
 }
 
 impl Grid {
-    /// Every vertex with a finite position into its cell's bucket.
-    fn fill(&mut self, pos: &[Vec4], vel: &[Vec4], rest: &[Vec3], ahead: f32, cell: f32) {
+    /// Every vertex with a finite position into its cell's bucket: the cells and the lanes in
+    /// parallel, the buckets' order on the calling thread (each bucket's entries in falling
+    /// vertex order, whatever the threads).
+    fn fill(
+        &mut self,
+        pos: &[Vec4],
+        vel: &[Vec4],
+        rest: &[Vec3],
+        ahead: f32,
+        cell: f32,
+        par: &impl Parallel,
+    ) {
         let n = pos.len();
         let size = (2 * n).next_power_of_two().max(2);
         let mask = size - 1;
         let inv = 1.0 / cell;
         self.cell = cell;
+        self.vertex_cells.resize(n, IVec3::ZERO);
+        let mut chunks: Vec<(usize, &mut [IVec3])> = self
+            .vertex_cells
+            .chunks_mut(4 * CHUNK)
+            .enumerate()
+            .map(|(k, c)| (k * 4 * CHUNK, c))
+            .collect();
+        par.for_each_mut(&mut chunks, |(first, cells)| {
+            for (k, c) in cells.iter_mut().enumerate() {
+                *c = cell_of(pos[*first + k].xyz(), inv);
+            }
+        });
+        drop(chunks);
         self.start.clear();
         self.start.resize(size + 1, 0);
-        self.vertex_cells.clear();
-        self.vertex_cells
-            .extend(pos.iter().map(|p| cell_of(p.xyz(), inv)));
         for (p, c) in pos.iter().zip(&self.vertex_cells) {
             if p.xyz().is_finite() {
                 self.start[grid_bucket(*c, mask)] += 1;
@@ -768,38 +848,62 @@ impl Grid {
             acc += *s;
             *s = acc;
         }
-        let count = acc as usize + LANES;
+        let real = acc as usize;
+        let count = real + LANES;
         self.entries.resize(count, 0);
-        self.x.resize(count, 0.0);
-        self.y.resize(count, 0.0);
-        self.z.resize(count, 0.0);
-        for lane in [
+        self.cells.resize(count, IVec3::ZERO);
+        for (i, p) in pos.iter().enumerate() {
+            if p.xyz().is_finite() {
+                let c = self.vertex_cells[i];
+                let h = grid_bucket(c, mask);
+                self.start[h] -= 1;
+                let k = self.start[h] as usize;
+                self.entries[k] = i as u32;
+                self.cells[k] = c;
+            }
+        }
+        // The lanes, one a work item: each read through the entries in order.
+        let entries = &self.entries[..real];
+        let mut lanes: Vec<(usize, &mut [f32])> = [
+            &mut self.x,
+            &mut self.y,
+            &mut self.z,
             &mut self.rx,
             &mut self.ry,
             &mut self.rz,
             &mut self.ax,
             &mut self.ay,
             &mut self.az,
-        ] {
+        ]
+        .into_iter()
+        .enumerate()
+        .map(|(kind, lane)| {
             lane.resize(count, 0.0);
-        }
-        self.cells.resize(count, IVec3::ZERO);
-        for (i, p) in pos.iter().enumerate() {
-            let p = p.xyz();
-            if p.is_finite() {
-                let c = self.vertex_cells[i];
-                let h = grid_bucket(c, mask);
-                self.start[h] -= 1;
-                let k = self.start[h] as usize;
-                self.entries[k] = i as u32;
-                (self.x[k], self.y[k], self.z[k]) = (p.x, p.y, p.z);
-                let r = rest[i];
-                (self.rx[k], self.ry[k], self.rz[k]) = (r.x, r.y, r.z);
-                let a = p + vel[i].xyz() * ahead;
-                (self.ax[k], self.ay[k], self.az[k]) = (a.x, a.y, a.z);
-                self.cells[k] = c;
+            (kind, &mut lane[..real])
+        })
+        .collect();
+        par.for_each_mut(&mut lanes, |(kind, out)| {
+            let out = &mut **out;
+            match *kind {
+                0 => gather(out, entries, |i| pos[i].x),
+                1 => gather(out, entries, |i| pos[i].y),
+                2 => gather(out, entries, |i| pos[i].z),
+                3 => gather(out, entries, |i| rest[i].x),
+                4 => gather(out, entries, |i| rest[i].y),
+                5 => gather(out, entries, |i| rest[i].z),
+                6 => gather(out, entries, |i| pos[i].x + vel[i].x * ahead),
+                7 => gather(out, entries, |i| pos[i].y + vel[i].y * ahead),
+                _ => gather(out, entries, |i| pos[i].z + vel[i].z * ahead),
             }
-        }
+        });
+    }
+}
+
+/// `out[k] = value(entries[k])` for every entry.
+#[inline]
+fn gather(out: &mut [f32], entries: &[u32], value: impl Fn(usize) -> f32) {
+    for (o, &i) in out.iter_mut().zip(entries) {
+        *o = value(i as usize);
     }
 }
 
@@ -829,26 +933,11 @@ impl SelfCollisionScratch {
     ) {
         let n = pos.len();
         let skip = SKIP * thickness;
-        let radius = reach + triangle_reach(rest, triangles, thickness);
+        self.mesh.update(rest, triangles);
+        let radius = reach + reach_of_longest(self.mesh.longest, thickness);
         self.grid
-            .fill(pos, vel, rest, AHEAD * dt, radius / CELLS_PER_RADIUS);
-        // Triangles by first corner, in triangle order.
-        self.first_start.clear();
-        self.first_start.resize(n + 1, 0);
+            .fill(pos, vel, rest, AHEAD * dt, radius / CELLS_PER_RADIUS, par);
         let valid = |t: &[u32; 3]| t.iter().all(|&k| (k as usize) < n);
-        for t in triangles.iter().filter(|t| valid(t)) {
-            self.first_start[t[0] as usize + 1] += 1;
-        }
-        for k in 0..n {
-            self.first_start[k + 1] += self.first_start[k];
-        }
-        self.first_tris.resize(self.first_start[n] as usize, 0);
-        let mut fill = self.first_start.clone();
-        for (ti, t) in triangles.iter().enumerate().filter(|(_, t)| valid(t)) {
-            let at = &mut fill[t[0] as usize];
-            self.first_tris[*at as usize] = ti as u32;
-            *at += 1;
-        }
 
         self.frames.resize(triangles.len(), Frame::default());
         let mut parts: Vec<(usize, &mut [Frame])> = self
@@ -885,8 +974,8 @@ impl SelfCollisionScratch {
             rest,
             triangles,
             grid: &self.grid,
-            first_start: &self.first_start,
-            first_tris: &self.first_tris,
+            first_start: &self.mesh.first_start,
+            first_tris: &self.mesh.first_tris,
             frames: &self.frames,
             thickness,
             reach,
@@ -1422,8 +1511,16 @@ mod tests {
     /// walk gives, in a sheet crumpled to half its size (folded everywhere) with a thickness
     /// of three edges (some vertices see more than [`NEAR_GROUPS`] groups of their own
     /// neighbourhood, and take the second walk either way).
-    #[test]
-    fn the_kept_groups_find_what_a_second_walk_finds() {
+    /// A 40 × 40 sheet crumpled to half its size, its velocities random, and a thickness of
+    /// three edges.
+    #[expect(clippy::type_complexity)]
+    fn crumpled_sheet() -> (
+        Vec<Vec4>,
+        Vec<Vec4>,
+        Vec<Vec3>,
+        Vec<[u32; 3]>,
+        SelfCollision,
+    ) {
         let mut seed = 11u32;
         let mut next = move || {
             seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
@@ -1453,6 +1550,12 @@ mod tests {
             thickness: 3.0 * h,
             friction: 0.0,
         };
+        (pos, vel, rest, tris, params)
+    }
+
+    #[test]
+    fn the_kept_groups_find_what_a_second_walk_finds() {
+        let (pos, vel, rest, tris, params) = crumpled_sheet();
         let dt = 1.0 / 60.0;
         let reach = reach(&vel, params, dt).unwrap();
         let t = params.thickness;
@@ -1476,6 +1579,34 @@ mod tests {
             found > 1000,
             "only {found} triangles found: the sheet did not fold"
         );
+    }
+
+    /// The lists kept from one mesh (triangles by first corner, longest edge) are rebuilt for
+    /// another: a scratch that stepped the whole sheet, then the sheet with half its triangles
+    /// gone (as after a tear), finds what a fresh scratch finds.
+    #[test]
+    fn a_scratch_stepping_another_mesh_finds_what_a_fresh_one_finds() {
+        let (pos, vel, rest, tris, params) = crumpled_sheet();
+        let dt = 1.0 / 60.0;
+        let mut reused = candidates(&pos, &vel, &rest, &tris, params);
+        let whole = reused.triangle_count.clone();
+        let torn = &tris[tris.len() / 2..];
+        find_self_collision_candidates(&pos, &vel, &rest, torn, params, dt, &mut reused, &Serial);
+        let fresh = candidates(&pos, &vel, &rest, torn, params);
+        assert_ne!(
+            reused.triangle_count, whole,
+            "the torn sheet found the same triangles"
+        );
+        assert_eq!(reused.neighbour_count, fresh.neighbour_count);
+        assert_eq!(reused.triangle_count, fresh.triangle_count);
+        for (i, &count) in fresh.triangle_count.iter().enumerate() {
+            let slots = i * MAX_SELF_TRIANGLES..i * MAX_SELF_TRIANGLES + count as usize;
+            assert_eq!(
+                reused.triangles[slots.clone()],
+                fresh.triangles[slots],
+                "vertex {i}"
+            );
+        }
     }
 
     #[test]
