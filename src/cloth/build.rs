@@ -210,8 +210,8 @@ fn self_collision_thickness(sim: &Simulation, sc: &ClothSelfCollision) -> (f32, 
 /// Warns when a cloth's self-collision thickness was brought down to
 /// [`MAX_SELF_COLLISION_EDGES`] mean edges, once per thickness asked (a tear changes the mean
 /// edge, and with it the thickness used, without warning again); and, once per cloth built,
-/// when its edges are more uneven than [`EVEN_EDGE_SPREAD`] for self-collision's one
-/// thickness.
+/// when its edges are more uneven than [`EVEN_EDGE_SPREAD`] (self-collision then keeps a
+/// thickness per vertex, which holds less well than one thickness on an even mesh).
 pub(super) fn warn_self_collision(
     cs: &mut ClothSim,
     sc: Option<&ClothSelfCollision>,
@@ -235,9 +235,9 @@ pub(super) fn warn_self_collision(
         cs.uneven_warned = true;
         warn!(
             "cloth {who}: its edges are uneven for self-collision (the 90th percentile of their \
-             lengths is {spread:.2} times the 10th; measured to hold up to {EVEN_EDGE_SPREAD}): \
-             one thickness for the whole cloth can let layers pass through each other where the \
-             edges differ most from it; a mesh remeshed to even edges holds"
+             lengths is {spread:.2} times the 10th, more than {EVEN_EDGE_SPREAD}): each vertex \
+             keeps a thickness from its own edges, and layers can still pass through each other \
+             in a few places where the cloth crumples; a mesh remeshed to even edges holds"
         );
     }
 }

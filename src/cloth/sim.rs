@@ -56,8 +56,8 @@ pub struct ClothSim {
     /// [`MAX_SELF_COLLISION_EDGES`](crate::solver::MAX_SELF_COLLISION_EDGES) mean edges): a
     /// tear, which changes the mean edge, does not warn again.
     pub(super) thickness_warned: Option<f32>,
-    /// Whether the warning that the mesh's edges are too uneven for self-collision's one
-    /// thickness was given (once per cloth built).
+    /// Whether the warning that the mesh's edges are uneven for self-collision was given
+    /// (once per cloth built).
     pub(super) uneven_warned: bool,
     /// A pin list that was refused (the last valid pins hold meanwhile).
     pub(super) pins_error: Option<ClothError>,

@@ -12,8 +12,9 @@ use glam::{Vec3, Vec4};
 
 use super::append_lists;
 use super::kernels::TILE;
+use crate::solver::collision::{first_corner_reach, thickness_scales};
 use crate::solver::constraints::{ConstraintBatches, Part};
-use crate::solver::{Simulation, Solver, Tethers, triangle_reach};
+use crate::solver::{Simulation, Solver, Tethers};
 
 /// Words of a cloth's record in `topo` (`common.wgsl`'s `CLOTH_WORDS`).
 pub(crate) const CLOTH_WORDS: usize = 20;
@@ -334,9 +335,17 @@ impl WorldLayout {
             rec[15] = features.tear_threshold.unwrap_or(0.0).to_bits();
             rec[16] = c;
             rec[17] = if sc.is_some() { out.head_words } else { 0 };
+            // Each vertex's thickness over the cloth's rides in its rest position's w.
+            let (rest, tris) = (sim.topology().rest_positions(), sim.topology().triangles());
+            let scales = if any_sc {
+                thickness_scales(rest, tris)
+            } else {
+                Vec::new()
+            };
             if let Some(sc) = sc {
-                let (rest, tris) = (sim.topology().rest_positions(), sim.topology().triangles());
-                rec[18] = triangle_reach(rest, tris, sc.thickness).to_bits();
+                rec[18] = first_corner_reach(rest, tris).to_bits();
+                let most = scales.iter().copied().fold(1.0, f32::max);
+                rec[19] = (sc.thickness * most).to_bits();
             }
             if sc.is_some() {
                 out.head_words += 2 * n;
@@ -383,8 +392,8 @@ impl WorldLayout {
             out.n += n;
             out.pins += pins.len() as u32;
             if any_sc {
-                let rest = sim.topology().rest_positions();
-                out.rest.extend(rest.iter().map(|p| p.extend(0.0)));
+                out.rest
+                    .extend(rest.iter().zip(&scales).map(|(p, &s)| p.extend(s)));
             }
         }
         out.any_sc = any_sc && out.head_words > 0;

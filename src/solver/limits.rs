@@ -277,7 +277,11 @@ pub const MAX_SELF_COLLISION_EDGES: f32 = 1.0;
 /// on with its one thickness: the crumpled 30² cloth of the `self_collision` tests, its grid
 /// squeezed towards the middle, ended with no edge–triangle pair crossing at spreads of 1.41
 /// (even), 1.65 and 1.74, and with 122 and 12 at 2.0 and 2.8 (a thinner thickness crossed
-/// more: the edges of the coarse parts slip between vertices). The plugin warns above it.
+/// more: the edges of the coarse parts slip between vertices). Above it each vertex takes a
+/// thickness from its own edges (the cloth's times the mean length of the edges at it over
+/// the mean edge): the same cloth squeezed both ways, spun at four rates, ended with 0 to 22
+/// crossing pairs at spreads of 2.1 to 3.7, where the one thickness left 4 to 10 343. The
+/// plugin warns above it.
 pub const EVEN_EDGE_SPREAD: f32 = 1.8;
 /// Self-collision friction.
 pub const SELF_COLLISION_FRICTION: Limit = Limit::new(

@@ -136,7 +136,10 @@ struct Cloth {
     tear: f32,
     status: u32,
     head_base: u32,
+    // 1.25 × the longest rest edge (`self_collision::first_corner_reach`; capped per vertex
+    // at 4 of its thicknesses), and the thickest vertex's thickness.
     sc_tri_reach: f32,
+    sc_thickest: f32,
 }
 
 const CLOTH_WORDS: u32 = 20u;
@@ -189,6 +192,7 @@ fn cloth_of(c: u32) -> Cloth {
     r.status = topo[b + 16u];
     r.head_base = topo[b + 17u];
     r.sc_tri_reach = f32_at(b + 18u);
+    r.sc_thickest = f32_at(b + 19u);
     return r;
 }
 

@@ -25,11 +25,17 @@ fn tethered(i: u32, x: vec4<f32>) -> vec4<f32> {
     return out;
 }
 
-// `self_collision::reach_and_skip`: the query distance (thickness plus a margin for the
-// fastest vertex's travel over the step).
-fn sc_reach(c: u32, cl: Cloth) -> f32 {
+// `self_collision::reach_of`: a vertex's query distance (its thickness plus a margin for the
+// fastest vertex's travel over the step, at most 1.5 thicknesses).
+fn sc_reach(c: u32, thickness: f32) -> f32 {
     let fastest = sqrt(bitcast<f32>(atomicLoad(&scratch[P.speed_at + c])));
-    return cl.sc_thickness + min(2.0 * fastest * P.dt, 1.5 * cl.sc_thickness);
+    return thickness + min(2.0 * fastest * P.dt, 1.5 * thickness);
+}
+
+// `self_collision::thickness_scales`: vertex `i`'s own thickness (its scale rides in its rest
+// position's w).
+fn sc_thickness_of(i: u32, cl: Cloth) -> f32 {
+    return cl.sc_thickness * state[P.rest_at + i].w;
 }
 
 // `sdf::closest_point_on_triangle` (Ericson 5.1.5).
@@ -231,22 +237,23 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
     var tcount = 0u;
     let p = state[i].xyz;
     if finite3(p) {
-        let reach = sc_reach(c, cl);
-        let radius = reach + cl.sc_tri_reach;
+        let thickness = sc_thickness_of(i, cl);
+        let reach = sc_reach(c, thickness);
+        let radius = reach + min(cl.sc_tri_reach, 4.0 * thickness);
         let inv = 1.0 / sc_cell_size(cl);
         let r2 = reach * reach;
         let big2 = radius * radius;
-        let skip = 2.5 * cl.sc_thickness;
-        let tri_skip = 0.5 * cl.sc_thickness;
+        let skip = 2.5 * thickness;
+        let tri_skip = 0.5 * thickness;
         var v: ScVertex;
         v.p = p;
         v.rest_i = state[P.rest_at + i].xyz;
         v.vel_i = state[P.vel_at + i].xyz;
         v.reach = reach;
-        v.margin = reach - cl.sc_thickness;
+        v.margin = reach - thickness;
         v.skip2 = skip * skip;
         v.tri_skip2 = tri_skip * tri_skip;
-        v.thickness = cl.sc_thickness;
+        v.thickness = thickness;
         let size = 2u * cl.n;
         let lo = sc_cell(p - vec3<f32>(radius), inv);
         let hi = sc_cell(p + vec3<f32>(radius), inv);
@@ -456,13 +463,15 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
     let tethers = (cl.flags & FLAG_TETHERS) != 0u;
     let a = sc_read(i, tethers);
     let prev_a = state[P.prev_at + i].xyz;
+    // The vertex keeps its own thickness from the others.
+    let thickness = sc_thickness_of(i, cl);
     var sum = vec3<f32>(0.0);
     var touching = 0.0;
     let count = atomicLoad(&scratch[P.ncount_at + i]);
     for (var k = 0u; k < count; k++) {
         let j = atomicLoad(&scratch[P.nlist_at + i * SC_MAX + k]);
         let b = sc_read(j, tethers);
-        let r = sc_pair(a, prev_a, b, state[P.prev_at + j].xyz, cl.sc_thickness, cl.sc_friction);
+        let r = sc_pair(a, prev_a, b, state[P.prev_at + j].xyz, thickness, cl.sc_friction);
         sum += r.xyz;
         touching += r.w;
     }
@@ -477,7 +486,7 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
             a, prev_a,
             sc_read(k0, tethers), sc_read(k1, tethers), sc_read(k2, tethers),
             state[P.prev_at + k0].xyz, state[P.prev_at + k1].xyz, state[P.prev_at + k2].xyz,
-            slot & 3u, cl.sc_thickness, cl.sc_friction,
+            slot & 3u, thickness, cl.sc_friction,
         );
         sum += r.xyz;
         touching += r.w;

@@ -77,7 +77,7 @@ fn sc_hash(c: vec3<i32>, size: u32) -> u32 {
 // and the triangle reach), so the hash needs no step-wide maximum first. (The CPU's grid,
 // `self_collision::Grid`, is laid out for its vector units; both find the same vertices.)
 fn sc_cell_size(cl: Cloth) -> f32 {
-    return 2.5 * cl.sc_thickness + cl.sc_tri_reach;
+    return 2.5 * cl.sc_thickest + min(cl.sc_tri_reach, 4.0 * cl.sc_thickest);
 }
 
 // The start of a step for every vertex: where pins start from (`ClothState::pin_starts`),

@@ -2,6 +2,11 @@
 //! and the triangles of other layers, and no vertex passes through a triangle it was in front
 //! of when the step began.
 //!
+//! On a mesh of uneven edges (more than [`EVEN_EDGE_SPREAD`]) each vertex keeps its own
+//! thickness, `thickness` times the mean length of the edges at it over the mean edge
+//! ([`thickness_scales`]); everything below that says *thickness* is then the querying or
+//! correcting vertex's own. On an even mesh every vertex keeps `thickness`.
+//!
 //! Once per step, vertices go into a dense spatial hash (Müller, "Ten Minute Physics" 11) and
 //! every vertex collects, in parallel:
 //! - the vertices closer than the *reach* (`thickness` plus a margin for the motion during the
@@ -50,6 +55,8 @@
 
 use glam::{IVec3, Vec3, Vec4, Vec4Swizzles};
 
+use crate::solver::limits::EVEN_EDGE_SPREAD;
+use crate::solver::mesh::spread_of;
 use crate::solver::parallel::Parallel;
 
 /// Self-collision settings of one cloth.
@@ -95,6 +102,9 @@ struct MeshLists {
     first_start: Vec<u32>,
     first_tris: Vec<u32>,
     longest: f32,
+    /// Per vertex, its thickness over the cloth's (see [`thickness_scales`]), and the largest.
+    scale: Vec<f32>,
+    scale_max: f32,
 }
 
 impl MeshLists {
@@ -109,6 +119,8 @@ impl MeshLists {
         self.rest.clear();
         self.rest.extend_from_slice(rest);
         self.longest = longest_rest_edge(rest, triangles);
+        self.scale = thickness_scales(rest, triangles);
+        self.scale_max = self.scale.iter().copied().fold(1.0, f32::max);
         // Triangles by first corner, in triangle order.
         self.first_start.clear();
         self.first_start.resize(n + 1, 0);
@@ -259,6 +271,12 @@ pub fn triangle_reach(rest: &[Vec3], triangles: &[[u32; 3]], thickness: f32) -> 
     reach_of_longest(longest_rest_edge(rest, triangles), thickness)
 }
 
+/// How far past a triangle's nearest point its first corner may lie before the cap of
+/// [`triangle_reach`]: 1.25 × the longest rest edge (the GPU backend caps it per vertex).
+pub(crate) fn first_corner_reach(rest: &[Vec3], triangles: &[[u32; 3]]) -> f32 {
+    1.25 * longest_rest_edge(rest, triangles)
+}
+
 /// [`triangle_reach`] from the longest rest edge.
 #[inline]
 fn reach_of_longest(longest: f32, thickness: f32) -> f32 {
@@ -281,6 +299,73 @@ fn longest_rest_edge(rest: &[Vec3], triangles: &[[u32; 3]]) -> f32 {
         .filter(|d| d.is_finite())
         .fold(0.0f32, f32::max);
     longest2.sqrt()
+}
+
+/// Each vertex's self-collision thickness over the cloth's. 1 everywhere on a mesh whose rest
+/// edges are even (their 90th over 10th percentile at most [`EVEN_EDGE_SPREAD`], as
+/// [`Topology::rest_edge_spread`](crate::solver::Topology::rest_edge_spread) measures). On a
+/// more uneven mesh, one thickness lets layers cross where the edges differ most from it, so
+/// each vertex takes its *edge scale*: the mean rest length of the edges of the triangles at
+/// it (each counted once per triangle) over the mean of every triangle's edges, within
+/// [`MIN_THICKNESS_SCALE`] and [`MAX_THICKNESS_SCALE`] (1 for a vertex in no triangle): layers
+/// farther apart where the mesh is coarser, closer where it is finer. The GPU backend reads
+/// the same numbers.
+pub(crate) fn thickness_scales(rest: &[Vec3], triangles: &[[u32; 3]]) -> Vec<f32> {
+    let n = rest.len();
+    let valid = |t: &&[u32; 3]| t.iter().all(|&k| (k as usize) < n);
+    let mut edges: Vec<(u32, u32)> = triangles
+        .iter()
+        .filter(valid)
+        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+        .map(|(a, b)| (a.min(b), a.max(b)))
+        .collect();
+    edges.sort_unstable();
+    edges.dedup();
+    let lengths = edges
+        .iter()
+        .map(|&(a, b)| rest[a as usize].distance(rest[b as usize]))
+        .collect();
+    if spread_of(lengths) <= EVEN_EDGE_SPREAD {
+        return vec![1.0; n];
+    }
+    let mut sum = vec![0.0f64; n];
+    let mut count = vec![0u32; n];
+    let (mut total, mut incidences) = (0.0f64, 0u64);
+    for t in triangles.iter().filter(valid) {
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            let l = f64::from(rest[a as usize].distance(rest[b as usize]));
+            if !l.is_finite() {
+                continue;
+            }
+            for v in [a, b] {
+                sum[v as usize] += l;
+                count[v as usize] += 1;
+            }
+            total += l;
+            incidences += 1;
+        }
+    }
+    let mean = total / incidences.max(1) as f64;
+    (0..n)
+        .map(|i| {
+            if count[i] == 0 || mean.is_nan() || mean <= 0.0 {
+                return 1.0;
+            }
+            let s = (sum[i] / f64::from(count[i]) / mean) as f32;
+            s.clamp(MIN_THICKNESS_SCALE, MAX_THICKNESS_SCALE)
+        })
+        .collect()
+}
+
+/// Bounds of a vertex's thickness over the cloth's ([`thickness_scales`]).
+pub(crate) const MIN_THICKNESS_SCALE: f32 = 0.25;
+pub(crate) const MAX_THICKNESS_SCALE: f32 = 4.0;
+
+/// A vertex's query distance: its thickness plus the step's motion margin, at most 1.5 of its
+/// thicknesses (the GPU's `sc_reach` the same).
+#[inline]
+fn reach_of(thickness: f32, motion: f32) -> f32 {
+    thickness + motion.min(1.5 * thickness)
 }
 
 /// What projecting onto a triangle needs of it, computed once a step for the query (the same
@@ -411,8 +496,16 @@ fn keep_smallest(list: &mut [u32], count: &mut usize, value: u32) {
     *count = (*count + 1).min(max);
 }
 
-/// What a step's query reads.
+/// What a step's query reads; `thickness`, `reach`, `radius` and `skip` are the querying
+/// vertex's (see [`Query::vertex`]).
+#[derive(Clone, Copy)]
 struct Query<'a> {
+    /// Per vertex, its thickness over `cloth_thickness`.
+    scale: &'a [f32],
+    cloth_thickness: f32,
+    /// The step's motion margin (twice the fastest vertex's travel).
+    motion: f32,
+    longest: f32,
     pos: &'a [Vec4],
     vel: &'a [Vec4],
     dt: f32,
@@ -452,6 +545,27 @@ impl Query<'_> {
     /// is working space. `WALK_TWICE` takes the path of a crowd too big for [`NEAR_GROUPS`]
     /// (a second walk for the own neighbourhood) for every vertex, as the tests compare.
     fn vertex<const WALK_TWICE: bool>(
+        &self,
+        i: usize,
+        neighbours: &mut [u32],
+        tris: &mut [u32],
+        ranges: &mut Vec<(Row, usize, usize)>,
+    ) -> (usize, usize) {
+        // The vertex's own thickness and the distances that follow from it.
+        let thickness = self.cloth_thickness * self.scale.get(i).copied().unwrap_or(1.0);
+        let reach = reach_of(thickness, self.motion);
+        let own = Query {
+            thickness,
+            reach,
+            radius: reach + reach_of_longest(self.longest, thickness),
+            skip: SKIP * thickness,
+            ..*self
+        };
+        own.vertex_with::<WALK_TWICE>(i, neighbours, tris, ranges)
+    }
+
+    /// [`Query::vertex`] with the vertex's own distances in `self`.
+    fn vertex_with<const WALK_TWICE: bool>(
         &self,
         i: usize,
         neighbours: &mut [u32],
@@ -928,13 +1042,14 @@ impl SelfCollisionScratch {
         rest: &[Vec3],
         triangles: &[[u32; 3]],
         thickness: f32,
-        reach: f32,
+        motion: f32,
         par: &impl Parallel,
     ) {
         let n = pos.len();
-        let skip = SKIP * thickness;
         self.mesh.update(rest, triangles);
-        let radius = reach + reach_of_longest(self.mesh.longest, thickness);
+        // The grid's cells from the thickest vertex's radius.
+        let thickest = thickness * self.mesh.scale_max;
+        let radius = reach_of(thickest, motion) + reach_of_longest(self.mesh.longest, thickest);
         self.grid
             .fill(pos, vel, rest, AHEAD * dt, radius / CELLS_PER_RADIUS, par);
         let valid = |t: &[u32; 3]| t.iter().all(|&k| (k as usize) < n);
@@ -968,6 +1083,10 @@ impl SelfCollisionScratch {
         self.triangle_count.resize(n, 0);
         self.triangles.resize(n * MAX_SELF_TRIANGLES, 0);
         let query = Query {
+            scale: &self.mesh.scale,
+            cloth_thickness: thickness,
+            motion,
+            longest: self.mesh.longest,
             pos,
             vel,
             dt,
@@ -977,10 +1096,11 @@ impl SelfCollisionScratch {
             first_start: &self.mesh.first_start,
             first_tris: &self.mesh.first_tris,
             frames: &self.frames,
+            // The querying vertex's, set per vertex.
             thickness,
-            reach,
+            reach: reach_of(thickness, motion),
             radius,
-            skip,
+            skip: SKIP * thickness,
         };
         let mut chunks: Vec<QueryChunk> = self
             .neighbour_count
@@ -1019,8 +1139,9 @@ impl SelfCollisionScratch {
     }
 }
 
-/// Query distance: `thickness` plus a margin for the step's motion; `None` when off.
-fn reach(vel: &[Vec4], params: SelfCollision, dt: f32) -> Option<f32> {
+/// The step's motion margin: twice the fastest vertex's travel in `dt` (a vertex's reach adds
+/// it to its thickness, at most 1.5 thicknesses: [`reach_of`]); `None` when off.
+fn motion_margin(vel: &[Vec4], params: SelfCollision, dt: f32) -> Option<f32> {
     let thickness = params.thickness;
     if !(thickness.is_finite() && thickness > 0.0) {
         return None;
@@ -1031,8 +1152,7 @@ fn reach(vel: &[Vec4], params: SelfCollision, dt: f32) -> Option<f32> {
         .filter(|s| s.is_finite())
         .fold(0.0f32, f32::max)
         .sqrt();
-    let margin = (2.0 * fastest * dt).min(1.5 * thickness);
-    Some(thickness + margin)
+    Some(2.0 * fastest * dt)
 }
 
 /// Coulomb friction on a contact pushed `push` along `n`: the tangential part of `slide` and
@@ -1152,6 +1272,7 @@ pub(crate) fn self_collide(
         return;
     }
     let active = &scratch.active;
+    let scale = &scratch.mesh.scale;
     scratch.corrections.clear();
     scratch.corrections.resize(active.len(), Vec3::ZERO);
     let (nc, nl) = (&scratch.neighbour_count, &scratch.neighbours);
@@ -1169,6 +1290,11 @@ pub(crate) fn self_collide(
         for (&i, out) in c.active.iter().zip(c.corrections.iter_mut()) {
             let i = i as usize;
             let (a, prev_a) = (read[i], prev[i]);
+            // The vertex keeps its own thickness from the others.
+            let params = SelfCollision {
+                thickness: params.thickness * scale.get(i).copied().unwrap_or(1.0),
+                ..params
+            };
             let mut sum = Vec3::ZERO;
             let mut touching = 0u32;
             let count = nc[i] as usize;
@@ -1216,8 +1342,8 @@ pub(crate) fn find_self_collision_candidates(
     scratch: &mut SelfCollisionScratch,
     par: &impl Parallel,
 ) {
-    if let Some(reach) = reach(vel, params, dt) {
-        scratch.find::<false>(pos, vel, dt, rest, triangles, params.thickness, reach, par);
+    if let Some(motion) = motion_margin(vel, params, dt) {
+        scratch.find::<false>(pos, vel, dt, rest, triangles, params.thickness, motion, par);
     } else {
         scratch.neighbour_count.clear();
         scratch.neighbour_count.resize(pos.len(), 0);
@@ -1557,12 +1683,12 @@ mod tests {
     fn the_kept_groups_find_what_a_second_walk_finds() {
         let (pos, vel, rest, tris, params) = crumpled_sheet();
         let dt = 1.0 / 60.0;
-        let reach = reach(&vel, params, dt).unwrap();
+        let motion = motion_margin(&vel, params, dt).unwrap();
         let t = params.thickness;
         let mut kept = SelfCollisionScratch::default();
-        kept.find::<false>(&pos, &vel, dt, &rest, &tris, t, reach, &Serial);
+        kept.find::<false>(&pos, &vel, dt, &rest, &tris, t, motion, &Serial);
         let mut walked = SelfCollisionScratch::default();
-        walked.find::<true>(&pos, &vel, dt, &rest, &tris, t, reach, &Serial);
+        walked.find::<true>(&pos, &vel, dt, &rest, &tris, t, motion, &Serial);
         assert_eq!(kept.neighbour_count, walked.neighbour_count);
         assert_eq!(kept.triangle_count, walked.triangle_count);
         let mut found = 0;
@@ -1607,6 +1733,42 @@ mod tests {
                 "vertex {i}"
             );
         }
+    }
+
+    /// Even meshes keep the cloth's thickness at every vertex; an uneven one gives its coarse
+    /// vertices more and its fine ones less.
+    #[test]
+    fn vertices_of_uneven_meshes_take_their_own_thickness() {
+        let grid = crate::solver::Grid::new(30, 30, 1.0, 1.0);
+        let tris: Vec<[u32; 3]> = grid
+            .indices()
+            .chunks_exact(3)
+            .map(|t| [t[0], t[1], t[2]])
+            .collect();
+        let even = grid.positions();
+        assert!(thickness_scales(&even, &tris).iter().all(|&s| s == 1.0));
+        // Squeezed towards the middle along x: edges 2.3 times longer at the sides.
+        let squeeze = |v: f32| {
+            let u = v + 0.5;
+            u + 0.4 * (core::f32::consts::TAU * u).sin() / core::f32::consts::TAU - 0.5
+        };
+        let uneven: Vec<Vec3> = even
+            .iter()
+            .map(|p| Vec3::new(squeeze(p.x), p.y, p.z))
+            .collect();
+        let scales = thickness_scales(&uneven, &tris);
+        let at = |x: u32| scales[grid.index(x, 15) as usize];
+        let (side, middle) = (at(1), at(15));
+        assert!(side > 1.1 && middle < 0.9, "side {side}, middle {middle}");
+        assert!(
+            scales
+                .iter()
+                .all(|s| (MIN_THICKNESS_SCALE..=MAX_THICKNESS_SCALE).contains(s))
+        );
+        // A vertex in no triangle keeps the cloth's.
+        let mut lone = uneven.clone();
+        lone.push(Vec3::splat(9.0));
+        assert_eq!(thickness_scales(&lone, &tris).last(), Some(&1.0));
     }
 
     #[test]

@@ -603,10 +603,14 @@ impl Topology {
 /// The 90th over the 10th percentile of `edges`' rest lengths; 1 without edges or with a
 /// zero 10th percentile's edge (degenerate edges are the solver's concern, not this ratio's).
 fn edge_spread(edges: &[Edge]) -> f32 {
-    if edges.is_empty() {
+    spread_of(edges.iter().map(|e| e.rest).collect())
+}
+
+/// The 90th over the 10th percentile of `lengths` (see [`Topology::rest_edge_spread`]).
+pub(crate) fn spread_of(mut lengths: Vec<f32>) -> f32 {
+    if lengths.is_empty() {
         return 1.0;
     }
-    let mut lengths: Vec<f32> = edges.iter().map(|e| e.rest).collect();
     let last = lengths.len() - 1;
     let (lo, hi) = (last / 10, last * 9 / 10);
     let p10 = *lengths.select_nth_unstable_by(lo, f32::total_cmp).1;
