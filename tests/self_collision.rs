@@ -69,6 +69,13 @@ fn floor() -> Collider {
 /// crumples onto the floor in overlapping folds.
 fn crumpled() -> Simulation {
     let mut sim = free_cloth(Grid::new(30, 30, 1.0, 1.0), 0.3);
+    stand_and_spin(&mut sim);
+    sim
+}
+
+/// Stands a horizontal 1 m cloth on its edge and spins it about the vertical at 5 rad/s,
+/// faster higher up.
+fn stand_and_spin(sim: &mut Simulation) {
     let stood: Vec<Vec3> = sim
         .topology()
         .rest_positions()
@@ -76,17 +83,10 @@ fn crumpled() -> Simulation {
         .map(|p| Vec3::new(p.x, 0.52 - p.z, 0.0))
         .collect();
     sim.reset_to(&stood);
-    for (v, p) in sim
-        .state_mut()
-        .velocities
-        .iter_mut()
-        .zip(stood.iter().copied())
-    {
-        // 5 rad/s about the vertical, faster higher up.
-        let spin = Vec3::Y.cross(p) * 5.0 * (0.5 + p.y);
+    for (v, p) in sim.state_mut().velocities.iter_mut().zip(&stood) {
+        let spin = Vec3::Y.cross(*p) * 5.0 * (0.5 + p.y);
         *v = spin.extend(v.w);
     }
-    sim
 }
 
 /// A 0.4 × 3.6 m strip folded into three 1.2 m layers, 1.5 thicknesses apart, dropped across
@@ -224,15 +224,7 @@ fn an_uneven_cloth_crumpled_keeps_its_layers_apart() {
         ..Features::default()
     })
     .unwrap();
-    let stood: Vec<Vec3> = rest
-        .iter()
-        .map(|p| Vec3::new(p.x, 0.52 - p.z, 0.0))
-        .collect();
-    sim.reset_to(&stood);
-    for (v, p) in sim.state_mut().velocities.iter_mut().zip(&stood) {
-        let spin = Vec3::Y.cross(*p) * 5.0 * (0.5 + p.y);
-        *v = spin.extend(v.w);
-    }
+    stand_and_spin(&mut sim);
     assert_eq!(crossings(&sim), 0, "starts clean");
     let (end, most) = run(&mut sim, &[floor()], 240, &Workers::new(1));
     println!("uneven ({spread:.2}): {end} crossings at the end, at most {most}");

@@ -12,7 +12,7 @@ use glam::{Vec3, Vec4};
 
 use super::append_lists;
 use super::kernels::TILE;
-use crate::solver::collision::{first_corner_reach, thickness_scales};
+use crate::solver::collision::first_corner_reach;
 use crate::solver::constraints::{ConstraintBatches, Part};
 use crate::solver::{Simulation, Solver, Tethers};
 
@@ -335,13 +335,10 @@ impl WorldLayout {
             rec[15] = features.tear_threshold.unwrap_or(0.0).to_bits();
             rec[16] = c;
             rec[17] = if sc.is_some() { out.head_words } else { 0 };
-            // Each vertex's thickness over the cloth's rides in its rest position's w.
+            // Each vertex's thickness over the cloth's rides in its rest position's w (1 where
+            // the mesh is even and has no scales).
             let (rest, tris) = (sim.topology().rest_positions(), sim.topology().triangles());
-            let scales = if any_sc {
-                thickness_scales(rest, tris)
-            } else {
-                Vec::new()
-            };
+            let scales = sim.topology().self_collision_scales();
             if let Some(sc) = sc {
                 rec[18] = first_corner_reach(rest, tris).to_bits();
                 let most = scales.iter().copied().fold(1.0, f32::max);
@@ -392,8 +389,9 @@ impl WorldLayout {
             out.n += n;
             out.pins += pins.len() as u32;
             if any_sc {
+                let scale = |i: usize| scales.get(i).copied().unwrap_or(1.0);
                 out.rest
-                    .extend(rest.iter().zip(&scales).map(|(p, &s)| p.extend(s)));
+                    .extend(rest.iter().enumerate().map(|(i, p)| p.extend(scale(i))));
             }
         }
         out.any_sc = any_sc && out.head_words > 0;

@@ -32,7 +32,7 @@ fn sc_reach(c: u32, thickness: f32) -> f32 {
     return thickness + min(2.0 * fastest * P.dt, 1.5 * thickness);
 }
 
-// `self_collision::thickness_scales`: vertex `i`'s own thickness (its scale rides in its rest
+// `Topology::self_collision_scales`: vertex `i`'s own thickness (its scale rides in its rest
 // position's w).
 fn sc_thickness_of(i: u32, cl: Cloth) -> f32 {
     return cl.sc_thickness * state[P.rest_at + i].w;

@@ -2,10 +2,10 @@
 //! and the triangles of other layers, and no vertex passes through a triangle it was in front
 //! of when the step began.
 //!
-//! On a mesh of uneven edges (more than [`EVEN_EDGE_SPREAD`]) each vertex keeps its own
-//! thickness, `thickness` times the mean length of the edges at it over the mean edge
-//! ([`thickness_scales`]); everything below that says *thickness* is then the querying or
-//! correcting vertex's own. On an even mesh every vertex keeps `thickness`.
+//! On a mesh of uneven edges each vertex keeps its own thickness, `thickness` times its
+//! [`Topology::self_collision_scales`](crate::solver::Topology::self_collision_scales);
+//! everything below that says *thickness* is then the querying or correcting vertex's own. On
+//! an even mesh (no scales) every vertex keeps `thickness`.
 //!
 //! Once per step, vertices go into a dense spatial hash (Müller, "Ten Minute Physics" 11) and
 //! every vertex collects, in parallel:
@@ -55,8 +55,6 @@
 
 use glam::{IVec3, Vec3, Vec4, Vec4Swizzles};
 
-use crate::solver::limits::EVEN_EDGE_SPREAD;
-use crate::solver::mesh::spread_of;
 use crate::solver::parallel::Parallel;
 
 /// Self-collision settings of one cloth.
@@ -102,9 +100,6 @@ struct MeshLists {
     first_start: Vec<u32>,
     first_tris: Vec<u32>,
     longest: f32,
-    /// Per vertex, its thickness over the cloth's (see [`thickness_scales`]), and the largest.
-    scale: Vec<f32>,
-    scale_max: f32,
 }
 
 impl MeshLists {
@@ -119,8 +114,6 @@ impl MeshLists {
         self.rest.clear();
         self.rest.extend_from_slice(rest);
         self.longest = longest_rest_edge(rest, triangles);
-        self.scale = thickness_scales(rest, triangles);
-        self.scale_max = self.scale.iter().copied().fold(1.0, f32::max);
         // Triangles by first corner, in triangle order.
         self.first_start.clear();
         self.first_start.resize(n + 1, 0);
@@ -301,66 +294,6 @@ fn longest_rest_edge(rest: &[Vec3], triangles: &[[u32; 3]]) -> f32 {
     longest2.sqrt()
 }
 
-/// Each vertex's self-collision thickness over the cloth's. 1 everywhere on a mesh whose rest
-/// edges are even (their 90th over 10th percentile at most [`EVEN_EDGE_SPREAD`], as
-/// [`Topology::rest_edge_spread`](crate::solver::Topology::rest_edge_spread) measures). On a
-/// more uneven mesh, one thickness lets layers cross where the edges differ most from it, so
-/// each vertex takes its *edge scale*: the mean rest length of the edges of the triangles at
-/// it (each counted once per triangle) over the mean of every triangle's edges, within
-/// [`MIN_THICKNESS_SCALE`] and [`MAX_THICKNESS_SCALE`] (1 for a vertex in no triangle): layers
-/// farther apart where the mesh is coarser, closer where it is finer. The GPU backend reads
-/// the same numbers.
-pub(crate) fn thickness_scales(rest: &[Vec3], triangles: &[[u32; 3]]) -> Vec<f32> {
-    let n = rest.len();
-    let valid = |t: &&[u32; 3]| t.iter().all(|&k| (k as usize) < n);
-    let mut edges: Vec<(u32, u32)> = triangles
-        .iter()
-        .filter(valid)
-        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
-        .map(|(a, b)| (a.min(b), a.max(b)))
-        .collect();
-    edges.sort_unstable();
-    edges.dedup();
-    let lengths = edges
-        .iter()
-        .map(|&(a, b)| rest[a as usize].distance(rest[b as usize]))
-        .collect();
-    if spread_of(lengths) <= EVEN_EDGE_SPREAD {
-        return vec![1.0; n];
-    }
-    let mut sum = vec![0.0f64; n];
-    let mut count = vec![0u32; n];
-    let (mut total, mut incidences) = (0.0f64, 0u64);
-    for t in triangles.iter().filter(valid) {
-        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-            let l = f64::from(rest[a as usize].distance(rest[b as usize]));
-            if !l.is_finite() {
-                continue;
-            }
-            for v in [a, b] {
-                sum[v as usize] += l;
-                count[v as usize] += 1;
-            }
-            total += l;
-            incidences += 1;
-        }
-    }
-    let mean = total / incidences.max(1) as f64;
-    (0..n)
-        .map(|i| {
-            if count[i] == 0 || mean.is_nan() || mean <= 0.0 {
-                return 1.0;
-            }
-            let s = (sum[i] / f64::from(count[i]) / mean) as f32;
-            s.clamp(MIN_THICKNESS_SCALE, MAX_THICKNESS_SCALE)
-        })
-        .collect()
-}
-
-/// Bounds of a vertex's thickness over the cloth's ([`thickness_scales`]).
-pub(crate) const MIN_THICKNESS_SCALE: f32 = 0.25;
-pub(crate) const MAX_THICKNESS_SCALE: f32 = 4.0;
-
 /// A vertex's query distance: its thickness plus the step's motion margin, at most 1.5 of its
 /// thicknesses (the GPU's `sc_reach` the same).
 #[inline]
@@ -500,7 +433,7 @@ fn keep_smallest(list: &mut [u32], count: &mut usize, value: u32) {
 /// vertex's (see [`Query::vertex`]).
 #[derive(Clone, Copy)]
 struct Query<'a> {
-    /// Per vertex, its thickness over `cloth_thickness`.
+    /// Per vertex, its thickness over `cloth_thickness` (none: 1).
     scale: &'a [f32],
     cloth_thickness: f32,
     /// The step's motion margin (twice the fastest vertex's travel).
@@ -938,18 +871,7 @@ impl Grid {
         let inv = 1.0 / cell;
         self.cell = cell;
         self.vertex_cells.resize(n, IVec3::ZERO);
-        let mut chunks: Vec<(usize, &mut [IVec3])> = self
-            .vertex_cells
-            .chunks_mut(4 * CHUNK)
-            .enumerate()
-            .map(|(k, c)| (k * 4 * CHUNK, c))
-            .collect();
-        par.for_each_mut(&mut chunks, |(first, cells)| {
-            for (k, c) in cells.iter_mut().enumerate() {
-                *c = cell_of(pos[*first + k].xyz(), inv);
-            }
-        });
-        drop(chunks);
+        fill_each(&mut self.vertex_cells, par, |i| cell_of(pos[i].xyz(), inv));
         self.start.clear();
         self.start.resize(size + 1, 0);
         for (p, c) in pos.iter().zip(&self.vertex_cells) {
@@ -1013,6 +935,20 @@ impl Grid {
     }
 }
 
+/// `out[i] = value(i)` for every `i`, in runs of `4 × CHUNK` in parallel.
+fn fill_each<T: Send>(out: &mut [T], par: &impl Parallel, value: impl Fn(usize) -> T + Sync) {
+    let mut runs: Vec<(usize, &mut [T])> = out
+        .chunks_mut(4 * CHUNK)
+        .enumerate()
+        .map(|(k, run)| (k * 4 * CHUNK, run))
+        .collect();
+    par.for_each_mut(&mut runs, |(first, run)| {
+        for (k, o) in run.iter_mut().enumerate() {
+            *o = value(*first + k);
+        }
+    });
+}
+
 /// `out[k] = value(entries[k])` for every entry.
 #[inline]
 fn gather(out: &mut [f32], entries: &[u32], value: impl Fn(usize) -> f32) {
@@ -1041,40 +977,32 @@ impl SelfCollisionScratch {
         dt: f32,
         rest: &[Vec3],
         triangles: &[[u32; 3]],
+        scales: &[f32],
         thickness: f32,
         motion: f32,
         par: &impl Parallel,
     ) {
         let n = pos.len();
         self.mesh.update(rest, triangles);
-        // The grid's cells from the thickest vertex's radius.
-        let thickest = thickness * self.mesh.scale_max;
+        // The grid's cells from the thickest vertex's radius (scales only on uneven meshes).
+        let thickest = thickness * scales.iter().copied().fold(1.0, f32::max);
         let radius = reach_of(thickest, motion) + reach_of_longest(self.mesh.longest, thickest);
         self.grid
             .fill(pos, vel, rest, AHEAD * dt, radius / CELLS_PER_RADIUS, par);
         let valid = |t: &[u32; 3]| t.iter().all(|&k| (k as usize) < n);
 
         self.frames.resize(triangles.len(), Frame::default());
-        let mut parts: Vec<(usize, &mut [Frame])> = self
-            .frames
-            .chunks_mut(4 * CHUNK)
-            .enumerate()
-            .map(|(k, f)| (k * 4 * CHUNK, f))
-            .collect();
-        par.for_each_mut(&mut parts, |(first, frames)| {
-            for (k, f) in frames.iter_mut().enumerate() {
-                let tri = triangles[*first + k];
-                *f = if valid(&tri) {
-                    Frame::of(tri.map(|k| pos[k as usize].xyz()))
-                } else {
-                    Frame {
-                        area2: f32::NAN,
-                        ..Frame::default()
-                    }
-                };
+        fill_each(&mut self.frames, par, |t| {
+            let tri = triangles[t];
+            if valid(&tri) {
+                Frame::of(tri.map(|k| pos[k as usize].xyz()))
+            } else {
+                Frame {
+                    area2: f32::NAN,
+                    ..Frame::default()
+                }
             }
         });
-        drop(parts);
 
         self.neighbour_count.clear();
         self.neighbour_count.resize(n, 0);
@@ -1083,7 +1011,7 @@ impl SelfCollisionScratch {
         self.triangle_count.resize(n, 0);
         self.triangles.resize(n * MAX_SELF_TRIANGLES, 0);
         let query = Query {
-            scale: &self.mesh.scale,
+            scale: scales,
             cloth_thickness: thickness,
             motion,
             longest: self.mesh.longest,
@@ -1263,6 +1191,7 @@ pub(crate) fn self_collide(
     pos: &mut [Vec4],
     prev: &[Vec4],
     triangles: &[[u32; 3]],
+    scales: &[f32],
     params: SelfCollision,
     scratch: &mut SelfCollisionScratch,
     par: &impl Parallel,
@@ -1272,7 +1201,6 @@ pub(crate) fn self_collide(
         return;
     }
     let active = &scratch.active;
-    let scale = &scratch.mesh.scale;
     scratch.corrections.clear();
     scratch.corrections.resize(active.len(), Vec3::ZERO);
     let (nc, nl) = (&scratch.neighbour_count, &scratch.neighbours);
@@ -1292,7 +1220,7 @@ pub(crate) fn self_collide(
             let (a, prev_a) = (read[i], prev[i]);
             // The vertex keeps its own thickness from the others.
             let params = SelfCollision {
-                thickness: params.thickness * scale.get(i).copied().unwrap_or(1.0),
+                thickness: params.thickness * scales.get(i).copied().unwrap_or(1.0),
                 ..params
             };
             let mut sum = Vec3::ZERO;
@@ -1337,13 +1265,15 @@ pub(crate) fn find_self_collision_candidates(
     vel: &[Vec4],
     rest: &[Vec3],
     triangles: &[[u32; 3]],
+    scales: &[f32],
     params: SelfCollision,
     dt: f32,
     scratch: &mut SelfCollisionScratch,
     par: &impl Parallel,
 ) {
     if let Some(motion) = motion_margin(vel, params, dt) {
-        scratch.find::<false>(pos, vel, dt, rest, triangles, params.thickness, motion, par);
+        let t = params.thickness;
+        scratch.find::<false>(pos, vel, dt, rest, triangles, scales, t, motion, par);
     } else {
         scratch.neighbour_count.clear();
         scratch.neighbour_count.resize(pos.len(), 0);
@@ -1457,7 +1387,17 @@ mod tests {
         params: SelfCollision,
     ) -> SelfCollisionScratch {
         let mut s = SelfCollisionScratch::default();
-        find_self_collision_candidates(pos, vel, rest, tris, params, 1.0 / 60.0, &mut s, &Serial);
+        find_self_collision_candidates(
+            pos,
+            vel,
+            rest,
+            tris,
+            &[],
+            params,
+            1.0 / 60.0,
+            &mut s,
+            &Serial,
+        );
         s
     }
 
@@ -1475,7 +1415,7 @@ mod tests {
             friction: 0.0,
         };
         let mut s = candidates(&pos, &[Vec4::ZERO; 3], &rest, &[], params);
-        self_collide(&mut pos, &prev, &[], params, &mut s, &Serial);
+        self_collide(&mut pos, &prev, &[], &[], params, &mut s, &Serial);
         assert!((pos[0].xyz().distance(pos[1].xyz()) - 0.1).abs() < 1e-6);
         assert_eq!(pos[2], prev[2]);
         // Equal masses: symmetric push.
@@ -1495,7 +1435,7 @@ mod tests {
             friction: 0.0,
         };
         let mut s = candidates(&pos, &[Vec4::ZERO; 2], &rest, &[], params);
-        self_collide(&mut pos, &prev, &[], params, &mut s, &Serial);
+        self_collide(&mut pos, &prev, &[], &[], params, &mut s, &Serial);
         assert_eq!(pos, prev);
     }
 
@@ -1519,12 +1459,12 @@ mod tests {
         assert_eq!(s.triangles[3 * MAX_SELF_TRIANGLES], SIDE_FRONT);
         // Too close on its side: pushed out along +z, its share half the push (equal masses).
         let mut pos = start.clone();
-        self_collide(&mut pos, &start, &tri, params, &mut s, &Serial);
+        self_collide(&mut pos, &start, &tri, &[], params, &mut s, &Serial);
         assert!((pos[3].z - 0.06).abs() < 1e-6, "{}", pos[3]);
         // Went through during the substep: brought back to its side.
         let mut pos = start.clone();
         pos[3].z = -0.05;
-        self_collide(&mut pos, &start, &tri, params, &mut s, &Serial);
+        self_collide(&mut pos, &start, &tri, &[], params, &mut s, &Serial);
         assert!((pos[3].z - (-0.05 + 0.075)).abs() < 1e-6, "{}", pos[3]);
         // The triangle's corners are moved by their own lists (they have none here).
         assert_eq!(&pos[..3], &start[..3]);
@@ -1686,9 +1626,9 @@ mod tests {
         let motion = motion_margin(&vel, params, dt).unwrap();
         let t = params.thickness;
         let mut kept = SelfCollisionScratch::default();
-        kept.find::<false>(&pos, &vel, dt, &rest, &tris, t, motion, &Serial);
+        kept.find::<false>(&pos, &vel, dt, &rest, &tris, &[], t, motion, &Serial);
         let mut walked = SelfCollisionScratch::default();
-        walked.find::<true>(&pos, &vel, dt, &rest, &tris, t, motion, &Serial);
+        walked.find::<true>(&pos, &vel, dt, &rest, &tris, &[], t, motion, &Serial);
         assert_eq!(kept.neighbour_count, walked.neighbour_count);
         assert_eq!(kept.triangle_count, walked.triangle_count);
         let mut found = 0;
@@ -1717,7 +1657,17 @@ mod tests {
         let mut reused = candidates(&pos, &vel, &rest, &tris, params);
         let whole = reused.triangle_count.clone();
         let torn = &tris[tris.len() / 2..];
-        find_self_collision_candidates(&pos, &vel, &rest, torn, params, dt, &mut reused, &Serial);
+        find_self_collision_candidates(
+            &pos,
+            &vel,
+            &rest,
+            torn,
+            &[],
+            params,
+            dt,
+            &mut reused,
+            &Serial,
+        );
         let fresh = candidates(&pos, &vel, &rest, torn, params);
         assert_ne!(
             reused.triangle_count, whole,
@@ -1733,42 +1683,6 @@ mod tests {
                 "vertex {i}"
             );
         }
-    }
-
-    /// Even meshes keep the cloth's thickness at every vertex; an uneven one gives its coarse
-    /// vertices more and its fine ones less.
-    #[test]
-    fn vertices_of_uneven_meshes_take_their_own_thickness() {
-        let grid = crate::solver::Grid::new(30, 30, 1.0, 1.0);
-        let tris: Vec<[u32; 3]> = grid
-            .indices()
-            .chunks_exact(3)
-            .map(|t| [t[0], t[1], t[2]])
-            .collect();
-        let even = grid.positions();
-        assert!(thickness_scales(&even, &tris).iter().all(|&s| s == 1.0));
-        // Squeezed towards the middle along x: edges 2.3 times longer at the sides.
-        let squeeze = |v: f32| {
-            let u = v + 0.5;
-            u + 0.4 * (core::f32::consts::TAU * u).sin() / core::f32::consts::TAU - 0.5
-        };
-        let uneven: Vec<Vec3> = even
-            .iter()
-            .map(|p| Vec3::new(squeeze(p.x), p.y, p.z))
-            .collect();
-        let scales = thickness_scales(&uneven, &tris);
-        let at = |x: u32| scales[grid.index(x, 15) as usize];
-        let (side, middle) = (at(1), at(15));
-        assert!(side > 1.1 && middle < 0.9, "side {side}, middle {middle}");
-        assert!(
-            scales
-                .iter()
-                .all(|s| (MIN_THICKNESS_SCALE..=MAX_THICKNESS_SCALE).contains(s))
-        );
-        // A vertex in no triangle keeps the cloth's.
-        let mut lone = uneven.clone();
-        lone.push(Vec3::splat(9.0));
-        assert_eq!(thickness_scales(&lone, &tris).last(), Some(&1.0));
     }
 
     #[test]

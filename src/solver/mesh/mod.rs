@@ -7,7 +7,6 @@ mod grid;
 pub(crate) mod hinge;
 mod shading;
 mod topology;
-pub(crate) use topology::spread_of;
 mod weld;
 
 pub use grid::Grid;

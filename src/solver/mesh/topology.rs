@@ -9,7 +9,7 @@
 use glam::{Vec2, Vec3};
 
 use super::hinge::{bend_angle, dihedral_weight, hinge_coefficients};
-use crate::solver::limits::{MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES};
+use crate::solver::limits::{EVEN_EDGE_SPREAD, MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES};
 
 /// What a distance edge resists.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -231,6 +231,8 @@ pub struct Topology {
     mean_edge: f32,
     /// The 90th over the 10th percentile of the edges' rest lengths.
     edge_spread: f32,
+    /// Per vertex, its self-collision thickness over the cloth's; empty on even edges.
+    self_collision_scales: Vec<f32>,
     skipped_triangles: usize,
     options: TopologyOptions,
 }
@@ -431,6 +433,11 @@ impl Topology {
 
         let mean_edge = edges.iter().map(|e| e.rest).sum::<f32>() / edges.len().max(1) as f32;
         let edge_spread = edge_spread(&edges);
+        let self_collision_scales = if edge_spread > EVEN_EDGE_SPREAD {
+            edge_scales(&positions, &triangles)
+        } else {
+            Vec::new()
+        };
         Self {
             rest_positions: positions,
             uvs,
@@ -440,6 +447,7 @@ impl Topology {
             bends,
             mean_edge,
             edge_spread,
+            self_collision_scales,
             skipped_triangles: 0,
             options,
         }
@@ -525,12 +533,23 @@ impl Topology {
 
     /// How uneven the edges are: the 90th percentile of their rest lengths over the 10th (1 for
     /// equal edges, √2 for a grid of squares with a diagonal each, 1 without edges). Self-
-    /// collision keeps one thickness for the whole cloth; above
-    /// [`EVEN_EDGE_SPREAD`](crate::solver::limits::EVEN_EDGE_SPREAD) layers can pass through
-    /// each other where the edges differ most from it.
+    /// collision keeps one thickness for the whole cloth up to
+    /// [`EVEN_EDGE_SPREAD`](crate::solver::limits::EVEN_EDGE_SPREAD), and a thickness per
+    /// vertex above ([`Topology::self_collision_scales`]).
     #[must_use]
     pub fn rest_edge_spread(&self) -> f32 {
         self.edge_spread
+    }
+
+    /// Each vertex's self-collision thickness over the cloth's, on a mesh whose edges are more
+    /// uneven than [`EVEN_EDGE_SPREAD`]: the mean rest length of the edges of the triangles at
+    /// it (each counted once per triangle) over the mean of every triangle's edges, a quarter
+    /// to four times (1 for a vertex in no triangle): layers farther apart where the mesh is
+    /// coarser, closer where it is finer. Empty on even edges, where every vertex keeps the
+    /// cloth's thickness. Both backends read these numbers.
+    #[must_use]
+    pub fn self_collision_scales(&self) -> &[f32] {
+        &self.self_collision_scales
     }
 
     /// The thickest self-collision this cloth takes:
@@ -600,17 +619,46 @@ impl Topology {
     }
 }
 
+/// Bounds of a vertex's self-collision thickness over the cloth's ([`edge_scales`]).
+const MIN_THICKNESS_SCALE: f32 = 0.25;
+const MAX_THICKNESS_SCALE: f32 = 4.0;
+
+/// [`Topology::self_collision_scales`] of an uneven mesh.
+fn edge_scales(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<f32> {
+    let n = positions.len();
+    let mut sum = vec![0.0f64; n];
+    let mut count = vec![0u32; n];
+    let (mut total, mut incidences) = (0.0f64, 0u64);
+    for t in triangles {
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            let l = f64::from(positions[a as usize].distance(positions[b as usize]));
+            for v in [a, b] {
+                sum[v as usize] += l;
+                count[v as usize] += 1;
+            }
+            total += l;
+            incidences += 1;
+        }
+    }
+    let mean = total / incidences.max(1) as f64;
+    (0..n)
+        .map(|i| {
+            if count[i] == 0 || mean.is_nan() || mean <= 0.0 {
+                return 1.0;
+            }
+            let s = (sum[i] / f64::from(count[i]) / mean) as f32;
+            s.clamp(MIN_THICKNESS_SCALE, MAX_THICKNESS_SCALE)
+        })
+        .collect()
+}
+
 /// The 90th over the 10th percentile of `edges`' rest lengths; 1 without edges or with a
 /// zero 10th percentile's edge (degenerate edges are the solver's concern, not this ratio's).
 fn edge_spread(edges: &[Edge]) -> f32 {
-    spread_of(edges.iter().map(|e| e.rest).collect())
-}
-
-/// The 90th over the 10th percentile of `lengths` (see [`Topology::rest_edge_spread`]).
-pub(crate) fn spread_of(mut lengths: Vec<f32>) -> f32 {
-    if lengths.is_empty() {
+    if edges.is_empty() {
         return 1.0;
     }
+    let mut lengths: Vec<f32> = edges.iter().map(|e| e.rest).collect();
     let last = lengths.len() - 1;
     let (lo, hi) = (last / 10, last * 9 / 10);
     let p10 = *lengths.select_nth_unstable_by(lo, f32::total_cmp).1;
@@ -627,6 +675,43 @@ pub(crate) fn spread_of(mut lengths: Vec<f32>) -> f32 {
 mod tests {
     use super::*;
     use crate::solver::mesh::Grid;
+
+    /// Even meshes have no self-collision scales (every vertex keeps the cloth's thickness);
+    /// an uneven one gives its coarse vertices more and its fine ones less.
+    #[test]
+    fn vertices_of_uneven_meshes_take_their_own_self_collision_thickness() {
+        let grid = Grid::new(30, 30, 1.0, 1.0);
+        let topology = |positions: &[Vec3]| {
+            Topology::from_triangles(positions, None, &grid.indices(), TopologyOptions::default())
+                .unwrap()
+        };
+        let even = grid.positions();
+        assert!(topology(&even).self_collision_scales().is_empty());
+        // Squeezed towards the middle along x: edges 2.3 times longer at the sides.
+        let squeeze = |v: f32| {
+            let u = v + 0.5;
+            u + 0.4 * (core::f32::consts::TAU * u).sin() / core::f32::consts::TAU - 0.5
+        };
+        let mut uneven: Vec<Vec3> = even
+            .iter()
+            .map(|p| Vec3::new(squeeze(p.x), p.y, p.z))
+            .collect();
+        // A vertex in no triangle keeps the cloth's.
+        uneven.push(Vec3::splat(9.0));
+        let t = topology(&uneven);
+        assert!(t.rest_edge_spread() > EVEN_EDGE_SPREAD);
+        let scales = t.self_collision_scales();
+        assert_eq!(scales.len(), uneven.len());
+        let at = |x: u32| scales[grid.index(x, 15) as usize];
+        let (side, middle) = (at(1), at(15));
+        assert!(side > 1.1 && middle < 0.9, "side {side}, middle {middle}");
+        assert!(
+            scales
+                .iter()
+                .all(|s| (MIN_THICKNESS_SCALE..=MAX_THICKNESS_SCALE).contains(s))
+        );
+        assert_eq!(scales.last(), Some(&1.0));
+    }
 
     #[test]
     fn cloths_too_large_to_allocate_are_refused_before_allocating() {
