@@ -87,6 +87,12 @@ pub struct SelfCollisionScratch {
     active: Vec<u32>,
     /// Per active vertex, its correction in the current pass.
     corrections: Vec<Vec3>,
+    /// The triangles in some vertex's list, each once, and per triangle its place among them
+    /// (`u32::MAX`: in none).
+    referenced: Vec<u32>,
+    frame_of: Vec<u32>,
+    /// The referenced triangles' [`Frame::plane`]s at the current pass's start.
+    pass_frames: Vec<Frame>,
 }
 
 /// A mesh's triangles by their first corner and its longest rest edge, with the triangles and
@@ -327,6 +333,28 @@ impl Frame {
     /// The frame of `[a, b, c]`; its `area2` is NaN when the triangle is degenerate.
     #[inline]
     fn of([a, b, c]: [Vec3; 3]) -> Self {
+        let centre = (a + b + c) / 3.0;
+        let spread = a
+            .distance_squared(centre)
+            .max(b.distance_squared(centre))
+            .max(c.distance_squared(centre))
+            .sqrt();
+        let longest2 = a
+            .distance_squared(b)
+            .max(b.distance_squared(c))
+            .max(c.distance_squared(a));
+        Self {
+            longest: longest2.sqrt(),
+            centre,
+            spread,
+            ..Self::plane([a, b, c])
+        }
+    }
+
+    /// What [`Frame::project`] needs of `[a, b, c]` (the same bits as [`Frame::of`]'s), the
+    /// centre, spread and longest edge left at zero.
+    #[inline]
+    fn plane([a, b, c]: [Vec3; 3]) -> Self {
         let e1 = b - a;
         let e2 = c - a;
         let nn = e1.cross(e2);
@@ -335,17 +363,7 @@ impl Frame {
         let d01 = e1.dot(e2);
         let d11 = e2.dot(e2);
         let denom = d00 * d11 - d01 * d01;
-        let centre = (a + b + c) / 3.0;
-        let spread = a
-            .distance_squared(centre)
-            .max(b.distance_squared(centre))
-            .max(c.distance_squared(centre))
-            .sqrt();
         let ok = !(len.is_nan() || len <= 1e-12 || denom.is_nan() || denom <= 0.0);
-        let longest2 = a
-            .distance_squared(b)
-            .max(b.distance_squared(c))
-            .max(c.distance_squared(a));
         Self {
             n: nn / len,
             e1,
@@ -355,9 +373,9 @@ impl Frame {
             d11,
             denom,
             area2: if ok { len } else { f32::NAN },
-            longest: longest2.sqrt(),
-            centre,
-            spread,
+            longest: 0.0,
+            centre: Vec3::ZERO,
+            spread: 0.0,
         }
     }
 
@@ -389,17 +407,6 @@ impl Frame {
         let w = (self.d00 * d21 - self.d01 * d20) / self.denom;
         Some((d, Vec3::new(1.0 - v - w, v, w)))
     }
-}
-
-/// Where `p`'s projection onto the plane of `[a, b, c]` falls: the unit normal, `p`'s signed
-/// distance along it, the projection's barycentric weights (all ≥ 0 when it is inside) and
-/// twice the triangle's area; `None` for a degenerate triangle. The GPU's `sc_project` does
-/// the same operations.
-#[inline]
-fn project(p: Vec3, corners: [Vec3; 3]) -> Option<(Vec3, f32, Vec3, f32)> {
-    let f = Frame::of(corners);
-    let (d, bary) = f.project(p, corners[0])?;
-    Some((f.n, d, bary, f.area2))
 }
 
 /// A triangle's slot: `triangle << 2 | side`, with [`BESIDE`] set for a triangle the vertex is
@@ -1064,6 +1071,34 @@ impl SelfCollisionScratch {
                 self.neighbour_count[i as usize] + self.triangle_count[i as usize] > 0
             }),
         );
+        self.mark_referenced(triangles.len());
+    }
+
+    /// The triangles in the vertices' lists, each once, into `referenced` and `frame_of`.
+    fn mark_referenced(&mut self, triangle_count: usize) {
+        if self.frame_of.len() == triangle_count {
+            for &t in &self.referenced {
+                self.frame_of[t as usize] = u32::MAX;
+            }
+        } else {
+            self.frame_of.clear();
+            self.frame_of.resize(triangle_count, u32::MAX);
+        }
+        self.referenced.clear();
+        for &i in &self.active {
+            let i = i as usize;
+            let count = self.triangle_count[i] as usize;
+            let list = &self.triangles[i * MAX_SELF_TRIANGLES..i * MAX_SELF_TRIANGLES + count];
+            for &slot in list {
+                let t = ((slot & !BESIDE) >> 2) as usize;
+                if let Some(f) = self.frame_of.get_mut(t)
+                    && *f == u32::MAX
+                {
+                    *f = self.referenced.len() as u32;
+                    self.referenced.push(t as u32);
+                }
+            }
+        }
     }
 }
 
@@ -1126,17 +1161,21 @@ fn pair_correction(
     da.is_finite().then_some(da)
 }
 
-/// The correction of vertex `a` (with `prev_a`) from a triangle (`x`, `prev_x`) and the side
-/// code it keeps to: when `a` is over the triangle and closer than `thickness` on its side, or
-/// through it to the other side (by less than 2.5 thicknesses), pushed out to `thickness` on
-/// its side along the normal, its share by the inverse masses (the triangle's at the point
-/// under `a`), with friction on the sliding. `None` when it does not touch.
+/// The correction of vertex `a` (with `prev_a`) from triangle `tri` (its corners in `read`,
+/// `prev`; `frame` its [`Frame::plane`] at `read`) and the side code it keeps to: when `a` is
+/// over the triangle and closer than `thickness` on its side, or through it to the other side
+/// (by less than 2.5 thicknesses), pushed out to `thickness` on its side along the normal, its
+/// share by the inverse masses (the triangle's at the point under `a`), with friction on the
+/// sliding. `None` when it does not touch. (The GPU's `sc_triangle` projects the same way.)
 #[inline]
+#[expect(clippy::too_many_arguments)]
 fn triangle_correction(
     a: Vec4,
     prev_a: Vec4,
-    x: [Vec4; 3],
-    prev_x: [Vec4; 3],
+    frame: &Frame,
+    tri: [u32; 3],
+    read: &[Vec4],
+    prev: &[Vec4],
     code: u32,
     params: SelfCollision,
 ) -> Option<Vec3> {
@@ -1144,10 +1183,11 @@ fn triangle_correction(
     if wa.is_nan() || wa <= 0.0 {
         return None;
     }
-    let (n, d, bary, _) = project(a.xyz(), x.map(|v| v.xyz()))?;
+    let (d, bary) = frame.project(a.xyz(), read[tri[0] as usize].xyz())?;
     if bary.min_element() < 0.0 {
         return None;
     }
+    let n = frame.n;
     let side = match code {
         SIDE_FRONT => 1.0,
         SIDE_BACK => -1.0,
@@ -1164,6 +1204,8 @@ fn triangle_correction(
     if ds >= thickness || ds <= -SKIP * thickness {
         return None;
     }
+    let x = tri.map(|v| read[v as usize]);
+    let prev_x = tri.map(|v| prev[v as usize]);
     let wt = bary.x * x[0].w + bary.y * x[1].w + bary.z * x[2].w;
     let share = wa / (wa + wt);
     let push = thickness - ds;
@@ -1200,12 +1242,28 @@ pub(crate) fn self_collide(
     if scratch.neighbour_count.len() != n || scratch.triangle_count.len() != n {
         return;
     }
+    let read: &[Vec4] = pos;
+    // The frames of the triangles in some list, at the pass's start: each is projected onto
+    // by several vertices (the same bits as projecting per vertex).
+    let referenced = &scratch.referenced;
+    scratch
+        .pass_frames
+        .resize(referenced.len(), Frame::default());
+    fill_each(&mut scratch.pass_frames, par, |k| {
+        match triangles.get(referenced[k] as usize) {
+            Some(tri) => Frame::plane(tri.map(|v| read[v as usize].xyz())),
+            None => Frame {
+                area2: f32::NAN,
+                ..Frame::default()
+            },
+        }
+    });
+    let (frames, frame_of) = (&scratch.pass_frames, &scratch.frame_of);
     let active = &scratch.active;
     scratch.corrections.clear();
     scratch.corrections.resize(active.len(), Vec3::ZERO);
     let (nc, nl) = (&scratch.neighbour_count, &scratch.neighbours);
     let (tc, tl) = (&scratch.triangle_count, &scratch.triangles);
-    let read: &[Vec4] = pos;
     let mut chunks: Vec<PassChunk> = active
         .chunks(CHUNK)
         .zip(scratch.corrections.chunks_mut(CHUNK))
@@ -1235,12 +1293,17 @@ pub(crate) fn self_collide(
             }
             let count = tc[i] as usize;
             for &slot in &tl[i * MAX_SELF_TRIANGLES..i * MAX_SELF_TRIANGLES + count] {
-                let Some(tri) = triangles.get(((slot & !BESIDE) >> 2) as usize) else {
+                let t = ((slot & !BESIDE) >> 2) as usize;
+                let (Some(&tri), Some(frame)) = (
+                    triangles.get(t),
+                    frame_of.get(t).and_then(|&f| frames.get(f as usize)),
+                ) else {
                     continue;
                 };
-                let x = tri.map(|v| read[v as usize]);
-                let px = tri.map(|v| prev[v as usize]);
-                if let Some(da) = triangle_correction(a, prev_a, x, px, slot & 3, params) {
+                let code = slot & 3;
+                if let Some(da) =
+                    triangle_correction(a, prev_a, frame, tri, read, prev, code, params)
+                {
                     sum += da;
                     touching += 1;
                 }
@@ -1280,6 +1343,7 @@ pub(crate) fn find_self_collision_candidates(
         scratch.triangle_count.clear();
         scratch.triangle_count.resize(pos.len(), 0);
         scratch.active.clear();
+        scratch.mark_referenced(triangles.len());
     }
 }
 
