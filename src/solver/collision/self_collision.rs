@@ -53,6 +53,8 @@
 //! own lists (the layers push each other apart symmetrically). Cost is linear in the vertex
 //! count for a given density.
 
+use std::sync::atomic::{AtomicU32, Ordering};
+
 use glam::{IVec3, Vec3, Vec4, Vec4Swizzles};
 
 use crate::solver::parallel::Parallel;
@@ -87,12 +89,30 @@ pub struct SelfCollisionScratch {
     active: Vec<u32>,
     /// Per active vertex, its correction in the current pass.
     corrections: Vec<Vec3>,
-    /// The triangles in some vertex's list, each once, and per triangle its place among them
-    /// (`u32::MAX`: in none).
-    referenced: Vec<u32>,
-    frame_of: Vec<u32>,
-    /// The referenced triangles' [`Frame::plane`]s at the current pass's start.
+    /// The triangles in some vertex's list: one bit a triangle, and per word of bits the
+    /// number set before it (a listed triangle's place among them, see [`Listed::rank`]).
+    listed: Listed,
+    /// The listed triangles' [`Frame::plane`]s at the current pass's start, in triangle order.
     pass_frames: Vec<Frame>,
+}
+
+/// A set of triangles as bits, with the rank of each member.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Listed {
+    words: Vec<u32>,
+    /// Per word, the members in the words before it; one more at the end (the count).
+    before: Vec<u32>,
+}
+
+impl Listed {
+    /// A member's place among the members in triangle order; `None` when `t` is not one.
+    #[inline]
+    fn rank(&self, t: usize) -> Option<usize> {
+        let (w, bit) = (t / 32, t % 32);
+        let word = *self.words.get(w)?;
+        ((word >> bit) & 1 == 1)
+            .then(|| (self.before[w] + (word & ((1u32 << bit) - 1)).count_ones()) as usize)
+    }
 }
 
 /// A mesh's triangles by their first corner and its longest rest edge, with the triangles and
@@ -455,6 +475,8 @@ struct Query<'a> {
     first_start: &'a [u32],
     first_tris: &'a [u32],
     frames: &'a [Frame],
+    /// The triangles put into some list (see [`Listed`]).
+    listed: &'a [AtomicU32],
     thickness: f32,
     reach: f32,
     radius: f32,
@@ -821,6 +843,7 @@ impl Query<'_> {
                 }
                 SIDE_FREE
             };
+            Listed::mark(self.listed, t as usize);
             keep_smallest(found.tris, &mut found.tc, slot(t, code));
         }
     }
@@ -1017,6 +1040,11 @@ impl SelfCollisionScratch {
         self.triangle_count.clear();
         self.triangle_count.resize(n, 0);
         self.triangles.resize(n * MAX_SELF_TRIANGLES, 0);
+        // The triangles put into a list (one that is later pushed out of a full list too:
+        // its plane is made for nothing).
+        let listed: Vec<AtomicU32> = (0..triangles.len().div_ceil(32))
+            .map(|_| AtomicU32::new(0))
+            .collect();
         let query = Query {
             scale: scales,
             cloth_thickness: thickness,
@@ -1031,6 +1059,7 @@ impl SelfCollisionScratch {
             first_start: &self.mesh.first_start,
             first_tris: &self.mesh.first_tris,
             frames: &self.frames,
+            listed: &listed,
             // The querying vertex's, set per vertex.
             thickness,
             reach: reach_of(thickness, motion),
@@ -1071,33 +1100,34 @@ impl SelfCollisionScratch {
                 self.neighbour_count[i as usize] + self.triangle_count[i as usize] > 0
             }),
         );
-        self.mark_referenced(triangles.len());
+        self.listed.set(listed);
+    }
+}
+
+impl Listed {
+    /// The set of `words` (one bit a triangle) and its ranks.
+    fn set(&mut self, words: Vec<AtomicU32>) {
+        self.words.clear();
+        self.words
+            .extend(words.into_iter().map(AtomicU32::into_inner));
+        self.before.clear();
+        self.before.push(0);
+        let mut count = 0;
+        for w in &self.words {
+            count += w.count_ones();
+            self.before.push(count);
+        }
     }
 
-    /// The triangles in the vertices' lists, each once, into `referenced` and `frame_of`.
-    fn mark_referenced(&mut self, triangle_count: usize) {
-        if self.frame_of.len() == triangle_count {
-            for &t in &self.referenced {
-                self.frame_of[t as usize] = u32::MAX;
-            }
-        } else {
-            self.frame_of.clear();
-            self.frame_of.resize(triangle_count, u32::MAX);
-        }
-        self.referenced.clear();
-        for &i in &self.active {
-            let i = i as usize;
-            let count = self.triangle_count[i] as usize;
-            let list = &self.triangles[i * MAX_SELF_TRIANGLES..i * MAX_SELF_TRIANGLES + count];
-            for &slot in list {
-                let t = ((slot & !BESIDE) >> 2) as usize;
-                if let Some(f) = self.frame_of.get_mut(t)
-                    && *f == u32::MAX
-                {
-                    *f = self.referenced.len() as u32;
-                    self.referenced.push(t as u32);
-                }
-            }
+    /// Marks triangle `t` in `words` (several threads at once).
+    #[inline]
+    fn mark(words: &[AtomicU32], t: usize) {
+        let bit = 1 << (t % 32);
+        // Most are set already (a triangle goes into many lists): read first.
+        if let Some(word) = words.get(t / 32)
+            && word.load(Ordering::Relaxed) & bit == 0
+        {
+            word.fetch_or(bit, Ordering::Relaxed);
         }
     }
 }
@@ -1243,22 +1273,44 @@ pub(crate) fn self_collide(
         return;
     }
     let read: &[Vec4] = pos;
-    // The frames of the triangles in some list, at the pass's start: each is projected onto
+    // The planes of the triangles in some list, at the pass's start: each is projected onto
     // by several vertices (the same bits as projecting per vertex).
-    let referenced = &scratch.referenced;
-    scratch
-        .pass_frames
-        .resize(referenced.len(), Frame::default());
-    fill_each(&mut scratch.pass_frames, par, |k| {
-        match triangles.get(referenced[k] as usize) {
-            Some(tri) => Frame::plane(tri.map(|v| read[v as usize].xyz())),
-            None => Frame {
-                area2: f32::NAN,
-                ..Frame::default()
-            },
+    let listed = &scratch.listed;
+    let words = listed.words.len();
+    scratch.pass_frames.resize(
+        listed.before.last().copied().unwrap_or(0) as usize,
+        Frame::default(),
+    );
+    let mut runs = Vec::new();
+    let mut rest: &mut [Frame] = &mut scratch.pass_frames;
+    for w0 in (0..words).step_by(CHUNK / 8) {
+        let w1 = (w0 + CHUNK / 8).min(words);
+        let (run, after) = rest.split_at_mut((listed.before[w1] - listed.before[w0]) as usize);
+        runs.push((w0..w1, run));
+        rest = after;
+    }
+    par.for_each_mut(&mut runs, |(range, run)| {
+        let members = range.clone().flat_map(|w| {
+            let mut word = listed.words[w];
+            std::iter::from_fn(move || {
+                (word != 0).then(|| {
+                    let bit = word.trailing_zeros() as usize;
+                    word &= word - 1;
+                    w * 32 + bit
+                })
+            })
+        });
+        for (out, t) in run.iter_mut().zip(members) {
+            *out = match triangles.get(t) {
+                Some(tri) => Frame::plane(tri.map(|v| read[v as usize].xyz())),
+                None => Frame {
+                    area2: f32::NAN,
+                    ..Frame::default()
+                },
+            };
         }
     });
-    let (frames, frame_of) = (&scratch.pass_frames, &scratch.frame_of);
+    let frames = &scratch.pass_frames;
     let active = &scratch.active;
     scratch.corrections.clear();
     scratch.corrections.resize(active.len(), Vec3::ZERO);
@@ -1294,10 +1346,9 @@ pub(crate) fn self_collide(
             let count = tc[i] as usize;
             for &slot in &tl[i * MAX_SELF_TRIANGLES..i * MAX_SELF_TRIANGLES + count] {
                 let t = ((slot & !BESIDE) >> 2) as usize;
-                let (Some(&tri), Some(frame)) = (
-                    triangles.get(t),
-                    frame_of.get(t).and_then(|&f| frames.get(f as usize)),
-                ) else {
+                let (Some(&tri), Some(frame)) =
+                    (triangles.get(t), listed.rank(t).and_then(|k| frames.get(k)))
+                else {
                     continue;
                 };
                 let code = slot & 3;
@@ -1343,7 +1394,7 @@ pub(crate) fn find_self_collision_candidates(
         scratch.triangle_count.clear();
         scratch.triangle_count.resize(pos.len(), 0);
         scratch.active.clear();
-        scratch.mark_referenced(triangles.len());
+        scratch.listed.set(Vec::new());
     }
 }
 
@@ -1747,6 +1798,24 @@ mod tests {
                 "vertex {i}"
             );
         }
+    }
+
+    #[test]
+    fn listed_triangles_rank_in_triangle_order() {
+        let members = [0usize, 5, 31, 32, 33, 64, 100, 127];
+        let words: Vec<AtomicU32> = (0..4).map(|_| AtomicU32::new(0)).collect();
+        // Marked out of order and twice, as the query's threads do.
+        for &t in members.iter().rev().chain(&members) {
+            Listed::mark(&words, t);
+        }
+        Listed::mark(&words, 128); // past the set: ignored
+        let mut listed = Listed::default();
+        listed.set(words);
+        for t in 0..130 {
+            let expected = members.iter().position(|&m| m == t);
+            assert_eq!(listed.rank(t), expected, "triangle {t}");
+        }
+        assert_eq!(listed.before.last(), Some(&(members.len() as u32)));
     }
 
     #[test]
