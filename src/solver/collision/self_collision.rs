@@ -50,8 +50,11 @@
 //! triangle it is over and closer than `thickness` to *on its side*, pushed out to `thickness`
 //! on that side along the triangle's normal, which also brings back a vertex that went
 //! through within the step. Both with friction on the sliding. The other party moves by its
-//! own lists (the layers push each other apart symmetrically). Cost is linear in the vertex
-//! count for a given density.
+//! own lists (the layers push each other apart symmetrically). A triangle sits in many
+//! vertices' lists, so a pass makes the plane of each listed triangle once (the query marks
+//! them in a bitmap as it lists them) and a vertex beside a triangle costs one projection;
+//! the same operations as projecting per vertex, so the same bits as the GPU's, which
+//! projects per vertex. Cost is linear in the vertex count for a given density.
 
 use std::sync::atomic::{AtomicU32, Ordering};
 
