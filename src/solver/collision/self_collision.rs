@@ -56,6 +56,7 @@
 //! the same operations as projecting per vertex, so the same bits as the GPU's, which
 //! projects per vertex. Cost is linear in the vertex count for a given density.
 
+use std::ops::Range;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 use glam::{IVec3, Vec3, Vec4, Vec4Swizzles};
@@ -115,6 +116,37 @@ impl Listed {
         let word = *self.words.get(w)?;
         ((word >> bit) & 1 == 1)
             .then(|| (self.before[w] + (word & ((1u32 << bit) - 1)).count_ones()) as usize)
+    }
+
+    /// The set of `words` (one bit a triangle) and its ranks.
+    fn set(&mut self, words: Vec<AtomicU32>) {
+        self.words.clear();
+        self.words
+            .extend(words.into_iter().map(AtomicU32::into_inner));
+        self.before.clear();
+        self.before.push(0);
+        let mut count = 0;
+        for w in &self.words {
+            count += w.count_ones();
+            self.before.push(count);
+        }
+    }
+
+    /// Marks triangle `t` in `words` (several threads at once).
+    #[inline]
+    fn mark(words: &[AtomicU32], t: usize) {
+        let bit = 1 << (t % 32);
+        // Most are set already (a triangle goes into many lists): read first.
+        if let Some(word) = words.get(t / 32)
+            && word.load(Ordering::Relaxed) & bit == 0
+        {
+            word.fetch_or(bit, Ordering::Relaxed);
+        }
+    }
+
+    /// The members in words `words`, in order.
+    fn members(&self, words: Range<usize>) -> impl Iterator<Item = usize> + '_ {
+        words.flat_map(|w| bits(self.words[w]).map(move |b| w * 32 + b))
     }
 }
 
@@ -227,9 +259,9 @@ struct Group {
     fold: u8,
 }
 
-/// The set bits of a lane mask.
+/// The set bits of a mask, lowest first.
 #[inline]
-fn bits(mut mask: u8) -> impl Iterator<Item = usize> {
+fn bits(mut mask: u32) -> impl Iterator<Item = usize> {
     std::iter::from_fn(move || {
         (mask != 0).then(|| {
             let l = mask.trailing_zeros() as usize;
@@ -587,12 +619,12 @@ impl Query<'_> {
         if !WALK_TWICE && ng <= NEAR_GROUPS && ranges.len() <= 256 {
             let groups = &groups[..ng];
             let row = |g: &Group| ranges[g.range as usize].0;
-            found.folded = groups
-                .iter()
-                .any(|g| bits(g.fold).any(|l| self.in_row(i, row(g), g.k as usize + l).is_some()));
+            found.folded = groups.iter().any(|g| {
+                bits(g.fold.into()).any(|l| self.in_row(i, row(g), g.k as usize + l).is_some())
+            });
             if found.folded {
                 for g in groups {
-                    for l in bits(g.near) {
+                    for l in bits(g.near.into()) {
                         self.near_hit(i, p, rest_i, row(g), g.k as usize + l, &mut found);
                     }
                 }
@@ -640,12 +672,12 @@ impl Query<'_> {
         };
         let mut folded = false;
         each(&mut |row, k, lanes| {
-            folded |= bits(lanes.fold as u8).any(|l| self.in_row(i, row, k + l).is_some());
+            folded |= bits(lanes.fold).any(|l| self.in_row(i, row, k + l).is_some());
         });
         found.folded = folded;
         if folded {
             each(&mut |row, k, lanes| {
-                for l in bits(lanes.near as u8) {
+                for l in bits(lanes.near) {
                     self.near_hit(i, p, rest_i, row, k + l, found);
                 }
             });
@@ -1107,34 +1139,6 @@ impl SelfCollisionScratch {
     }
 }
 
-impl Listed {
-    /// The set of `words` (one bit a triangle) and its ranks.
-    fn set(&mut self, words: Vec<AtomicU32>) {
-        self.words.clear();
-        self.words
-            .extend(words.into_iter().map(AtomicU32::into_inner));
-        self.before.clear();
-        self.before.push(0);
-        let mut count = 0;
-        for w in &self.words {
-            count += w.count_ones();
-            self.before.push(count);
-        }
-    }
-
-    /// Marks triangle `t` in `words` (several threads at once).
-    #[inline]
-    fn mark(words: &[AtomicU32], t: usize) {
-        let bit = 1 << (t % 32);
-        // Most are set already (a triangle goes into many lists): read first.
-        if let Some(word) = words.get(t / 32)
-            && word.load(Ordering::Relaxed) & bit == 0
-        {
-            word.fetch_or(bit, Ordering::Relaxed);
-        }
-    }
-}
-
 /// The step's motion margin: twice the fastest vertex's travel in `dt` (a vertex's reach adds
 /// it to its thickness, at most 1.5 thicknesses: [`reach_of`]); `None` when off.
 fn motion_margin(vel: &[Vec4], params: SelfCollision, dt: f32) -> Option<f32> {
@@ -1292,18 +1296,8 @@ pub(crate) fn self_collide(
         runs.push((w0..w1, run));
         rest = after;
     }
-    par.for_each_mut(&mut runs, |(range, run)| {
-        let members = range.clone().flat_map(|w| {
-            let mut word = listed.words[w];
-            std::iter::from_fn(move || {
-                (word != 0).then(|| {
-                    let bit = word.trailing_zeros() as usize;
-                    word &= word - 1;
-                    w * 32 + bit
-                })
-            })
-        });
-        for (out, t) in run.iter_mut().zip(members) {
+    par.for_each_mut(&mut runs, |(words, run)| {
+        for (out, t) in run.iter_mut().zip(listed.members(words.clone())) {
             *out = match triangles.get(t) {
                 Some(tri) => Frame::plane(tri.map(|v| read[v as usize].xyz())),
                 None => Frame {
