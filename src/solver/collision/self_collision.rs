@@ -96,8 +96,8 @@ pub struct SelfCollisionScratch {
     /// The triangles in some vertex's list: one bit a triangle, and per word of bits the
     /// number set before it (a listed triangle's place among them, see [`Listed::rank`]).
     listed: Listed,
-    /// The listed triangles' [`Frame::plane`]s at the current pass's start, in triangle order.
-    pass_frames: Vec<Frame>,
+    /// The listed triangles' [`Plane`]s at the current pass's start, in triangle order.
+    pass_planes: Vec<Plane>,
 }
 
 /// A set of triangles as bits, with the rank of each member.
@@ -362,18 +362,14 @@ fn reach_of(thickness: f32, motion: f32) -> f32 {
     thickness + motion.min(1.5 * thickness)
 }
 
-/// What projecting onto a triangle needs of it, computed once a step for the query (the same
-/// operations in the same order as the GPU's `sc_project`, so the results are the same bits).
+/// What the query needs of a triangle at the step's start: the bound of
+/// [`Frame::surely_apart`], and the normal, area and longest edge for the tests after it (the
+/// rest of its [`Plane`] is made from the corners when it gets that far: a third of the
+/// memory a query reads per triangle).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct Frame {
     /// Unit normal, `(b - a) × (c - a)` normalised.
     n: Vec3,
-    e1: Vec3,
-    e2: Vec3,
-    d00: f32,
-    d01: f32,
-    d11: f32,
-    denom: f32,
     /// Twice the area; NaN for a degenerate triangle (or one not finite).
     area2: f32,
     /// The longest edge.
@@ -388,6 +384,7 @@ impl Frame {
     /// The frame of `[a, b, c]`; its `area2` is NaN when the triangle is degenerate.
     #[inline]
     fn of([a, b, c]: [Vec3; 3]) -> Self {
+        let plane = Plane::of([a, b, c]);
         let centre = (a + b + c) / 3.0;
         let spread = a
             .distance_squared(centre)
@@ -399,38 +396,11 @@ impl Frame {
             .max(b.distance_squared(c))
             .max(c.distance_squared(a));
         Self {
+            n: plane.n,
+            area2: plane.area2,
             longest: longest2.sqrt(),
             centre,
             spread,
-            ..Self::plane([a, b, c])
-        }
-    }
-
-    /// What [`Frame::project`] needs of `[a, b, c]` (the same bits as [`Frame::of`]'s), the
-    /// centre, spread and longest edge left at zero.
-    #[inline]
-    fn plane([a, b, c]: [Vec3; 3]) -> Self {
-        let e1 = b - a;
-        let e2 = c - a;
-        let nn = e1.cross(e2);
-        let len = nn.length();
-        let d00 = e1.dot(e1);
-        let d01 = e1.dot(e2);
-        let d11 = e2.dot(e2);
-        let denom = d00 * d11 - d01 * d01;
-        let ok = !(len.is_nan() || len <= 1e-12 || denom.is_nan() || denom <= 0.0);
-        Self {
-            n: nn / len,
-            e1,
-            e2,
-            d00,
-            d01,
-            d11,
-            denom,
-            area2: if ok { len } else { f32::NAN },
-            longest: 0.0,
-            centre: Vec3::ZERO,
-            spread: 0.0,
         }
     }
 
@@ -445,6 +415,59 @@ impl Frame {
         let along2 = dc.length_squared() - dn * dn;
         let limit = slide + self.spread;
         along2 > limit * limit * 1.001 + 1e-4 * reach * reach || dn.abs() > 1.001 * reach
+    }
+}
+
+/// What projecting onto a triangle needs of it (the same operations in the same order as the
+/// GPU's `sc_project`, so the results are the same bits).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Plane {
+    /// Unit normal, `(b - a) × (c - a)` normalised.
+    n: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+    d00: f32,
+    d01: f32,
+    d11: f32,
+    denom: f32,
+    /// Twice the area; NaN for a degenerate triangle (or one not finite).
+    area2: f32,
+}
+
+impl Plane {
+    /// The plane of `[a, b, c]`; its `area2` is NaN when the triangle is degenerate.
+    #[inline]
+    fn of([a, b, c]: [Vec3; 3]) -> Self {
+        let nn = (b - a).cross(c - a);
+        let len = nn.length();
+        let plane = Self::with_normal([a, b, c], nn / len, len);
+        let denom = plane.denom;
+        let ok = !(len.is_nan() || len <= 1e-12 || denom.is_nan() || denom <= 0.0);
+        Self {
+            area2: if ok { len } else { f32::NAN },
+            ..plane
+        }
+    }
+
+    /// The plane of `[a, b, c]` with the normal and `area2` of its [`Plane::of`] (or
+    /// [`Frame::of`]) given: the same bits, without the cross product and square root again.
+    #[inline]
+    fn with_normal([a, b, c]: [Vec3; 3], n: Vec3, area2: f32) -> Self {
+        let e1 = b - a;
+        let e2 = c - a;
+        let d00 = e1.dot(e1);
+        let d01 = e1.dot(e2);
+        let d11 = e2.dot(e2);
+        Self {
+            n,
+            e1,
+            e2,
+            d00,
+            d01,
+            d11,
+            denom: d00 * d11 - d01 * d01,
+            area2,
+        }
     }
 
     /// `p`'s signed distance along the normal and its projection's barycentric weights (all
@@ -843,7 +866,8 @@ impl Query<'_> {
             }
             // Over the triangle, or beside it by no more than it can slide over in the step
             // (the sheet's own triangles around the vertex are beside it, in its plane).
-            let Some((d, bary)) = frame.project(p, corners[0]) else {
+            let plane = Plane::with_normal(corners, frame.n, frame.area2);
+            let Some((d, bary)) = plane.project(p, corners[0]) else {
                 continue;
             };
             if d.is_nan() || d.abs() >= self.reach {
@@ -1199,7 +1223,7 @@ fn pair_correction(
 }
 
 /// The correction of vertex `a` (with `prev_a`) from triangle `tri` (its corners in `read`,
-/// `prev`; `frame` its [`Frame::plane`] at `read`) and the side code it keeps to: when `a` is
+/// `prev`; `plane` its [`Plane`] at `read`) and the side code it keeps to: when `a` is
 /// over the triangle and closer than `thickness` on its side, or through it to the other side
 /// (by less than 2.5 thicknesses), pushed out to `thickness` on its side along the normal, its
 /// share by the inverse masses (the triangle's at the point under `a`), with friction on the
@@ -1209,7 +1233,7 @@ fn pair_correction(
 fn triangle_correction(
     a: Vec4,
     prev_a: Vec4,
-    frame: &Frame,
+    plane: &Plane,
     tri: [u32; 3],
     read: &[Vec4],
     prev: &[Vec4],
@@ -1220,11 +1244,11 @@ fn triangle_correction(
     if wa.is_nan() || wa <= 0.0 {
         return None;
     }
-    let (d, bary) = frame.project(a.xyz(), read[tri[0] as usize].xyz())?;
+    let (d, bary) = plane.project(a.xyz(), read[tri[0] as usize].xyz())?;
     if bary.min_element() < 0.0 {
         return None;
     }
-    let n = frame.n;
+    let n = plane.n;
     let side = match code {
         SIDE_FRONT => 1.0,
         SIDE_BACK => -1.0,
@@ -1284,12 +1308,12 @@ pub(crate) fn self_collide(
     // by several vertices (the same bits as projecting per vertex).
     let listed = &scratch.listed;
     let words = listed.words.len();
-    scratch.pass_frames.resize(
+    scratch.pass_planes.resize(
         listed.before.last().copied().unwrap_or(0) as usize,
-        Frame::default(),
+        Plane::default(),
     );
     let mut runs = Vec::new();
-    let mut rest: &mut [Frame] = &mut scratch.pass_frames;
+    let mut rest: &mut [Plane] = &mut scratch.pass_planes;
     for w0 in (0..words).step_by(CHUNK / 8) {
         let w1 = (w0 + CHUNK / 8).min(words);
         let (run, after) = rest.split_at_mut((listed.before[w1] - listed.before[w0]) as usize);
@@ -1299,15 +1323,15 @@ pub(crate) fn self_collide(
     par.for_each_mut(&mut runs, |(words, run)| {
         for (out, t) in run.iter_mut().zip(listed.members(words.clone())) {
             *out = match triangles.get(t) {
-                Some(tri) => Frame::plane(tri.map(|v| read[v as usize].xyz())),
-                None => Frame {
+                Some(tri) => Plane::of(tri.map(|v| read[v as usize].xyz())),
+                None => Plane {
                     area2: f32::NAN,
-                    ..Frame::default()
+                    ..Plane::default()
                 },
             };
         }
     });
-    let frames = &scratch.pass_frames;
+    let planes = &scratch.pass_planes;
     let active = &scratch.active;
     scratch.corrections.clear();
     scratch.corrections.resize(active.len(), Vec3::ZERO);
@@ -1343,14 +1367,14 @@ pub(crate) fn self_collide(
             let count = tc[i] as usize;
             for &slot in &tl[i * MAX_SELF_TRIANGLES..i * MAX_SELF_TRIANGLES + count] {
                 let t = ((slot & !BESIDE) >> 2) as usize;
-                let (Some(&tri), Some(frame)) =
-                    (triangles.get(t), listed.rank(t).and_then(|k| frames.get(k)))
+                let (Some(&tri), Some(plane)) =
+                    (triangles.get(t), listed.rank(t).and_then(|k| planes.get(k)))
                 else {
                     continue;
                 };
                 let code = slot & 3;
                 if let Some(da) =
-                    triangle_correction(a, prev_a, frame, tri, read, prev, code, params)
+                    triangle_correction(a, prev_a, plane, tri, read, prev, code, params)
                 {
                     sum += da;
                     touching += 1;
