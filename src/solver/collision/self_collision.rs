@@ -274,6 +274,12 @@ fn bits(mut mask: u32) -> impl Iterator<Item = usize> {
 /// Vertices handled by one parallel work item.
 const CHUNK: usize = 512;
 
+/// Vertices a work item of the grid's sort lays out by bin ([`Grid::sort`]).
+const SORT_RUN: usize = 4096;
+
+/// The grid's sort splits the buckets into at most `2^BIN_BITS` bins by their high bits.
+const BIN_BITS: u32 = 8;
+
 #[inline]
 fn cell_of(p: Vec3, inv_cell: f32) -> IVec3 {
     // floor() without a libm call (x86-64's baseline has no rounding instruction):
@@ -937,14 +943,20 @@ struct Grid {
     ay: Vec<f32>,
     az: Vec<f32>,
     cells: Vec<IVec3>,
-    /// Cell of each vertex.
+    /// Cell of each vertex, and its bucket (`u32::MAX`: its position is not finite).
     vertex_cells: Vec<IVec3>,
+    vertex_buckets: Vec<u32>,
+    /// Working space of [`Grid::sort`]: per run of vertices its count and first place per
+    /// bin, its vertices by bin; each bin's first entry.
+    bin_counts: Vec<u32>,
+    bin_offsets: Vec<u32>,
+    by_bin: Vec<u32>,
+    bin_start: Vec<u32>,
 }
 
 impl Grid {
-    /// Every vertex with a finite position into its cell's bucket: the cells and the lanes in
-    /// parallel, the buckets' order on the calling thread (each bucket's entries in falling
-    /// vertex order, whatever the threads).
+    /// Every vertex with a finite position into its cell's bucket, in parallel (see
+    /// [`Grid::sort`]).
     fn fill(
         &mut self,
         pos: &[Vec4],
@@ -961,32 +973,17 @@ impl Grid {
         self.cell = cell;
         self.vertex_cells.resize(n, IVec3::ZERO);
         fill_each(&mut self.vertex_cells, par, |i| cell_of(pos[i].xyz(), inv));
-        self.start.clear();
-        self.start.resize(size + 1, 0);
-        for (p, c) in pos.iter().zip(&self.vertex_cells) {
-            if p.xyz().is_finite() {
-                self.start[grid_bucket(*c, mask)] += 1;
+        self.vertex_buckets.resize(n, 0);
+        let cells = &self.vertex_cells;
+        fill_each(&mut self.vertex_buckets, par, |i| {
+            if pos[i].xyz().is_finite() {
+                grid_bucket(cells[i], mask) as u32
+            } else {
+                u32::MAX
             }
-        }
-        let mut acc = 0;
-        for s in &mut self.start {
-            acc += *s;
-            *s = acc;
-        }
-        let real = acc as usize;
+        });
+        let real = self.sort(size, par);
         let count = real + LANES;
-        self.entries.resize(count, 0);
-        self.cells.resize(count, IVec3::ZERO);
-        for (i, p) in pos.iter().enumerate() {
-            if p.xyz().is_finite() {
-                let c = self.vertex_cells[i];
-                let h = grid_bucket(c, mask);
-                self.start[h] -= 1;
-                let k = self.start[h] as usize;
-                self.entries[k] = i as u32;
-                self.cells[k] = c;
-            }
-        }
         // The lanes, one a work item: each read through the entries in order.
         let entries = &self.entries[..real];
         let mut lanes: Vec<(usize, &mut [f32])> = [
@@ -1021,6 +1018,122 @@ impl Grid {
                 _ => gather(out, entries, |i| pos[i].z + vel[i].z * ahead),
             }
         });
+    }
+
+    /// The entries in bucket order, the `size` buckets' starts and the entries' cells from
+    /// the vertices' buckets and cells; returns the number of entries (vertices with a finite position).
+    /// A parallel counting sort whose order does not depend on the threads: runs of
+    /// [`SORT_RUN`] vertices are each laid out by bin (the buckets' high bits) in their own
+    /// stretch, then each bin gathers its stretches in run order and sorts them by bucket;
+    /// a bucket's entries are in rising vertex order.
+    fn sort(&mut self, size: usize, par: &impl Parallel) -> usize {
+        let n = self.vertex_buckets.len();
+        let cells = &self.vertex_cells;
+        let log = size.trailing_zeros();
+        let shift = log - log.min(BIN_BITS);
+        let bins = size >> shift;
+        let runs = n.div_ceil(SORT_RUN);
+        // Per run: its count per bin, and its vertices laid out by bin in its stretch.
+        self.bin_counts.clear();
+        self.bin_counts.resize(runs * bins, 0);
+        self.by_bin.resize(n, 0);
+        let buckets = &self.vertex_buckets;
+        let mut items: Vec<(usize, &mut [u32], &mut [u32])> = self
+            .bin_counts
+            .chunks_mut(bins)
+            .zip(self.by_bin.chunks_mut(SORT_RUN))
+            .enumerate()
+            .map(|(r, (counts, out))| (r * SORT_RUN, counts, out))
+            .collect();
+        par.for_each_mut(&mut items, |(first, counts, out)| {
+            let run = &buckets[*first..*first + out.len()];
+            for &b in run.iter().filter(|&&b| b != u32::MAX) {
+                counts[(b >> shift) as usize] += 1;
+            }
+            let mut at = [0u32; 1 << BIN_BITS];
+            let mut acc = 0;
+            for (a, &c) in at.iter_mut().zip(counts.iter()) {
+                *a = acc;
+                acc += c;
+            }
+            for (k, &b) in run.iter().enumerate().filter(|&(_, &b)| b != u32::MAX) {
+                let a = &mut at[(b >> shift) as usize];
+                out[*a as usize] = (*first + k) as u32;
+                *a += 1;
+            }
+        });
+        // Where each bin's entries go, and where each run's part of a bin lies in its stretch.
+        self.bin_offsets.clear();
+        self.bin_offsets.resize(runs * bins, 0);
+        for (offsets, counts) in self
+            .bin_offsets
+            .chunks_mut(bins)
+            .zip(self.bin_counts.chunks(bins))
+        {
+            let mut acc = 0;
+            for (o, &c) in offsets.iter_mut().zip(counts) {
+                *o = acc;
+                acc += c;
+            }
+        }
+        self.bin_start.clear();
+        self.bin_start.push(0);
+        for b in 0..bins {
+            let total: u32 = (0..runs).map(|r| self.bin_counts[r * bins + b]).sum();
+            self.bin_start.push(self.bin_start[b] + total);
+        }
+        let real = self.bin_start[bins] as usize;
+        self.entries.resize(real + LANES, 0);
+        self.cells.resize(real + LANES, IVec3::ZERO);
+        self.start.clear();
+        self.start.resize(size + 1, 0);
+        self.start[size] = real as u32;
+        // Each bin: its buckets' starts and its entries, in parallel.
+        let (by_bin, counts, offsets) = (&self.by_bin, &self.bin_counts, &self.bin_offsets);
+        let mut entries = &mut self.entries[..real];
+        let mut entry_cells = &mut self.cells[..real];
+        let mut items = Vec::with_capacity(bins);
+        for (b, starts) in self.start[..size].chunks_mut(1 << shift).enumerate() {
+            let len = (self.bin_start[b + 1] - self.bin_start[b]) as usize;
+            let (e, rest) = entries.split_at_mut(len);
+            entries = rest;
+            let (c, rest) = entry_cells.split_at_mut(len);
+            entry_cells = rest;
+            items.push((b, starts, e, c));
+        }
+        let bin_start = &self.bin_start;
+        par.for_each_mut(&mut items, |(b, starts, e, c)| {
+            let b = *b;
+            let low = (1u32 << shift) - 1;
+            let stretch = |r: usize| {
+                let at = r * SORT_RUN + offsets[r * bins + b] as usize;
+                &by_bin[at..at + counts[r * bins + b] as usize]
+            };
+            let each = || (0..runs).flat_map(stretch);
+            for &j in each() {
+                starts[(buckets[j as usize] & low) as usize] += 1;
+            }
+            let mut acc = 0;
+            for s in starts.iter_mut() {
+                let count = *s;
+                *s = acc;
+                acc += count;
+            }
+            // Placed with the starts as cursors: each ends at its bucket's end, the next
+            // bucket's start.
+            for &j in each() {
+                let s = &mut starts[(buckets[j as usize] & low) as usize];
+                e[*s as usize] = j;
+                c[*s as usize] = cells[j as usize];
+                *s += 1;
+            }
+            starts.rotate_right(1);
+            starts[0] = 0;
+            for s in starts.iter_mut() {
+                *s += bin_start[b];
+            }
+        });
+        real
     }
 }
 
@@ -1512,7 +1625,7 @@ fn segment_crosses_triangle(a: Vec3, b: Vec3, [v0, v1, v2]: [Vec3; 3]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solver::parallel::Serial;
+    use crate::solver::parallel::{Serial, Workers};
 
     /// The candidate lists of one step of 1/60 s, on one thread.
     fn candidates(
@@ -1819,6 +1932,51 @@ mod tests {
                 "vertex {i}"
             );
         }
+    }
+
+    #[test]
+    fn the_grid_sorts_every_vertex_into_its_bucket_whatever_the_threads() {
+        // Three runs of the sort, a few positions not finite, cells of a few vertices each.
+        let n = 2 * SORT_RUN + 1000;
+        let mut seed = 11u32;
+        let mut next = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let mut pos: Vec<Vec4> = (0..n)
+            .map(|_| Vec3::new(next(), next(), next()).extend(1.0))
+            .collect();
+        for k in [0, 17, SORT_RUN, n - 1] {
+            pos[k].y = f32::NAN;
+        }
+        let vel = vec![Vec4::ZERO; n];
+        let rest = vec![Vec3::ZERO; n];
+        let fill = |par: &dyn Fn(&mut Grid)| {
+            let mut g = Grid::default();
+            par(&mut g);
+            g
+        };
+        let serial = fill(&|g| g.fill(&pos, &vel, &rest, 0.0, 0.05, &Serial));
+        let pool = Workers::new(3);
+        let threaded = fill(&|g| g.fill(&pos, &vel, &rest, 0.0, 0.05, &pool));
+        assert_eq!(serial, threaded);
+        let g = serial;
+        let size = g.start.len() - 1;
+        let real = g.start[size] as usize;
+        assert_eq!(real, n - 4);
+        let mut seen = vec![false; n];
+        for h in 0..size {
+            let bucket = &g.entries[g.start[h] as usize..g.start[h + 1] as usize];
+            assert!(bucket.windows(2).all(|w| w[0] < w[1]), "rising order");
+            for (k, &j) in bucket.iter().enumerate() {
+                let j = j as usize;
+                let c = cell_of(pos[j].xyz(), 1.0 / 0.05);
+                assert_eq!(grid_bucket(c, size - 1), h, "vertex {j}");
+                assert_eq!(g.cells[g.start[h] as usize + k], c);
+                assert!(!std::mem::replace(&mut seen[j], true), "vertex {j} twice");
+            }
+        }
+        assert_eq!(seen.iter().filter(|&&s| s).count(), n - 4);
     }
 
     #[test]
