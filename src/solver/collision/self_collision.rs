@@ -28,8 +28,9 @@
 //!
 //! The triangles by first corner and the longest rest edge depend on the mesh alone: they are
 //! kept from step to step (rebuilt when the triangles or rest positions differ, as after a
-//! tear). The grid's lanes are gathered in parallel, one lane a work item; only the buckets'
-//! counts and order are made on one thread.
+//! tear). The grid is made in parallel: the vertices' buckets, their order (a counting sort
+//! by runs of vertices, then by bins of buckets, which gives the same order on any number of
+//! threads) and its lanes, one lane a work item.
 //!
 //! The CPU's hash keeps the cells of a row along x in consecutive buckets and the positions,
 //! rest positions and positions two steps ahead in separate lanes, so that a query reads a
