@@ -1030,8 +1030,11 @@ impl Grid {
     fn sort(&mut self, size: usize, par: &impl Parallel) -> usize {
         let n = self.vertex_buckets.len();
         let cells = &self.vertex_cells;
+        // About a bin per 1024 vertices, at most 2^BIN_BITS: a small cloth's sort is a few
+        // items, not hundreds of tiny ones.
+        let bin_bits = (n / 1024).max(1).ilog2().min(BIN_BITS);
         let log = size.trailing_zeros();
-        let shift = log - log.min(BIN_BITS);
+        let shift = log - log.min(bin_bits);
         let bins = size >> shift;
         let runs = n.div_ceil(SORT_RUN);
         // Per run: its count per bin, and its vertices laid out by bin in its stretch.
@@ -1500,9 +1503,27 @@ pub(crate) fn self_collide(
         }
     });
     drop(chunks);
-    for (&i, c) in active.iter().zip(&scratch.corrections) {
-        pos[i as usize] += c.extend(0.0);
+    // All move at once, by runs of vertices in parallel (`active` rises); a few on this
+    // thread.
+    let corrections = &scratch.corrections;
+    if active.len() < 4 * CHUNK {
+        for (&i, c) in active.iter().zip(corrections) {
+            pos[i as usize] += c.extend(0.0);
+        }
+        return;
     }
+    let mut runs: Vec<(usize, &mut [Vec4])> = pos
+        .chunks_mut(4 * CHUNK)
+        .enumerate()
+        .map(|(k, run)| (k * 4 * CHUNK, run))
+        .collect();
+    par.for_each_mut(&mut runs, |(first, run)| {
+        let lo = active.partition_point(|&i| (i as usize) < *first);
+        let hi = active.partition_point(|&i| (i as usize) < *first + run.len());
+        for (&i, c) in active[lo..hi].iter().zip(&corrections[lo..hi]) {
+            run[i as usize - *first] += c.extend(0.0);
+        }
+    });
 }
 
 /// Collects the candidates for this step: vertices and triangles closer than `thickness` plus
