@@ -166,8 +166,8 @@ struct MeshLists {
 
 impl MeshLists {
     /// Brings the lists up to date with `rest` and `triangles`.
-    fn update(&mut self, rest: &[Vec3], triangles: &[[u32; 3]]) {
-        if self.triangles == triangles && self.rest == rest {
+    fn update(&mut self, rest: &[Vec3], triangles: &[[u32; 3]], par: &impl Parallel) {
+        if same(&self.triangles, triangles, par) && same(&self.rest, rest, par) {
             return;
         }
         let n = rest.len();
@@ -1141,6 +1141,20 @@ impl Grid {
     }
 }
 
+/// Whether `a` and `b` are equal, compared in runs of `4 × CHUNK` in parallel.
+fn same<T: PartialEq + Sync>(a: &[T], b: &[T], par: &impl Parallel) -> bool {
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut runs: Vec<(&[T], &[T], bool)> = a
+        .chunks(4 * CHUNK)
+        .zip(b.chunks(4 * CHUNK))
+        .map(|(x, y)| (x, y, false))
+        .collect();
+    par.for_each_mut(&mut runs, |(x, y, equal)| *equal = x == y);
+    runs.iter().all(|r| r.2)
+}
+
 /// `out[i] = value(i)` for every `i`, in runs of `4 × CHUNK` in parallel.
 fn fill_each<T: Send>(out: &mut [T], par: &impl Parallel, value: impl Fn(usize) -> T + Sync) {
     let mut runs: Vec<(usize, &mut [T])> = out
@@ -1189,7 +1203,7 @@ impl SelfCollisionScratch {
         par: &impl Parallel,
     ) {
         let n = pos.len();
-        self.mesh.update(rest, triangles);
+        self.mesh.update(rest, triangles, par);
         // The grid's cells from the thickest vertex's radius (scales only on uneven meshes).
         let thickest = thickness * scales.iter().copied().fold(1.0, f32::max);
         let radius = reach_of(thickest, motion) + reach_of_longest(self.mesh.longest, thickest);
@@ -1999,6 +2013,18 @@ mod tests {
             }
         }
         assert_eq!(seen.iter().filter(|&&s| s).count(), n - 4);
+    }
+
+    #[test]
+    fn same_compares_every_run() {
+        let pool = Workers::new(2);
+        let a: Vec<u32> = (0..3 * 4 * CHUNK as u32 + 5).collect();
+        let mut b = a.clone();
+        assert!(same(&a, &b, &pool) && same(&a, &b, &Serial));
+        *b.last_mut().unwrap() += 1;
+        assert!(!same(&a, &b, &pool) && !same(&a, &b, &Serial));
+        assert!(!same(&a, &a[1..], &pool));
+        assert!(same::<u32>(&[], &[], &pool));
     }
 
     #[test]
