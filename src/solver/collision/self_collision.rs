@@ -1184,6 +1184,8 @@ struct QueryChunk<'a> {
     neighbours: &'a mut [u32],
     triangle_count: &'a mut [u32],
     triangles: &'a mut [u32],
+    /// Its vertices with something in their lists, rising.
+    active: Vec<u32>,
 }
 
 impl SelfCollisionScratch {
@@ -1269,6 +1271,7 @@ impl SelfCollisionScratch {
                 neighbours: nl,
                 triangle_count: tc,
                 triangles: tl,
+                active: Vec::new(),
             })
             .collect();
         par.for_each_mut(&mut chunks, |c| {
@@ -1282,31 +1285,36 @@ impl SelfCollisionScratch {
                 );
                 c.neighbour_count[k] = nc as u32;
                 c.triangle_count[k] = tc as u32;
+                if nc + tc > 0 {
+                    c.active.push((c.first + k) as u32);
+                }
             }
         });
         self.active.clear();
-        self.active.extend(
-            (0..n as u32).filter(|&i| {
-                self.neighbour_count[i as usize] + self.triangle_count[i as usize] > 0
-            }),
-        );
+        for c in &chunks {
+            self.active.extend_from_slice(&c.active);
+        }
         self.listed.set(listed);
     }
 }
 
 /// The step's motion margin: twice the fastest vertex's travel in `dt` (a vertex's reach adds
 /// it to its thickness, at most 1.5 thicknesses: [`reach_of`]); `None` when off.
-fn motion_margin(vel: &[Vec4], params: SelfCollision, dt: f32) -> Option<f32> {
+fn motion_margin(vel: &[Vec4], params: SelfCollision, dt: f32, par: &impl Parallel) -> Option<f32> {
     let thickness = params.thickness;
     if !(thickness.is_finite() && thickness > 0.0) {
         return None;
     }
-    let fastest = vel
-        .iter()
-        .map(|v| v.xyz().length_squared())
-        .filter(|s| s.is_finite())
-        .fold(0.0f32, f32::max)
-        .sqrt();
+    let fastest2 = |run: &[Vec4]| {
+        run.iter()
+            .map(|v| v.xyz().length_squared())
+            .filter(|s| s.is_finite())
+            .fold(0.0f32, f32::max)
+    };
+    // Runs in parallel (a maximum: the same whatever the order).
+    let mut runs: Vec<(&[Vec4], f32)> = vel.chunks(4 * CHUNK).map(|r| (r, 0.0)).collect();
+    par.for_each_mut(&mut runs, |(run, max)| *max = fastest2(run));
+    let fastest = runs.iter().map(|r| r.1).fold(0.0f32, f32::max).sqrt();
     Some(2.0 * fastest * dt)
 }
 
@@ -1555,7 +1563,7 @@ pub(crate) fn find_self_collision_candidates(
     scratch: &mut SelfCollisionScratch,
     par: &impl Parallel,
 ) {
-    if let Some(motion) = motion_margin(vel, params, dt) {
+    if let Some(motion) = motion_margin(vel, params, dt, par) {
         let t = params.thickness;
         scratch.find::<false>(pos, vel, dt, rest, triangles, scales, t, motion, par);
     } else {
@@ -1908,7 +1916,7 @@ mod tests {
     fn the_kept_groups_find_what_a_second_walk_finds() {
         let (pos, vel, rest, tris, params) = crumpled_sheet();
         let dt = 1.0 / 60.0;
-        let motion = motion_margin(&vel, params, dt).unwrap();
+        let motion = motion_margin(&vel, params, dt, &Serial).unwrap();
         let t = params.thickness;
         let mut kept = SelfCollisionScratch::default();
         kept.find::<false>(&pos, &vel, dt, &rest, &tris, &[], t, motion, &Serial);
