@@ -149,6 +149,42 @@ impl Listed {
     fn members(&self, words: Range<usize>) -> impl Iterator<Item = usize> + '_ {
         words.flat_map(|w| bits(self.words[w]).map(move |b| w * 32 + b))
     }
+
+    /// The members' [`Plane`]s at `pos` into `out`, in triangle order (a pass's: each is
+    /// projected onto by several vertices; the same bits as projecting per vertex), runs of
+    /// members in parallel.
+    fn planes(
+        &self,
+        triangles: &[[u32; 3]],
+        pos: &[Vec4],
+        out: &mut Vec<Plane>,
+        par: &impl Parallel,
+    ) {
+        let words = self.words.len();
+        out.resize(
+            self.before.last().copied().unwrap_or(0) as usize,
+            Plane::default(),
+        );
+        let mut runs = Vec::new();
+        let mut rest: &mut [Plane] = out;
+        for w0 in (0..words).step_by(CHUNK / 8) {
+            let w1 = (w0 + CHUNK / 8).min(words);
+            let (run, after) = rest.split_at_mut((self.before[w1] - self.before[w0]) as usize);
+            runs.push((w0..w1, run));
+            rest = after;
+        }
+        par.for_each_mut(&mut runs, |(words, run)| {
+            for (plane, t) in run.iter_mut().zip(self.members(words.clone())) {
+                *plane = match triangles.get(t) {
+                    Some(tri) => Plane::of(tri.map(|v| pos[v as usize].xyz())),
+                    None => Plane {
+                        area2: f32::NAN,
+                        ..Plane::default()
+                    },
+                };
+            }
+        });
+    }
 }
 
 /// A mesh's triangles by their first corner and its longest rest edge, with the triangles and
@@ -1037,27 +1073,30 @@ impl Grid {
         let shift = log - log.min(bin_bits);
         let bins = size >> shift;
         let runs = n.div_ceil(SORT_RUN);
-        // Per run: its count per bin, and its vertices laid out by bin in its stretch.
+        // Per run: its count per bin, where each bin's part starts in its stretch, and its
+        // vertices laid out by bin there.
         self.bin_counts.clear();
         self.bin_counts.resize(runs * bins, 0);
+        self.bin_offsets.resize(runs * bins, 0);
         self.by_bin.resize(n, 0);
         let buckets = &self.vertex_buckets;
-        let mut items: Vec<(usize, &mut [u32], &mut [u32])> = self
+        let mut items: Vec<_> = self
             .bin_counts
             .chunks_mut(bins)
+            .zip(self.bin_offsets.chunks_mut(bins))
             .zip(self.by_bin.chunks_mut(SORT_RUN))
             .enumerate()
-            .map(|(r, (counts, out))| (r * SORT_RUN, counts, out))
+            .map(|(r, ((counts, offsets), out))| (r * SORT_RUN, counts, offsets, out))
             .collect();
-        par.for_each_mut(&mut items, |(first, counts, out)| {
+        par.for_each_mut(&mut items, |(first, counts, offsets, out)| {
             let run = &buckets[*first..*first + out.len()];
             for &b in run.iter().filter(|&&b| b != u32::MAX) {
                 counts[(b >> shift) as usize] += 1;
             }
             let mut at = [0u32; 1 << BIN_BITS];
             let mut acc = 0;
-            for (a, &c) in at.iter_mut().zip(counts.iter()) {
-                *a = acc;
+            for ((a, o), &c) in at.iter_mut().zip(offsets.iter_mut()).zip(counts.iter()) {
+                (*a, *o) = (acc, acc);
                 acc += c;
             }
             for (k, &b) in run.iter().enumerate().filter(|&(_, &b)| b != u32::MAX) {
@@ -1066,20 +1105,7 @@ impl Grid {
                 *a += 1;
             }
         });
-        // Where each bin's entries go, and where each run's part of a bin lies in its stretch.
-        self.bin_offsets.clear();
-        self.bin_offsets.resize(runs * bins, 0);
-        for (offsets, counts) in self
-            .bin_offsets
-            .chunks_mut(bins)
-            .zip(self.bin_counts.chunks(bins))
-        {
-            let mut acc = 0;
-            for (o, &c) in offsets.iter_mut().zip(counts) {
-                *o = acc;
-                acc += c;
-            }
-        }
+        // Where each bin's entries go.
         self.bin_start.clear();
         self.bin_start.push(0);
         for b in 0..bins {
@@ -1141,18 +1167,27 @@ impl Grid {
     }
 }
 
-/// Whether `a` and `b` are equal, compared in runs of `4 × CHUNK` in parallel.
-fn same<T: PartialEq + Sync>(a: &[T], b: &[T], par: &impl Parallel) -> bool {
-    if a.len() != b.len() {
-        return false;
-    }
-    let mut runs: Vec<(&[T], &[T], bool)> = a
-        .chunks(4 * CHUNK)
-        .zip(b.chunks(4 * CHUNK))
-        .map(|(x, y)| (x, y, false))
+/// `value` of every run of `4 × CHUNK` indices below `len` (the last one shorter), the runs
+/// in parallel.
+fn per_run<R: Send + Default>(
+    len: usize,
+    par: &impl Parallel,
+    value: impl Fn(Range<usize>) -> R + Sync,
+) -> Vec<R> {
+    let run = 4 * CHUNK;
+    let mut runs: Vec<(Range<usize>, R)> = (0..len.div_ceil(run))
+        .map(|k| (k * run..((k + 1) * run).min(len), R::default()))
         .collect();
-    par.for_each_mut(&mut runs, |(x, y, equal)| *equal = x == y);
-    runs.iter().all(|r| r.2)
+    par.for_each_mut(&mut runs, |(range, out)| *out = value(range.clone()));
+    runs.into_iter().map(|r| r.1).collect()
+}
+
+/// Whether `a` and `b` are equal, compared in runs in parallel.
+fn same<T: PartialEq + Sync>(a: &[T], b: &[T], par: &impl Parallel) -> bool {
+    a.len() == b.len()
+        && per_run(a.len(), par, |r| a[r.clone()] == b[r])
+            .into_iter()
+            .all(|equal| equal)
 }
 
 /// `out[i] = value(i)` for every `i`, in runs of `4 × CHUNK` in parallel.
@@ -1311,10 +1346,11 @@ fn motion_margin(vel: &[Vec4], params: SelfCollision, dt: f32, par: &impl Parall
             .filter(|s| s.is_finite())
             .fold(0.0f32, f32::max)
     };
-    // Runs in parallel (a maximum: the same whatever the order).
-    let mut runs: Vec<(&[Vec4], f32)> = vel.chunks(4 * CHUNK).map(|r| (r, 0.0)).collect();
-    par.for_each_mut(&mut runs, |(run, max)| *max = fastest2(run));
-    let fastest = runs.iter().map(|r| r.1).fold(0.0f32, f32::max).sqrt();
+    // A maximum per run in parallel: the same whatever the order.
+    let fastest = per_run(vel.len(), par, |r| fastest2(&vel[r]))
+        .into_iter()
+        .fold(0.0f32, f32::max)
+        .sqrt();
     Some(2.0 * fastest * dt)
 }
 
@@ -1443,33 +1479,10 @@ pub(crate) fn self_collide(
         return;
     }
     let read: &[Vec4] = pos;
-    // The planes of the triangles in some list, at the pass's start: each is projected onto
-    // by several vertices (the same bits as projecting per vertex).
+    scratch
+        .listed
+        .planes(triangles, read, &mut scratch.pass_planes, par);
     let listed = &scratch.listed;
-    let words = listed.words.len();
-    scratch.pass_planes.resize(
-        listed.before.last().copied().unwrap_or(0) as usize,
-        Plane::default(),
-    );
-    let mut runs = Vec::new();
-    let mut rest: &mut [Plane] = &mut scratch.pass_planes;
-    for w0 in (0..words).step_by(CHUNK / 8) {
-        let w1 = (w0 + CHUNK / 8).min(words);
-        let (run, after) = rest.split_at_mut((listed.before[w1] - listed.before[w0]) as usize);
-        runs.push((w0..w1, run));
-        rest = after;
-    }
-    par.for_each_mut(&mut runs, |(words, run)| {
-        for (out, t) in run.iter_mut().zip(listed.members(words.clone())) {
-            *out = match triangles.get(t) {
-                Some(tri) => Plane::of(tri.map(|v| read[v as usize].xyz())),
-                None => Plane {
-                    area2: f32::NAN,
-                    ..Plane::default()
-                },
-            };
-        }
-    });
     let planes = &scratch.pass_planes;
     let active = &scratch.active;
     scratch.corrections.clear();
