@@ -127,28 +127,27 @@ fn folded_over_a_bar() -> (Simulation, Collider) {
     (sim, bar)
 }
 
-#[test]
-fn a_crumpled_cloth_never_passes_through_itself() {
-    let mut sim = crumpled();
-    assert_eq!(crossings(&sim), 0, "starts clean");
-    let (end, most) = run(&mut sim, &[floor()], 240, &Workers::new(1));
-    println!("crumpled: {end} crossings at the end, at most {most}");
+/// Asserts that `sim` starts and, stepped among `colliders` for `steps` steps on one thread,
+/// ends without a crossing pair (`label` names the scene in the output).
+fn ends_apart(label: &str, sim: &mut Simulation, colliders: &[Collider], steps: usize) {
+    assert_eq!(crossings(sim), 0, "{label}: starts clean");
+    let (end, most) = run(sim, colliders, steps, &Workers::new(1));
+    println!("{label}: {end} crossings at the end, at most {most}");
     assert_eq!(
         end, 0,
-        "{end} edge–triangle pairs cross at the end (at most {most})"
+        "{label}: {end} edge–triangle pairs cross at the end (at most {most})"
     );
+}
+
+#[test]
+fn a_crumpled_cloth_never_passes_through_itself() {
+    ends_apart("crumpled", &mut crumpled(), &[floor()], 240);
 }
 
 #[test]
 fn a_cloth_folded_three_times_over_a_bar_keeps_its_layers_apart() {
     let (mut sim, bar) = folded_over_a_bar();
-    assert_eq!(crossings(&sim), 0, "starts clean");
-    let (end, most) = run(&mut sim, &[bar, floor()], 300, &Workers::new(1));
-    println!("folded: {end} crossings at the end, at most {most}");
-    assert_eq!(
-        end, 0,
-        "{end} edge–triangle pairs cross at the end (at most {most})"
-    );
+    ends_apart("folded", &mut sim, &[bar, floor()], 300);
 }
 
 /// The same scenes with the thickest layers a cloth takes (`MAX_SELF_COLLISION_EDGES`, one mean
@@ -171,19 +170,14 @@ fn the_thickest_layers_a_cloth_takes_hold_too() {
     };
     let mut sim = crumpled();
     let t = thickest(&mut sim);
-    let (end, most) = run(&mut sim, &[floor()], 240, &Workers::new(1));
-    println!("crumpled, {t} m thick: {end} crossings at the end, at most {most}");
-    assert_eq!(
-        end, 0,
-        "crumpled: {end} pairs cross at the end (at most {most})"
-    );
+    ends_apart(&format!("crumpled, {t} m thick"), &mut sim, &[floor()], 240);
     let (mut sim, bar) = folded_over_a_bar();
     let t = thickest(&mut sim);
-    let (end, most) = run(&mut sim, &[bar, floor()], 300, &Workers::new(1));
-    println!("folded, {t} m thick: {end} crossings at the end, at most {most}");
-    assert_eq!(
-        end, 0,
-        "folded: {end} pairs cross at the end (at most {most})"
+    ends_apart(
+        &format!("folded, {t} m thick"),
+        &mut sim,
+        &[bar, floor()],
+        300,
     );
 }
 
@@ -225,13 +219,7 @@ fn an_uneven_cloth_crumpled_keeps_its_layers_apart() {
     })
     .unwrap();
     stand_and_spin(&mut sim);
-    assert_eq!(crossings(&sim), 0, "starts clean");
-    let (end, most) = run(&mut sim, &[floor()], 240, &Workers::new(1));
-    println!("uneven ({spread:.2}): {end} crossings at the end, at most {most}");
-    assert_eq!(
-        end, 0,
-        "{end} edge–triangle pairs cross at the end (at most {most})"
-    );
+    ends_apart(&format!("uneven ({spread:.2})"), &mut sim, &[floor()], 240);
 }
 
 /// Without self-collision the same scenes do pass through themselves: the tests above can
