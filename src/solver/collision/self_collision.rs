@@ -30,11 +30,12 @@
 //! kept from step to step (rebuilt when the triangles or rest positions differ, as after a
 //! tear). The grid is made in parallel: the vertices' buckets, their order (a counting sort
 //! by runs of vertices, then by bins of buckets, which gives the same order on any number of
-//! threads) and its lanes, one lane a work item.
+//! threads; within a bucket by x) and its lanes, one lane a work item.
 //!
 //! The CPU's hash keeps the cells of a row along x in consecutive buckets and the positions,
-//! rest positions and positions two steps ahead in separate lanes, so that a query reads a
-//! few runs of entries in sequence and tests eight at a time (vectorised), in one walk: the
+//! rest positions and positions two steps ahead in separate lanes, and a bucket's entries
+//! in order of x, so that a query reads a few runs of entries in sequence (a row's ends
+//! beyond its x range left out) and tests eight at a time (vectorised), in one walk: the
 //! groups of eight holding some of the vertex's own neighbourhood are kept for the fold test
 //! and its triangles after it, and a triangle is first tested against a bound from its
 //! centroid (most of those looked at lie beside the vertex, farther than it can slide)
@@ -788,8 +789,13 @@ impl Query<'_> {
                 if left < 0.0 {
                     continue;
                 }
+                // The x range the row's entries within the radius lie in.
+                let half = if exact {
+                    left.sqrt() + slack
+                } else {
+                    f32::INFINITY
+                };
                 let (x0, x1) = if exact {
-                    let half = left.sqrt() + slack;
                     (
                         cell_of(Vec3::splat(p.x - half), inv).x.max(lo.x),
                         cell_of(Vec3::splat(p.x + half), inv).x.min(hi.x),
@@ -809,11 +815,20 @@ impl Query<'_> {
                 let base = row_base(y, z);
                 let b0 = base.wrapping_add(x0 as isize as usize) & mask;
                 let b1 = base.wrapping_add(x1 as isize as usize) & mask;
+                // A bucket's entries are ordered by x: the first bucket's below the range and
+                // the last one's above it are left out.
+                let (from, to) = (p.x - half, p.x + half);
+                let first = g.start[b0] as usize
+                    + g.x[g.start[b0] as usize..g.start[b0 + 1] as usize]
+                        .partition_point(|&x| x < from);
+                let last = g.start[b1] as usize
+                    + g.x[g.start[b1] as usize..g.start[b1 + 1] as usize]
+                        .partition_point(|&x| x <= to);
                 if b0 <= b1 {
-                    out.push((row, g.start[b0] as usize, g.start[b1 + 1] as usize));
+                    out.push((row, first, last.max(first)));
                 } else {
-                    out.push((row, g.start[b0] as usize, g.start[size] as usize));
-                    out.push((row, g.start[0] as usize, g.start[b1 + 1] as usize));
+                    out.push((row, first, g.start[size] as usize));
+                    out.push((row, g.start[0] as usize, last));
                 }
             }
         }
@@ -1022,7 +1037,7 @@ impl Grid {
                 u32::MAX
             }
         });
-        let real = self.sort(size, par);
+        let real = self.sort(size, pos, par);
         let count = real + LANES;
         // The lanes, one a work item: each read through the entries in order.
         let entries = &self.entries[..real];
@@ -1065,8 +1080,9 @@ impl Grid {
     /// A parallel counting sort whose order does not depend on the threads: runs of
     /// [`SORT_RUN`] vertices are each laid out by bin (the buckets' high bits) in their own
     /// stretch, then each bin gathers its stretches in run order and sorts them by bucket;
-    /// a bucket's entries are in rising vertex order.
-    fn sort(&mut self, size: usize, par: &impl Parallel) -> usize {
+    /// then each bucket's entries are ordered by their x (ties: rising vertex order), so a
+    /// query can leave out the ends of a row beyond its x range ([`Query::ranges`]).
+    fn sort(&mut self, size: usize, pos: &[Vec4], par: &impl Parallel) -> usize {
         let n = self.vertex_buckets.len();
         let cells = &self.vertex_cells;
         // About a bin per 1024 vertices, at most 2^BIN_BITS: a small cloth's sort is a few
@@ -1157,8 +1173,20 @@ impl Grid {
             for &j in each() {
                 let s = &mut starts[(buckets[j as usize] & low) as usize];
                 e[*s as usize] = j;
-                c[*s as usize] = cells[j as usize];
                 *s += 1;
+            }
+            // Each bucket by x (its vertices are in rising order: a stable sort keeps that
+            // for equal x), then the cells in the same order.
+            let mut from = 0;
+            for &end in starts.iter() {
+                let bucket = &mut e[from as usize..end as usize];
+                if bucket.len() > 1 {
+                    bucket.sort_by(|&a, &b| pos[a as usize].x.total_cmp(&pos[b as usize].x));
+                }
+                from = end;
+            }
+            for (c, &j) in c.iter_mut().zip(e.iter()) {
+                *c = cells[j as usize];
             }
             starts.rotate_right(1);
             starts[0] = 0;
@@ -2006,6 +2034,10 @@ mod tests {
         let mut pos: Vec<Vec4> = (0..n)
             .map(|_| Vec3::new(next(), next(), next()).extend(1.0))
             .collect();
+        // Some equal x in a bucket: vertex order decides.
+        for k in (100..200).step_by(10) {
+            pos[k + 5] = pos[k] + Vec4::new(0.0, 0.001, 0.0, 0.0);
+        }
         for k in [0, 17, SORT_RUN, n - 1] {
             pos[k].y = f32::NAN;
         }
@@ -2027,7 +2059,13 @@ mod tests {
         let mut seen = vec![false; n];
         for h in 0..size {
             let bucket = &g.entries[g.start[h] as usize..g.start[h + 1] as usize];
-            assert!(bucket.windows(2).all(|w| w[0] < w[1]), "rising order");
+            assert!(
+                bucket.windows(2).all(|w| {
+                    let (a, b) = (pos[w[0] as usize].x, pos[w[1] as usize].x);
+                    a < b || (a == b && w[0] < w[1])
+                }),
+                "ordered by x, then by vertex"
+            );
             for (k, &j) in bucket.iter().enumerate() {
                 let j = j as usize;
                 let c = cell_of(pos[j].xyz(), 1.0 / 0.05);
