@@ -264,11 +264,11 @@ const TRIANGLE_SKIP: f32 = 0.5;
 const FOLDED2: f32 = 0.81;
 
 /// The query's grid cells are the query's radius over this (4/3 of the radius wide): a query
-/// reads four to nine rows of two or three cells each, in sequence. Narrower cells (1.5 per radius)
-/// look at fewer vertices outside the radius but cost more rows; measured at 256² with
-/// self-collision (`tradeoff --scene-costs`), this width is 8–10 % faster on one thread than
-/// that and than cells as wide as the radius or twice as wide. The cell width changes what
-/// is looked at, never what is found.
+/// reads four to nine rows of two or three cells each, in sequence. Narrower cells (1.5 per
+/// radius) look at fewer vertices outside the radius but cost more rows; measured at 256²
+/// with self-collision (`tradeoff --scene-costs`), this width is faster than that (about 10 %
+/// on one thread, a third on two) and than cells as wide as the radius or twice as wide. The
+/// cell width changes what is looked at, never what is found.
 const CELLS_PER_RADIUS: f32 = 0.75;
 
 /// A vertex's own neighbourhood (the vertices resting between half a thickness and 2.5
@@ -1076,9 +1076,9 @@ impl Grid {
     }
 
     /// The entries in bucket order, the `size` buckets' starts and the entries' cells from
-    /// the vertices' buckets and cells; returns the number of entries (vertices with a finite position).
-    /// A parallel counting sort whose order does not depend on the threads: runs of
-    /// [`SORT_RUN`] vertices are each laid out by bin (the buckets' high bits) in their own
+    /// the vertices' buckets and cells; returns the number of entries (vertices with a finite
+    /// position). A parallel counting sort whose order does not depend on the threads: runs
+    /// of [`SORT_RUN`] vertices are each laid out by bin (the buckets' high bits) in their own
     /// stretch, then each bin gathers its stretches in run order and sorts them by bucket;
     /// then each bucket's entries are ordered by their x (ties: rising vertex order), so a
     /// query can leave out the ends of a row beyond its x range ([`Query::ranges`]).
@@ -1175,13 +1175,16 @@ impl Grid {
                 e[*s as usize] = j;
                 *s += 1;
             }
-            // Each bucket by x (its vertices are in rising order: a stable sort keeps that
-            // for equal x), then the cells in the same order.
+            // Each bucket by x, equal x by vertex (an unstable sort: no allocation, and no
+            // two entries compare equal), then the cells in the same order.
             let mut from = 0;
             for &end in starts.iter() {
                 let bucket = &mut e[from as usize..end as usize];
                 if bucket.len() > 1 {
-                    bucket.sort_by(|&a, &b| pos[a as usize].x.total_cmp(&pos[b as usize].x));
+                    bucket.sort_unstable_by(|&a, &b| {
+                        let x = |j: u32| pos[j as usize].x;
+                        x(a).total_cmp(&x(b)).then(a.cmp(&b))
+                    });
                 }
                 from = end;
             }
@@ -1221,16 +1224,22 @@ fn same<T: PartialEq + Sync>(a: &[T], b: &[T], par: &impl Parallel) -> bool {
             .all(|equal| equal)
 }
 
-/// `out[i] = value(i)` for every `i`, in runs of `4 × CHUNK` in parallel.
-fn fill_each<T: Send>(out: &mut [T], par: &impl Parallel, value: impl Fn(usize) -> T + Sync) {
+/// `each(first, run)` for every run of `4 × CHUNK` items of `out` (the last one shorter),
+/// `first` its first index, the runs in parallel.
+fn each_run<T: Send>(out: &mut [T], par: &impl Parallel, each: impl Fn(usize, &mut [T]) + Sync) {
     let mut runs: Vec<(usize, &mut [T])> = out
         .chunks_mut(4 * CHUNK)
         .enumerate()
         .map(|(k, run)| (k * 4 * CHUNK, run))
         .collect();
-    par.for_each_mut(&mut runs, |(first, run)| {
+    par.for_each_mut(&mut runs, |(first, run)| each(*first, run));
+}
+
+/// `out[i] = value(i)` for every `i`, in runs of `4 × CHUNK` in parallel.
+fn fill_each<T: Send>(out: &mut [T], par: &impl Parallel, value: impl Fn(usize) -> T + Sync) {
+    each_run(out, par, |first, run| {
         for (k, o) in run.iter_mut().enumerate() {
-            *o = value(*first + k);
+            *o = value(first + k);
         }
     });
 }
@@ -1578,16 +1587,11 @@ pub(crate) fn self_collide(
         }
         return;
     }
-    let mut runs: Vec<(usize, &mut [Vec4])> = pos
-        .chunks_mut(4 * CHUNK)
-        .enumerate()
-        .map(|(k, run)| (k * 4 * CHUNK, run))
-        .collect();
-    par.for_each_mut(&mut runs, |(first, run)| {
-        let lo = active.partition_point(|&i| (i as usize) < *first);
-        let hi = active.partition_point(|&i| (i as usize) < *first + run.len());
+    each_run(pos, par, |first, run| {
+        let lo = active.partition_point(|&i| (i as usize) < first);
+        let hi = active.partition_point(|&i| (i as usize) < first + run.len());
         for (&i, c) in active[lo..hi].iter().zip(&corrections[lo..hi]) {
-            run[i as usize - *first] += c.extend(0.0);
+            run[i as usize - first] += c.extend(0.0);
         }
     });
 }
