@@ -256,6 +256,14 @@ fn read_back_cloths(
     }
 }
 
+/// Whether some cloth runs on the GPU without reading its state back (a window): its
+/// `ClothSim` then holds the starting state, and figures measured from it mean nothing.
+pub fn gpu_state_unread(world: &mut World) -> bool {
+    let mut q = world.query::<(Option<&ClothBackendInUse>, Has<ClothReadback>)>();
+    q.iter(world)
+        .any(|(backend, read_back)| backend.is_some_and(|b| b.gpu) && !read_back)
+}
+
 /// What every example reports about its cloths.
 pub fn cloth_report(world: &mut World) -> Json {
     let mut q = world.query::<(&ClothSim, Option<&ClothBackendInUse>, Has<ClothReadback>)>();
