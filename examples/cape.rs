@@ -409,23 +409,18 @@ fn report(world: &mut World) -> support::Json {
     let (skirt_over, skirt_penetration, skirt_steps) =
         (m.skirt_over, m.skirt_penetration, m.skirt_steps);
     // A GPU cloth in a window reads nothing back: its measured figures become `null`.
-    let (pin_error, penetration, skirt_over, skirt_penetration) =
-        if support::gpu_state_unread(world) {
-            (f32::NAN, f32::NAN, f32::NAN, f32::NAN)
-        } else {
-            (pin_error, penetration, skirt_over, skirt_penetration)
-        };
+    let unread = support::gpu_state_unread(world);
     support::cloth_report(world)
         .str("example", "cape")
         .str("gait", gait)
         .num("measured_steps", steps)
         .num("colliders", colliders as f64)
         .num("touching_steps", touching)
-        .num("pin_error", pin_error)
-        .num("penetration", penetration)
+        .measured("pin_error", pin_error, unread)
+        .measured("penetration", penetration, unread)
         .num("skirt_steps", skirt_steps)
-        .num("skirt_over_max_distance", skirt_over)
-        .num("skirt_penetration", skirt_penetration)
+        .measured("skirt_over_max_distance", skirt_over, unread)
+        .measured("skirt_penetration", skirt_penetration, unread)
 }
 
 fn main() {

@@ -72,10 +72,11 @@ fn report(world: &mut World) -> support::Json {
         let s = c.simulation().state();
         (0..s.len()).map(|i| s.position(i).x).sum::<f32>() / s.len() as f32
     });
+    let unread = support::gpu_state_unread(world);
     support::cloth_report(world)
         .str("example", "flag")
         .num("wind", wind)
-        .num("mean_x", reach)
+        .measured("mean_x", reach, unread)
 }
 
 fn main() {

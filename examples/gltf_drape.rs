@@ -156,11 +156,12 @@ fn report(world: &mut World) -> support::Json {
             seam_gap = seam_gap.max(Vec3::from(p[v]).distance(Vec3::from(p[first])));
         }
     }
+    let unread = support::gpu_state_unread(world);
     support::cloth_report(world)
         .str("example", "gltf_drape")
         .num("mesh_vertices", counts.0 as f64)
         .num("particles", counts.1 as f64)
-        .num("seam_gap", seam_gap)
+        .measured("seam_gap", seam_gap, unread)
         .num("max_penetration", penetration)
 }
 

@@ -85,11 +85,12 @@ fn report(world: &mut World) -> support::Json {
         (c.now, c.max)
     };
     let on = !world.resource::<Off>().0;
+    let unread = support::gpu_state_unread(world);
     support::cloth_report(world)
         .str("example", "self_collision")
         .num("self_collision", if on { 1.0 } else { 0.0 })
-        .num("crossings", now as f64)
-        .num("max_crossings", max as f64)
+        .measured("crossings", now as f64, unread)
+        .measured("max_crossings", max as f64, unread)
 }
 
 fn main() {

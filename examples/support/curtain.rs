@@ -128,11 +128,12 @@ pub fn report(world: &mut World, example: &str) -> Json {
         .sum::<f32>()
         / n;
     let (balls, bulge) = (stats.speed_after.len(), stats.bulge);
+    let unread = support::gpu_state_unread(world);
     support::cloth_report(world)
         .str("example", example)
         .num("balls", balls as f64)
         .num("speed_loss", loss)
-        .num("bulge", bulge)
+        .measured("bulge", bulge, unread)
 }
 
 /// The app both examples start from: the curtain scene on a 1/60 s fixed clock.

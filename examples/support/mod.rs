@@ -134,6 +134,13 @@ impl Json {
         self
     }
 
+    /// Adds a number measured from the cloths' state, or `null` when some GPU cloth's state
+    /// is not read back (`unread`, see [`gpu_state_unread`]): the figure would describe the
+    /// state the cloth started from.
+    pub fn measured(self, k: &str, v: impl Into<f64>, unread: bool) -> Self {
+        self.num(k, if unread { f64::NAN } else { v.into() })
+    }
+
     /// Adds a string.
     pub fn str(mut self, k: &str, v: &str) -> Self {
         self.0.push((k.to_string(), format!("{v:?}")));
@@ -436,8 +443,12 @@ pub fn stage(
     ));
 }
 
-/// Deepest penetration (metres) of any cloth vertex below any collider's surface this step.
+/// Deepest penetration (metres) of any cloth vertex below any collider's surface this step;
+/// NaN (`null` in the report) when some GPU cloth's state is not read back.
 pub fn max_penetration(world: &mut World) -> f32 {
+    if gpu_state_unread(world) {
+        return f32::NAN;
+    }
     let colliders = world
         .resource::<bevy_cloth::collider::ClothColliders>()
         .clone();
