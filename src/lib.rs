@@ -133,7 +133,7 @@ pub mod prelude {
     pub use crate::editor::{ClothCameraPlugin, ClothFlyCamera};
     #[cfg(feature = "animation")]
     pub use crate::foundation::ClothAnimationPlugin;
-    pub use crate::foundation::{ClothSystems, grid_mesh};
+    pub use crate::foundation::{ClothSystems, grid_mesh, try_grid_mesh};
     pub use crate::gpu::{ClothBackend, ClothBackendInUse, ClothGpuPlugin, ClothReadback};
     pub use crate::render::{
         VelvetExtension, VelvetMaterial, VelvetPlugin, lined_velvet, velvet_material,

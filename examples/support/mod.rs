@@ -218,10 +218,17 @@ pub fn app(args: &Args, title: &str, fixed_step: f64) -> App {
         // The report reads GPU cloths' state back.
         .add_systems(Update, read_back_cloths);
     } else if args.headless {
-        app.add_plugins((MinimalPlugins, TransformPlugin, assets(), MeshPlugin))
-            .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
-                fixed_step,
-            )));
+        // Logs too, so that what the plugin reports (an invalid cloth) shows.
+        app.add_plugins((
+            MinimalPlugins,
+            bevy::log::LogPlugin::default(),
+            TransformPlugin,
+            assets(),
+            MeshPlugin,
+        ))
+        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+            fixed_step,
+        )));
     } else {
         app.add_plugins(
             DefaultPlugins
@@ -497,7 +504,10 @@ pub fn add_gltf_support(app: &mut App) {
         app.add_plugins(bevy::world_serialization::WorldSerializationPlugin);
     }
     if !app.is_plugin_added::<bevy::gltf::GltfPlugin>() {
-        app.add_plugins(bevy::gltf::GltfPlugin::default());
+        // No renderer, so no GPU to ask which compressed textures it reads: none.
+        use bevy::image::{CompressedImageFormatSupport, CompressedImageFormats};
+        app.insert_resource(CompressedImageFormatSupport(CompressedImageFormats::NONE))
+            .add_plugins(bevy::gltf::GltfPlugin::default());
     }
     if !app.is_plugin_added::<bevy::animation::AnimationPlugin>() {
         app.add_plugins(bevy::animation::AnimationPlugin);

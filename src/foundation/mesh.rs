@@ -5,7 +5,7 @@ use bevy::asset::RenderAssetUsages;
 use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
 use bevy::prelude::*;
 
-use crate::solver::{Grid, MeshAttributes};
+use crate::solver::{Grid, MeshAttributes, TopologyError};
 
 /// Why a mesh cannot be read.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -177,9 +177,34 @@ pub(crate) fn modified_meshes(events: &mut MessageReader<AssetEvent<Mesh>>) -> V
 /// (`Transform::from_rotation(Quat::from_rotation_x(-FRAC_PI_2))`) the grid stands up like a
 /// curtain with row 0 at the top and its front face towards −Z: pin `grid.index(i, 0)` to
 /// hang it.
+///
+/// A grid that fails [`Grid::validate`] (fewer than 2×2 vertices, a size that is not finite
+/// and positive, more vertices than a cloth may have) logs why and gives an empty mesh, which
+/// a `Cloth` then reports as invalid; nothing is allocated for it. [`try_grid_mesh`] returns
+/// the error instead.
 #[must_use]
 pub fn grid_mesh(grid: &Grid) -> Mesh {
+    try_grid_mesh(grid).unwrap_or_else(|e| {
+        error!("grid_mesh: {e}; the mesh is left empty");
+        triangle_list_mesh(Vec::new(), Vec::new(), Vec::new())
+    })
+}
+
+/// [`grid_mesh`], or why the grid cannot be made (checked by [`Grid::validate`] before
+/// anything is allocated).
+///
+/// # Errors
+/// [`TopologyError::BadGrid`] or [`TopologyError::TooLarge`] from [`Grid::validate`].
+pub fn try_grid_mesh(grid: &Grid) -> Result<Mesh, TopologyError> {
+    grid.validate()?;
     let positions: Vec<[f32; 3]> = grid.positions().iter().map(|p| p.to_array()).collect();
+    let uvs = grid.uvs().iter().map(|uv| uv.to_array()).collect();
+    Ok(triangle_list_mesh(positions, uvs, grid.indices()))
+}
+
+/// A main-world triangle list of `positions` with +Y normals, `uvs`, +X tangents and `u32`
+/// `indices`.
+fn triangle_list_mesh(positions: Vec<[f32; 3]>, uvs: Vec<[f32; 2]>, indices: Vec<u32>) -> Mesh {
     let n = positions.len();
     Mesh::new(
         PrimitiveTopology::TriangleList,
@@ -187,15 +212,9 @@ pub fn grid_mesh(grid: &Grid) -> Mesh {
     )
     .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
     .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0f32, 1.0, 0.0]; n])
-    .with_inserted_attribute(
-        Mesh::ATTRIBUTE_UV_0,
-        grid.uvs()
-            .iter()
-            .map(|uv| uv.to_array())
-            .collect::<Vec<_>>(),
-    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uvs)
     .with_inserted_attribute(Mesh::ATTRIBUTE_TANGENT, vec![[1.0f32, 0.0, 0.0, 1.0]; n])
-    .with_inserted_indices(Indices::U32(grid.indices()))
+    .with_inserted_indices(Indices::U32(indices))
 }
 
 #[cfg(test)]
@@ -221,5 +240,38 @@ mod tests {
             read_mesh(&triangle_list(4)),
             Err(MeshError::PartialTriangle(4))
         );
+    }
+
+    fn vertex_count(mesh: &Mesh) -> usize {
+        mesh.attribute(Mesh::ATTRIBUTE_POSITION)
+            .map_or(usize::MAX, VertexAttributeValues::len)
+    }
+
+    #[test]
+    fn a_grid_that_cannot_be_made_gives_an_error_or_an_empty_mesh_without_allocating_it() {
+        // 10^10 vertices: making them would need 120 GB for the positions alone.
+        let huge = Grid::new(100_000, 100_000, 1.0, 1.0);
+        assert!(matches!(
+            try_grid_mesh(&huge),
+            Err(TopologyError::TooLarge {
+                vertices: 10_000_000_000,
+                ..
+            })
+        ));
+        assert_eq!(vertex_count(&grid_mesh(&huge)), 0);
+        for bad in [
+            Grid::new(1, 32, 1.0, 1.0),
+            Grid::new(4, 4, 0.0, 1.0),
+            Grid::new(4, 4, 1.0, f32::NAN),
+        ] {
+            assert!(matches!(
+                try_grid_mesh(&bad),
+                Err(TopologyError::BadGrid { .. })
+            ));
+            assert_eq!(vertex_count(&grid_mesh(&bad)), 0);
+        }
+        let good = grid_mesh(&Grid::new(3, 2, 1.0, 1.0));
+        assert_eq!(vertex_count(&good), 6);
+        assert_eq!(good.indices().map(Indices::len), Some(12));
     }
 }
