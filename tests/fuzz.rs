@@ -109,3 +109,18 @@ fn fourteen_vertex_soup_with_enormous_shear_compliance() {
         other => panic!("{other:?}"),
     }
 }
+
+/// Finding 5 (seed 1): three vertices of 1.2e37 kg each, two triangles over the same corners,
+/// a pin pulled 20 km: a stretch correction's `Δλ` overflowed (its vertex's inverse mass
+/// times its length underflowed) and the solver had to reset. Refused now: a vertex is at
+/// most `MAX_VERTEX_MASS`.
+#[test]
+fn three_vertices_of_ten_to_the_thirty_seven_kilograms() {
+    let outcome = sane(&hex(
+        "7a280c327268603d48c79bb7efb5d86a187eba60e3f905b221d01c5b879c315c54ab0b49b89ac6f69259c51b3677d05d57b44c680feaa5f64b75e1ac16d07f30d8fdd63444bafb2b295dfbc693e3849f60ad1a67c55ce5c7d230e9598725d0874f9ac6f69259c51b3677b5d86a1853ba60e3f905b221d01d5b879d315c54ab0b49b81ec6f69259c51b3677d05d57b44c680feaa5e64b75e9ac16d0",
+    ));
+    match outcome {
+        FuzzOutcome::Refused(why) => assert!(why.contains("has mass"), "{why}"),
+        other => panic!("{other:?}"),
+    }
+}

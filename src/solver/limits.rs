@@ -38,6 +38,11 @@ impl std::error::Error for ParamError {}
 /// `f32` resolves 1 m; keep cloth within a few km of the origin for millimetre precision.
 pub const MAX_COORDINATE: f32 = 1.0e7;
 
+/// The heaviest a single vertex may be, in kilograms. A cloth's whole mass is at most 10⁶ kg
+/// ([`MASS`]); far heavier vertices make the constraints' inverse masses so small that a
+/// correction's intermediate `Δλ` overflows `f32` (a 10³⁷ kg vertex did, found by the fuzzer).
+pub const MAX_VERTEX_MASS: f32 = 1.0e9;
+
 /// The most vertices a cloth may have: 2²² = 4 194 304 (a 2048 × 2048 grid). The solver keeps
 /// a few hundred bytes a vertex (positions, constraints, colours, scratch), so this is about
 /// 1.5 GB; a mesh, grid or scene file asking for more is refused before anything is

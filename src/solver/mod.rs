@@ -72,8 +72,8 @@ pub use constraints::{
     LAB_WEIGHT, MotionConstraints, Solver, TetherParams, Tethers, default_part_count,
 };
 pub use limits::{
-    EVEN_EDGE_SPREAD, MAX_COORDINATE, MAX_SELF_COLLISION_EDGES, MAX_TRIANGLES, MAX_VERTICES,
-    ParamError,
+    EVEN_EDGE_SPREAD, MAX_COORDINATE, MAX_SELF_COLLISION_EDGES, MAX_TRIANGLES, MAX_VERTEX_MASS,
+    MAX_VERTICES, ParamError,
 };
 pub use mesh::{
     Bend, BendRest, BendingModel, Edge, EdgeKind, Grid, HARD_EDGE_COS, MassDistribution,

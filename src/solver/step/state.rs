@@ -5,7 +5,7 @@
 //! aligned vector per vertex. Positions carry the vertex's *active* inverse mass in `w`
 //! (0 for pinned vertices), so a constraint kernel gets both in one load.
 
-use crate::solver::limits::{MAX_COORDINATE, within_range};
+use crate::solver::limits::{MAX_COORDINATE, MAX_VERTEX_MASS, within_range};
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
 /// Positions, velocities and pins of one cloth.
@@ -43,7 +43,8 @@ pub enum StateError {
         /// Number of masses.
         masses: usize,
     },
-    /// A mass is zero, negative, NaN or infinite.
+    /// A mass is zero, negative, NaN, infinite, so small that its inverse is infinite, or
+    /// heavier than [`MAX_VERTEX_MASS`](crate::solver::MAX_VERTEX_MASS).
     BadMass {
         /// Vertex index.
         vertex: usize,
@@ -94,7 +95,8 @@ impl core::fmt::Display for StateError {
             StateError::BadMass { vertex, mass } => {
                 write!(
                     f,
-                    "vertex {vertex} has mass {mass}; masses must be finite and > 0"
+                    "vertex {vertex} has mass {mass}; masses must be finite, > 0 and at most \
+                     {MAX_VERTEX_MASS} kg"
                 )
             }
             StateError::NonFinitePosition { vertex } => {
@@ -138,8 +140,8 @@ impl ClothState {
     /// A cloth at rest at `positions` with per-vertex `masses` in kilograms, no pins.
     ///
     /// # Errors
-    /// [`StateError`] if the lengths differ, a mass is not finite and positive, or a position
-    /// is not finite.
+    /// [`StateError`] if the lengths differ, a mass is not finite and positive or is over
+    /// [`MAX_VERTEX_MASS`](crate::solver::MAX_VERTEX_MASS), or a position is not finite.
     pub fn new(positions: &[Vec3], masses: &[f32]) -> Result<Self, StateError> {
         if positions.len() != masses.len() {
             return Err(StateError::LengthMismatch {
@@ -149,7 +151,7 @@ impl ClothState {
         }
         let mut inv_mass = Vec::with_capacity(masses.len());
         for (vertex, (&m, p)) in masses.iter().zip(positions).enumerate() {
-            if !(m.is_finite() && m > 0.0 && (1.0 / m).is_finite()) {
+            if !(m.is_finite() && m > 0.0 && (1.0 / m).is_finite() && m <= MAX_VERTEX_MASS) {
                 return Err(StateError::BadMass { vertex, mass: m });
             }
             if !within_range(*p) {
@@ -385,6 +387,14 @@ mod tests {
             ClothState::new(&[Vec3::ZERO], &[0.0]),
             Err(StateError::BadMass { vertex: 0, .. })
         ));
+        let pair = [Vec3::ZERO, Vec3::X];
+        assert!(ClothState::new(&pair, &[1.0, MAX_VERTEX_MASS]).is_ok());
+        for heavy in [MAX_VERTEX_MASS * 1.001, 1.2e37, 1e-45] {
+            assert!(matches!(
+                ClothState::new(&pair, &[1.0, heavy]),
+                Err(StateError::BadMass { vertex: 1, .. })
+            ));
+        }
         assert!(matches!(
             ClothState::new(&[Vec3::NAN], &[1.0]),
             Err(StateError::NonFinitePosition { vertex: 0 })
