@@ -115,9 +115,10 @@ fn setup(
 
 fn report(world: &mut World) -> support::Json {
     let depth = support::max_penetration(world);
+    let unread = support::gpu_state_unread(world);
     support::cloth_report(world)
         .str("example", "drape")
-        .num("max_penetration", depth)
+        .measured("max_penetration", depth, unread)
         .num("sdf_mesh_triangles", 20480.0)
 }
 

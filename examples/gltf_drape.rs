@@ -162,7 +162,7 @@ fn report(world: &mut World) -> support::Json {
         .num("mesh_vertices", counts.0 as f64)
         .num("particles", counts.1 as f64)
         .measured("seam_gap", seam_gap, unread)
-        .num("max_penetration", penetration)
+        .measured("max_penetration", penetration, unread)
 }
 
 fn main() {

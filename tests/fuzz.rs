@@ -49,6 +49,14 @@ fn empty_and_tiny_inputs() {
     }
 }
 
+/// Asserts that `outcome` is a refusal whose message says `says`.
+fn assert_refused(outcome: FuzzOutcome, says: &str) {
+    match outcome {
+        FuzzOutcome::Refused(why) => assert!(why.contains(says), "{why}"),
+        other => panic!("{other:?}"),
+    }
+}
+
 /// Decodes a fuzzer finding (`fuzz-finding-N.hex`).
 fn hex(s: &str) -> Vec<u8> {
     (0..s.len() / 2)
@@ -104,10 +112,7 @@ fn fourteen_vertex_soup_with_enormous_shear_compliance() {
     // Since compliances have a closed range (`solver::limits::XPBD_COMPLIANCE`, at most
     // 1e6 m/N), this input is refused by name instead of simulated; the solver at the largest
     // accepted compliance is covered by tests/editor.rs and tests/stability.rs.
-    match outcome {
-        FuzzOutcome::Refused(why) => assert!(why.contains("`shear`"), "{why}"),
-        other => panic!("{other:?}"),
-    }
+    assert_refused(outcome, "`shear`");
 }
 
 /// Finding 5 (seed 1): three vertices of 1.2e37 kg each, two triangles over the same corners,
@@ -119,8 +124,5 @@ fn three_vertices_of_ten_to_the_thirty_seven_kilograms() {
     let outcome = sane(&hex(
         "7a280c327268603d48c79bb7efb5d86a187eba60e3f905b221d01c5b879c315c54ab0b49b89ac6f69259c51b3677d05d57b44c680feaa5f64b75e1ac16d07f30d8fdd63444bafb2b295dfbc693e3849f60ad1a67c55ce5c7d230e9598725d0874f9ac6f69259c51b3677b5d86a1853ba60e3f905b221d01d5b879d315c54ab0b49b81ec6f69259c51b3677d05d57b44c680feaa5e64b75e9ac16d0",
     ));
-    match outcome {
-        FuzzOutcome::Refused(why) => assert!(why.contains("has mass"), "{why}"),
-        other => panic!("{other:?}"),
-    }
+    assert_refused(outcome, "has mass");
 }

@@ -450,12 +450,8 @@ pub fn stage(
     ));
 }
 
-/// Deepest penetration (metres) of any cloth vertex below any collider's surface this step;
-/// NaN (`null` in the report) when some GPU cloth's state is not read back.
+/// Deepest penetration (metres) of any cloth vertex below any collider's surface this step.
 pub fn max_penetration(world: &mut World) -> f32 {
-    if gpu_state_unread(world) {
-        return f32::NAN;
-    }
     let colliders = world
         .resource::<bevy_cloth::collider::ClothColliders>()
         .clone();
