@@ -1733,28 +1733,45 @@ fn the_mesh_kernel_matches_the_cpu_write_back() {
     }
 }
 
-/// The tear check (`tear_check`) against `tear::overstretched_edges`: a cloth pulled by its
-/// corners, threshold 1.6; the GPU's flag rises in the frame the CPU first finds an edge past
-/// it (neither side tears here: the plugin tears on the CPU). Each frame starts from the CPU's
-/// state, so the frame compared is one step's.
+/// The tear check (`tear_check`, `tear_release`) against `tear::overstretched_edges` and
+/// `Topology::without_edges`, and what a torn edge does against its CPU twin
+/// (`ConstraintBatches::release_edges`): a cloth pulled by its corners, threshold 1.6. The
+/// GPU's flag rises in the frame the CPU first finds an edge past it; the edges it tears are
+/// the CPU's, but for an edge within rounding of the threshold, and the edges it lets go of
+/// are exactly those the CPU's torn topology no longer has; from the next step on, their
+/// distance constraints hold nothing on both sides (neither rebuilds the topology here: the
+/// plugin does that on the CPU), and the positions agree within rounding while the tear runs
+/// through the cloth. Each frame starts from the CPU's state, so the frame compared is one
+/// step's.
 #[test]
-fn the_tear_check_matches_the_cpu() {
-    let Some(g) = gpu("the_tear_check_matches_the_cpu") else {
+fn the_tear_check_and_the_torn_edges_match_the_cpu() {
+    let Some(g) = gpu("the_tear_check_and_the_torn_edges_match_the_cpu") else {
         return;
     };
     let n = 16;
+    let threshold = 1.6;
     let mut s = sim(n, SolverParams::default(), |p| {
         Vec3::new(p.x, 1.0 - (p.z + 0.5), 0.0)
     });
     s.set_features(Features {
-        tear_threshold: Some(1.6),
+        tear_threshold: Some(threshold),
         ..Default::default()
     })
     .unwrap();
     let start = corners(&mut s, n);
     let mut world = GpuWorld::new(&g.device, &g.queue, &g.kernels, &[&s]).unwrap();
     let mut twin = Twin::new(&s);
+    let edge_index: std::collections::HashMap<[u32; 2], u32> = twin
+        .topology
+        .edges()
+        .iter()
+        .enumerate()
+        .map(|(i, e)| (e.v, i as u32))
+        .collect();
     let (mut cpu_first, mut gpu_first) = (None, None);
+    let (mut torn_frames, mut worst) = (0, 0.0f32);
+    let mut torn: Vec<[u32; 2]> = Vec::new();
+    let mut released: Vec<[u32; 2]> = Vec::new();
     for k in 0..60 {
         // The corners move apart 2 cm a step.
         let t: Vec<Vec3> = start
@@ -1763,6 +1780,7 @@ fn the_tear_check_matches_the_cpu() {
             .map(|(i, p)| *p + Vec3::X * (0.02 * k as f32 * if i == 0 { -1.0 } else { 1.0 }))
             .collect();
         world.upload(&g.queue, 0, &twin.state.positions, &twin.state.velocities);
+        let bound = rounding_bound(&s, 1, &twin.state.positions);
         twin.step(&t, Vec3::ZERO, &[], &[]);
         let targets = [vec![t]];
         let frame = GpuFrame::uniform(DT, 1, &[], &targets);
@@ -1770,25 +1788,98 @@ fn the_tear_check_matches_the_cpu() {
         let mut encoder = g.device.create_command_encoder(&Default::default());
         world.record(&mut encoder, &g.kernels);
         g.queue.submit([encoder.finish()]);
-        let over = !bevy_cloth::solver::overstretched_edges(
-            &twin.state.positions,
-            twin.topology.edges(),
-            1.6,
-        )
-        .is_empty();
-        if over && cpu_first.is_none() {
+        let cpu = &twin.state.positions;
+        let (gpu_positions, _) = world.read_state(&g.device, &g.queue, 0);
+        let diff = cpu
+            .iter()
+            .zip(&gpu_positions)
+            .map(|(a, b)| (a.truncate() - b.truncate()).abs().max_element())
+            .fold(0.0f32, f32::max);
+        assert!(
+            diff <= bound,
+            "step {k} ({} torn edges): positions differ by {diff} m, rounding allows {bound}",
+            torn.len()
+        );
+        if !torn.is_empty() {
+            torn_frames += 1;
+            worst = worst.max(diff / bound);
+        }
+        // What the tear check tears: the CPU's overstretched edges among those not let go of
+        // yet (torn edges stay torn), but for an edge within rounding of the threshold.
+        let mut over =
+            bevy_cloth::solver::overstretched_edges(cpu, twin.topology.edges(), threshold);
+        over.retain(|e| !released.contains(e));
+        over.extend(torn.iter().copied());
+        over.sort_unstable();
+        let gpu_torn = world.read_torn_edges(&g.device, &g.queue, 0);
+        let mut flagged = gpu_torn.torn.clone();
+        flagged.sort_unstable();
+        for e in symmetric_difference(&over, &flagged) {
+            let rest = twin.topology.edges()[edge_index[&e] as usize].rest;
+            let len = cpu[e[0] as usize]
+                .truncate()
+                .distance(cpu[e[1] as usize].truncate());
+            let margin = (len / (threshold * rest) - 1.0).abs();
+            assert!(
+                margin < 1e-4,
+                "step {k}: edge {e:?} is {len} m against {} m, flagged on one side only",
+                threshold * rest
+            );
+        }
+        if !over.is_empty() && cpu_first.is_none() {
             cpu_first = Some(k);
         }
         if world.read_status(&g.device, &g.queue, 0).1 && gpu_first.is_none() {
             gpu_first = Some(k);
         }
+        // What lets go: the torn edges and those the torn topology has no more.
+        let kept = twin.topology.without_edges(&flagged);
+        let mut cpu_released: Vec<[u32; 2]> = twin
+            .topology
+            .edges()
+            .iter()
+            .map(|e| e.v)
+            .filter(|v| !kept.edges().iter().any(|k| k.v == *v))
+            .collect();
+        cpu_released.sort_unstable();
+        let mut gpu_released = gpu_torn.released;
+        gpu_released.sort_unstable();
+        assert_eq!(gpu_released, cpu_released, "step {k}: edges let go of");
+        // The twin holds what the GPU tore (the two stay in step where an edge sits on the
+        // threshold itself).
+        torn = flagged;
+        released = gpu_released;
+        let slots: Vec<u32> = released.iter().map(|e| edge_index[e]).collect();
+        twin.batches.release_edges(&slots);
     }
-    eprintln!("first overstretched step: CPU {cpu_first:?}, GPU {gpu_first:?}");
+    eprintln!(
+        "first overstretched step: CPU {cpu_first:?}, GPU {gpu_first:?}; {} edges torn, {} let go \
+         of, {torn_frames} steps compared with torn edges, worst {worst:.3} of the rounding bound",
+        torn.len(),
+        released.len()
+    );
     assert!(
         cpu_first.is_some_and(|k| k > 5),
         "the scene must start untorn"
     );
     assert_eq!(gpu_first, cpu_first);
+    assert!(
+        torn.len() >= 4 && torn_frames > 10,
+        "the tear must run through the cloth: {} edges in {torn_frames} steps",
+        torn.len()
+    );
+}
+
+/// The vertex pairs in one sorted list and not the other.
+fn symmetric_difference(a: &[[u32; 2]], b: &[[u32; 2]]) -> Vec<[u32; 2]> {
+    let mut out: Vec<[u32; 2]> = a
+        .iter()
+        .filter(|e| b.binary_search(e).is_err())
+        .chain(b.iter().filter(|e| a.binary_search(e).is_err()))
+        .copied()
+        .collect();
+    out.sort_unstable();
+    out
 }
 
 /// The lab solver (seed 000's Jacobi averaging: velocity keep, 32 iterations of averaged edge

@@ -196,6 +196,20 @@ impl ClothSim {
         !torn.is_empty()
     }
 
+    /// Tears `edges` (particle pairs, as [`Simulation::tear_edges`](crate::solver::Simulation::tear_edges)):
+    /// the edges a backend stepping elsewhere found past the tear threshold, torn as
+    /// [`Self::tear_now`] tears. Returns whether any tore.
+    pub fn tear_edges_now(
+        &mut self,
+        entity: Entity,
+        edges: &[[u32; 2]],
+        messages: &mut MessageWriter<ClothTorn>,
+    ) -> bool {
+        let torn = self.sim.tear_edges(edges);
+        self.note_torn(entity, &torn, messages);
+        !torn.is_empty()
+    }
+
     /// Writes the index buffer without the torn triangles into `mesh` (the cloth's own mesh),
     /// if any tore since the last write, in the mesh's own index format.
     pub fn write_indices(&mut self, mesh: &mut Mesh) {

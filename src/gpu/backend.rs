@@ -115,7 +115,10 @@ pub(crate) struct GpuResult {
     /// A step left a NaN or infinite position or velocity.
     pub failed: bool,
     /// A step ended with an edge past the tear threshold.
-    pub torn: bool,
+    pub tear: bool,
+    /// The edges the GPU tore (its own vertex indices), when it keeps torn flags (all but
+    /// the lab solver).
+    pub torn: Option<Vec<[u32; 2]>>,
     /// Positions and velocities, when asked for.
     pub state: Option<(Vec<Vec4>, Vec<Vec4>)>,
 }
@@ -448,11 +451,17 @@ pub(crate) fn apply_gpu_results(
             cloth.recover(EntityName::new(entity, name), transform.copied());
         } else if let Some((positions, velocities)) = &r.state {
             cloth.receive_state(positions, velocities);
-            // Tear on the CPU; the new topology goes to the GPU as a settings change (its
-            // state carried over), and the index buffer loses the torn triangles.
-            if r.torn
-                && cloth.tear_now(entity, &mut torn_messages)
-                && let Some(mesh) = meshes.as_deref_mut().and_then(|m| m.get_mut(cloth.mesh()))
+            // Tear on the CPU the edges the GPU tore (it let go of them at once; the lab
+            // solver only says that some edge is past the threshold, so its cloth tears what
+            // is in the state read back). The new topology goes to the GPU as a settings
+            // change (its state carried over, the edges it tore since torn again before its
+            // first step), and the index buffer loses the torn triangles.
+            let tore = r.tear
+                && match &r.torn {
+                    Some(edges) => cloth.tear_edges_now(entity, edges, &mut torn_messages),
+                    None => cloth.tear_now(entity, &mut torn_messages),
+                };
+            if tore && let Some(mesh) = meshes.as_deref_mut().and_then(|m| m.get_mut(cloth.mesh()))
             {
                 cloth.write_indices(mesh.into_inner());
             }

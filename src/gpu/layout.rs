@@ -30,6 +30,7 @@ pub(crate) const FLAG_DIHEDRAL: u32 = 4;
 pub(crate) const FLAG_ACCUMULATE: u32 = 8;
 pub(crate) const FLAG_SC: u32 = 16;
 pub(crate) const FLAG_TETHERS: u32 = 32;
+pub(crate) const FLAG_TEARING: u32 = 64;
 
 /// The part count the GPU projects `sim` with: parts of at most [`TILE`] vertices (one
 /// workgroup each, in workgroup memory), fewer when the mesh's vertex order would leave
@@ -71,6 +72,9 @@ pub(crate) struct ClothLayout {
     pub flags: u32,
     /// Whether its edges are checked against a tear threshold.
     pub tearing: bool,
+    /// Its distance constraints in `cons` (a cloth's are contiguous): the range of the
+    /// world's torn flags that are its own.
+    pub distances: core::ops::Range<u32>,
     /// Gravity, damping (1/s) and, for the lab solver, the velocity kept per step: what the
     /// record's per-frame words (gravity·h, damping factor) are made from.
     pub gravity: Vec3,
@@ -112,6 +116,10 @@ pub(crate) struct WorldLayout {
     pub lab_at: u32,
     pub edges_at: u32,
     pub edges: u32,
+    /// Per tearing edge the triangles it belongs to (offsets, list; global triangles).
+    pub edge_tris_at: u32,
+    /// Triangles of every cloth (the tear's dead-triangle flags have one each).
+    pub triangles: u32,
     /// The levels: parts, seams (all of a cloth's, or its even ones), odd seams (where a
     /// cloth's seams overlap), boundaries.
     pub levels: [LevelRange; 4],
@@ -139,16 +147,31 @@ struct GroupSpec {
     bend_bounds: Vec<u32>,
 }
 
+/// The distance constraints of `cons` as they are laid out, with the topology edge (of its
+/// cloth) each one holds.
+#[derive(Default)]
+struct Distances {
+    cons: Vec<[u32; 4]>,
+    edge: Vec<u32>,
+}
+
+impl Distances {
+    fn len(&self) -> usize {
+        self.cons.len()
+    }
+}
+
 /// Appends `part`'s distance constraints of `range` (local indices).
-fn push_distances(part: &Part, range: core::ops::Range<usize>, out: &mut Vec<[u32; 4]>) {
+fn push_distances(part: &Part, range: core::ops::Range<usize>, out: &mut Distances) {
     let d = &part.distance;
     for i in range {
-        out.push([
+        out.cons.push([
             d.a()[i],
             d.b()[i],
             d.rest[i].to_bits(),
             d.param[i].to_bits(),
         ]);
+        out.edge.push(d.edge[i]);
     }
 }
 
@@ -178,7 +201,7 @@ fn group(
     part: &Part,
     bending: bool,
     shared: bool,
-    dist: &mut Vec<[u32; 4]>,
+    dist: &mut Distances,
     hinges: &mut Vec<[[u32; 4]; 3]>,
 ) -> GroupSpec {
     let mut record = [0u32; GROUP_WORDS];
@@ -239,7 +262,7 @@ impl WorldLayout {
             lab: key.lab,
             ..Default::default()
         };
-        let mut dist: Vec<[u32; 4]> = Vec::new();
+        let mut dist = Distances::default();
         let mut hinges: Vec<[[u32; 4]; 3]> = Vec::new();
         let mut levels: [Vec<GroupSpec>; 4] = Default::default();
         let mut vertex_cloth = Vec::new();
@@ -249,6 +272,7 @@ impl WorldLayout {
         let mut tethers: Vec<(u32, [u32; 2])> = Vec::new();
         let mut lab_edges: Vec<(u32, [u32; 2])> = Vec::new();
         let mut tear_edges: Vec<[u32; 4]> = Vec::new();
+        let mut edge_tris: Vec<(u32, [u32; 1])> = Vec::new();
         let any_sc = sims.iter().any(|s| s.features().self_collision.is_some());
         for (c, sim) in sims.iter().enumerate() {
             let c = c as u32;
@@ -294,6 +318,7 @@ impl WorldLayout {
                     );
                 }
             }
+            let tri_base = triangles.len() as u32;
             triangles.extend(
                 sim.topology()
                     .triangles()
@@ -310,13 +335,8 @@ impl WorldLayout {
                 }));
             }
             let tearing = features.tear_threshold.is_some_and(|t| t > 1.0);
-            if tearing {
-                tear_edges.extend(
-                    sim.topology()
-                        .edges()
-                        .iter()
-                        .map(|e| [vbase + e.v[0], vbase + e.v[1], e.rest.to_bits(), c]),
-                );
+            if tearing && !key.lab {
+                flags |= FLAG_TEARING;
             }
             // The record (`common.wgsl`'s `cloth_of`); gravity·h and the damping factor
             // (words 5–8) depend on the step length and are written per frame.
@@ -349,6 +369,7 @@ impl WorldLayout {
             }
             records.push(rec);
             // Groups: parts (in workgroup memory when they fit), seams, the boundary.
+            let first_distance = dist.len();
             if !key.lab {
                 let bending = batches.bending;
                 for part in &batches.parts {
@@ -368,6 +389,38 @@ impl WorldLayout {
                     levels[3].push(g);
                 }
             }
+            if tearing {
+                // Each edge with the slot of its distance constraint in `cons`, where
+                // `tear_check` flags it torn (`NO_PIN`: the lab solver, which has none).
+                let mut slot = vec![NO_PIN; sim.topology().edges().len()];
+                for (k, &e) in dist.edge[first_distance..].iter().enumerate() {
+                    slot[e as usize] = (first_distance + k) as u32;
+                }
+                // And each edge's triangles, which its tear takes with it.
+                let edge_base = tear_edges.len() as u32;
+                let t = sim.topology();
+                let mut index: Vec<([u32; 2], u32)> = t
+                    .edges()
+                    .iter()
+                    .enumerate()
+                    .map(|(i, e)| (e.v, i as u32))
+                    .collect();
+                index.sort_unstable();
+                for (k, tri) in t.triangles().iter().enumerate() {
+                    for j in 0..3 {
+                        let (a, b) = (tri[j], tri[(j + 1) % 3]);
+                        if let Ok(i) = index.binary_search_by_key(&[a.min(b), a.max(b)], |x| x.0) {
+                            edge_tris.push((edge_base + index[i].1, [tri_base + k as u32]));
+                        }
+                    }
+                }
+                tear_edges.extend(
+                    t.edges()
+                        .iter()
+                        .zip(slot)
+                        .map(|(e, slot)| [vbase + e.v[0], vbase + e.v[1], e.rest.to_bits(), slot]),
+                );
+            }
             out.any_tethers |= flags & FLAG_TETHERS != 0;
             out.any_accumulate |= flags & FLAG_ACCUMULATE != 0;
             out.any_tearing |= tearing;
@@ -379,6 +432,7 @@ impl WorldLayout {
                 parts: batches.part_count(),
                 flags,
                 tearing,
+                distances: first_distance as u32..dist.len() as u32,
                 gravity: params.gravity,
                 damping: params.damping,
                 keep: match params.solver {
@@ -402,7 +456,7 @@ impl WorldLayout {
         out.distances = dist.len() as u32;
         out.hinges = hinges.len() as u32;
         out.bend_at = dist.len() as u32;
-        out.cons = dist;
+        out.cons = dist.cons;
         out.cons.extend(hinges.iter().flatten());
         // `topo`.
         let n = out.n as usize;
@@ -465,6 +519,8 @@ impl WorldLayout {
         out.edges_at = topo.len() as u32;
         out.edges = tear_edges.len() as u32;
         topo.extend(tear_edges.iter().flatten());
+        out.edge_tris_at = append_lists(&mut topo, tear_edges.len(), edge_tris);
+        out.triangles = triangles.len() as u32;
         out.topo = topo;
         out
     }
@@ -533,6 +589,35 @@ mod tests {
         assert_eq!(world.hinges as usize, total_bends);
         assert_eq!(world.cloths[1].vbase, 48 * 48);
         assert!(world.any_sc && world.any_tethers && world.any_tearing);
+        // Each cloth's distance constraints are one range, the ranges in order.
+        assert_eq!(world.cloths[0].distances.start, 0);
+        assert_eq!(
+            world.cloths[0].distances.end,
+            world.cloths[1].distances.start
+        );
+        assert_eq!(world.cloths[1].distances.end, world.distances);
+        // The group base of every distance constraint, to check the tear edges' slots.
+        let mut base_of = vec![u32::MAX; world.distances as usize];
+        for g in 0..world.levels.iter().map(|l| l.count).sum::<u32>() {
+            let at = (world.group_at as usize) + g as usize * GROUP_WORDS;
+            let rec = &world.topo[at..at + GROUP_WORDS];
+            for i in world.topo[rec[6] as usize]..rec[7] + rec[8] {
+                base_of[i as usize] = rec[1];
+            }
+        }
+        // The tearing cloth's edges, each with the slot of its own distance constraint.
+        assert_eq!(world.edges as usize, a.topology().edges().len());
+        let edges = &world.topo[world.edges_at as usize..][..4 * world.edges as usize];
+        for (e, w) in a.topology().edges().iter().zip(edges.chunks(4)) {
+            assert_eq!([w[0], w[1], w[2]], [e.v[0], e.v[1], e.rest.to_bits()]);
+            let slot = w[3] as usize;
+            assert!(world.cloths[0].distances.contains(&w[3]));
+            let c = world.cons[slot];
+            assert_eq!([base_of[slot] + c[0], base_of[slot] + c[1]], e.v);
+            assert_eq!(c[2], e.rest.to_bits());
+        }
+        assert_ne!(world.cloths[0].flags & FLAG_TEARING, 0);
+        assert_eq!(world.cloths[1].flags & FLAG_TEARING, 0);
         // Within each level, no two groups touch the same vertex.
         for level in &world.levels {
             let mut owner = vec![u32::MAX; world.n as usize];

@@ -27,7 +27,7 @@ pub use layout::{WorldKey, gpu_part_count};
 pub use plugin::ClothGpuPlugin;
 pub use world::{
     ClothFrame, DispatchCount, GpuFrame, GpuStage, GpuWorld, MotionTargets, StepColliders,
-    sum_impulses,
+    TornEdges, TornFlags, sum_impulses,
 };
 
 /// Appends per-owner lists to a `u32` table (how the kernels find a vertex's triangles, edges,

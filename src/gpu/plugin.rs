@@ -39,8 +39,8 @@ use crate::foundation::{ClothSchedule, ClothSystems};
 /// teleport rule), tethers, gravity, damping, the speed limit, air drag/lift/friction with the
 /// wind, sphere/box/capsule/plane and mesh (baked SDF) colliders with friction, self-collision
 /// (in its parallel form: each vertex moves by the mean of its contacts' corrections; the CPU
-/// projects contacts one by one), tearing (checked on the GPU, done on the CPU after a
-/// readback), normals and tangents. What keeps a cloth on the CPU: `BendingSolve::Implicit`.
+/// projects contacts one by one), tearing (a torn edge lets go on the GPU at once; the
+/// topology tears on the CPU after a readback), normals and tangents. What keeps a cloth on the CPU: `BendingSolve::Implicit`.
 /// Bending the CPU would solve implicitly under `BendingSolve::Auto` is projected.
 ///
 /// The results stay on the GPU: [`ClothSim`](crate::cloth::ClothSim)'s state is the one the cloth started from unless

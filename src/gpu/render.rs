@@ -31,7 +31,9 @@ use super::backend::{
 use super::kernels::GpuKernels;
 use super::layout::WorldKey;
 use super::mesh::{MeshKernel, MeshWriter};
-use super::world::{ClothFrame, GpuFrame, GpuWorld, MotionTargets, StepColliders, sum_impulses};
+use super::world::{
+    ClothFrame, GpuFrame, GpuWorld, MotionTargets, StepColliders, TornFlags, sum_impulses,
+};
 use crate::solver::Carry;
 
 /// The compiled kernels (render world).
@@ -157,6 +159,8 @@ struct WriterEntry {
 pub(crate) struct Readback {
     /// Per member: entity, generation, vertices, where its state is in the copy (if read).
     cloths: Vec<(Entity, u64, usize, Option<u64>)>,
+    /// Per member that tears: where its torn-edge flags are in the copy, and their edges.
+    torn: Vec<Option<TornFlags>>,
     /// The collider entities of the impulse slots after the states (empty: none copied).
     colliders: Vec<Entity>,
     impulses_at: u64,
@@ -407,7 +411,8 @@ pub(crate) fn run_gpu_worlds(
         if !w.stepped && !any_state {
             continue;
         }
-        // [statuses | per read-back cloth: positions, velocities | impulse slots].
+        // [statuses | per read-back cloth: positions, velocities | per read-back tearing
+        // cloth: its torn-edge flags | impulse slots].
         let members = w.members.len() as u64;
         let mut cloths = Vec::with_capacity(w.members.len());
         let mut at = 16 * members;
@@ -419,6 +424,17 @@ pub(crate) fn run_gpu_worlds(
                 here
             });
             cloths.push((m.entity, m.generation, n, state_at));
+        }
+        let mut torn = Vec::with_capacity(w.members.len());
+        let mut torn_copies = Vec::new();
+        for (i, m) in w.members.iter().enumerate() {
+            let flags = w.world.torn_flags(i).filter(|_| m.readback);
+            torn.push(flags.map(|f| {
+                torn_copies.push((f.at, at, f.bytes));
+                let here = at;
+                at += f.bytes;
+                TornFlags { at: here, ..f }
+            }));
         }
         let impulses_at = at;
         let (impulse_from, impulse_bytes) = if w.stepped {
@@ -448,6 +464,9 @@ pub(crate) fn run_gpu_worlds(
                 }
             }
         }
+        for (from, to, bytes) in torn_copies {
+            encoder.copy_buffer_to_buffer(w.world.scratch_buffer(), from, &buffer, to, bytes);
+        }
         if impulse_bytes > 0 {
             encoder.copy_buffer_to_buffer(
                 w.world.scratch_buffer(),
@@ -464,6 +483,7 @@ pub(crate) fn run_gpu_worlds(
         };
         worlds.requested.push(Readback {
             cloths,
+            torn,
             colliders,
             impulses_at,
             buffer,
@@ -520,11 +540,25 @@ pub(crate) fn send_gpu_results(
                 let values: Vec<Vec4> = bytemuck::pod_collect_to_vec(&data[at..at + 32 * n]);
                 (values[..n].to_vec(), values[n..].to_vec())
             });
+            // The edges the GPU tore past the threshold (flag 1; those it let go of for want
+            // of a triangle go with them on the CPU).
+            let torn = r.torn.get(i).and_then(Option::as_ref).map(|f| {
+                let at = f.at as usize;
+                let flags: Vec<u32> =
+                    bytemuck::pod_collect_to_vec(&data[at..at + f.bytes as usize]);
+                flags
+                    .iter()
+                    .zip(f.edges.iter())
+                    .filter(|(f, _)| **f == 1)
+                    .map(|(_, e)| *e)
+                    .collect()
+            });
             cloths.push(GpuResult {
                 entity,
                 generation,
                 failed: status.x != 0.0,
-                torn: status.y != 0.0,
+                tear: status.y != 0.0,
+                torn,
                 state,
             });
         }

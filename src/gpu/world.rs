@@ -8,7 +8,9 @@
 //! world with a cloth whose neighbouring seams overlap) and the boundaries (each only if some
 //! cloth has one); `sc_collide` with self-collision; `finish_substep`
 //! (tethers, the self-collision correction, colliders) when any of those acts; per step
-//! `step_end` (velocities, the NaN guard) and `tear_check` with tearing. That is at most 6
+//! `step_end` (velocities, the NaN guard), and `tear_check` and `tear_release` with tearing
+//! (an edge past the threshold and the edges its tear leaves without a triangle hold nothing
+//! from the next step on, as on the CPU, until the host tears the topology). That is at most 6
 //! dispatches a substep however many colours, parts or cloths there are
 //! ([`GpuWorld::dispatches`] counts them). The lab solver has kernels of its own.
 //!
@@ -29,6 +31,29 @@ use crate::solver::{
     Carry, Collider, ContactImpulse, MAX_SELF_NEIGHBOURS, MAX_SELF_TRIANGLES, Pose, SdfGrid, Shape,
     Simulation,
 };
+
+/// A cloth's torn-edge flags in a buffer ([`GpuWorld::torn_flags`]): one `u32` per distance
+/// constraint, 1 once its edge tore past the threshold, 2 once the edge was let go of for
+/// want of a triangle, 0 while it holds.
+#[derive(Clone, Debug)]
+pub struct TornFlags {
+    /// Byte offset of the first flag.
+    pub at: u64,
+    /// Bytes of flags (4 each).
+    pub bytes: u64,
+    /// The edge of each flag (the cloth's own vertex indices).
+    pub edges: Arc<[[u32; 2]]>,
+}
+
+/// What a world's GPU tore of a cloth ([`GpuWorld::read_torn_edges`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct TornEdges {
+    /// The edges found past the tear threshold.
+    pub torn: Vec<[u32; 2]>,
+    /// The edges that hold nothing: the torn ones and those their tears left without a
+    /// triangle.
+    pub released: Vec<[u32; 2]>,
+}
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -74,6 +99,9 @@ pub(crate) struct WorldUniform {
     tcount_at: u32,
     tlist_at: u32,
     first_tri_at: u32,
+    torn_at: u32,
+    edge_tris_at: u32,
+    dead_at: u32,
 }
 
 #[repr(C)]
@@ -338,7 +366,31 @@ struct ScratchRegions {
     nlist: u32,
     tcount: u32,
     tlist: u32,
+    torn: u32,
+    dead: u32,
     impulse: u32,
+}
+
+/// Per cloth of `layout`, the edge (its own vertices) of each of its torn-edge flags, for a
+/// tearing cloth with distance constraints.
+fn torn_edge_tables(layout: &WorldLayout) -> Vec<Option<Arc<[[u32; 2]]>>> {
+    let edges = &layout.topo[layout.edges_at as usize..][..4 * layout.edges as usize];
+    layout
+        .cloths
+        .iter()
+        .map(|c| {
+            if !c.tearing || c.distances.is_empty() {
+                return None;
+            }
+            let mut table = vec![[u32::MAX; 2]; c.distances.len()];
+            for e in edges.chunks_exact(4) {
+                if c.distances.contains(&e[3]) {
+                    table[(e[3] - c.distances.start) as usize] = [e[0] - c.vbase, e[1] - c.vbase];
+                }
+            }
+            Some(table.into())
+        })
+        .collect()
 }
 
 fn storage_init(device: &wgpu::Device, label: &str, bytes: &[u8]) -> wgpu::Buffer {
@@ -413,6 +465,8 @@ fn gpu_collider(
 #[derive(Debug)]
 pub struct GpuWorld {
     layout: WorldLayout,
+    /// Per tearing cloth, the edge (its own vertices) of each of its torn-edge flags.
+    torn_edge_of: Vec<Option<Arc<[[u32; 2]]>>>,
     regions: Regions,
     scratch_regions: ScratchRegions,
     uniform: wgpu::Buffer,
@@ -528,6 +582,11 @@ impl GpuWorld {
             s.tlist = s.tcount + n;
             words = s.tlist + n * MAX_SELF_TRIANGLES as u32;
         }
+        if layout.any_tearing {
+            s.torn = words;
+            s.dead = s.torn + layout.distances;
+            words = s.dead + layout.triangles;
+        }
         s.impulse = words;
         let limit = device.limits().max_storage_buffer_binding_size;
         let state_bytes = u64::from(r.len) * 16;
@@ -580,6 +639,7 @@ impl GpuWorld {
             collider_slots: 0,
             impulse_words: 0,
             carries: Vec::new(),
+            torn_edge_of: torn_edge_tables(&layout),
             layout,
         };
         // Zeroed scratch (empty hash) and state (status clear), then the rest positions and
@@ -724,7 +784,8 @@ impl GpuWorld {
     }
 
     /// Replaces cloth `cloth`'s GPU state with `positions` (`w`: inverse mass, 0 when pinned)
-    /// and `velocities`, one per vertex, and clears its status.
+    /// and `velocities`, one per vertex, and clears its status. Edges flagged torn stay so:
+    /// they belong to the world's topology, which only a rebuild changes.
     ///
     /// # Panics
     /// If either has not [`Self::cloth_len`] entries.
@@ -918,6 +979,9 @@ impl GpuWorld {
             tcount_at: s.tcount,
             tlist_at: s.tlist,
             first_tri_at: l.first_tri_at,
+            torn_at: s.torn,
+            edge_tris_at: l.edge_tris_at,
+            dead_at: s.dead,
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         // The per-frame words of every cloth's record: gravity·h and the damping factor (the
@@ -1302,6 +1366,14 @@ impl GpuWorld {
             enter(&mut out, GpuStage::Begin, [0, 0]);
             out.push(Cmd::Run(&kernels.impulse_clear, groups(self.impulse_words)));
         }
+        if !self.carries.is_empty() && l.any_tearing && l.edges > 0 {
+            // A rebuilt world carrying a tearing cloth (the host's tear lags the GPU's by a
+            // few steps): its edges past the threshold in the carried state hold nothing
+            // before the first step, as they did in the old world.
+            enter(&mut out, GpuStage::Finish, [sub_offset(0, 0), 0]);
+            out.push(Cmd::Run(&kernels.tear_check, groups(l.edges)));
+            out.push(Cmd::Run(&kernels.tear_release, groups(l.edges)));
+        }
         for k in 0..self.steps {
             let first = sub_offset(k, 0);
             enter(&mut out, GpuStage::Begin, [first, 0]);
@@ -1374,6 +1446,7 @@ impl GpuWorld {
             out.push(Cmd::Run(&kernels.step_end, vertex_groups));
             if l.any_tearing && l.edges > 0 {
                 out.push(Cmd::Run(&kernels.tear_check, groups(l.edges)));
+                out.push(Cmd::Run(&kernels.tear_release, groups(l.edges)));
             }
         }
         out
@@ -1412,6 +1485,62 @@ impl GpuWorld {
     ) -> (bool, bool) {
         let s = self.read(device, queue, self.status_offset(cloth), 16)[0];
         (s.x != 0.0, s.y != 0.0)
+    }
+
+    /// Where cloth `cloth`'s torn-edge flags sit in [`Self::scratch_buffer`], and the edge of
+    /// each: what the plugin reads back to tear on the CPU exactly what the GPU tore. `None`
+    /// for a cloth that does not tear (or runs the lab solver, which has no torn flags).
+    #[must_use]
+    pub fn torn_flags(&self, cloth: usize) -> Option<TornFlags> {
+        let c = self.cloth(cloth);
+        let edges = self.torn_edge_of.get(cloth)?.clone()?;
+        Some(TornFlags {
+            at: u64::from(self.scratch_regions.torn + c.distances.start) * 4,
+            bytes: u64::from(c.distances.end - c.distances.start) * 4,
+            edges,
+        })
+    }
+
+    /// What the GPU tore of cloth `cloth` since the world was built (blocking, as
+    /// [`Self::read_state`]), as edges in its own vertex indices, in its topology's edge
+    /// order: the edges `tear_check` found past the tear threshold, and every edge whose
+    /// distance constraint holds nothing since (those and the edges their tears left without
+    /// a triangle). Empty for a cloth that does not tear.
+    #[must_use]
+    pub fn read_torn_edges(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        cloth: usize,
+    ) -> TornEdges {
+        let c = self.cloth(cloth);
+        if !c.tearing || c.distances.is_empty() {
+            return TornEdges::default();
+        }
+        let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&self.read_bytes(
+            device,
+            queue,
+            &self.scratch,
+            u64::from(self.scratch_regions.torn) * 4,
+            u64::from(self.layout.distances) * 4,
+        ));
+        let l = &self.layout;
+        let mut out = TornEdges::default();
+        for e in l.topo[l.edges_at as usize..][..4 * l.edges as usize].chunks_exact(4) {
+            if !(c.vbase..c.vbase + c.n).contains(&e[0]) {
+                continue;
+            }
+            let v = [e[0] - c.vbase, e[1] - c.vbase];
+            match flags.get(e[3] as usize) {
+                Some(1) => {
+                    out.torn.push(v);
+                    out.released.push(v);
+                }
+                Some(2) => out.released.push(v),
+                _ => {}
+            }
+        }
+        out
     }
 
     /// Where the impulse slots of the last prepared frame sit in [`Self::scratch_buffer`]:

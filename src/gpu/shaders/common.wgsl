@@ -21,12 +21,17 @@
 // pin (NO_PIN: none) | per group its record (`GROUP_WORDS`) and colour bounds | per vertex
 // the triangles it belongs to (offsets, list) and the triangles | with self-collision, per
 // vertex the triangles whose first corner it is (offsets, list) | tethers | the lab solver's
-// edges | the tearing cloths' edges.
+// edges | the tearing cloths' edges (a, b: global vertices; rest length bits; the slot of
+// the edge's distance constraint in `cons`, or `NO_PIN`), then per tearing edge its
+// triangles (offsets, list).
 //
 // `scratch` (atomic u32): per cloth the fastest squared speed of the step's start (bits) |
 // self-collision: hash heads (2 per vertex of the cloth), the next vertex in each bucket, per
 // vertex its neighbour count and `SC_MAX` neighbours, per vertex its triangle count and
-// `SC_TRI_MAX` triangles (`triangle << 2 | side`) | the colliders' impulse slots.
+// `SC_TRI_MAX` triangles (`triangle << 2 | side`) | with tearing, per distance constraint 1
+// once `tear_check` found its edge past the threshold, 2 once `tear_release` found its edge
+// left without a triangle (either way the constraint holds nothing), then per triangle 1
+// once an edge of it tore | the colliders' impulse slots.
 //
 // `frame` (vec4): per step every pin's target | per step and cloth a record (xyz: teleport
 // offset; w: 0 not stepped, else 1 + 2 teleporting + 4 carried + 8 held by motion targets;
@@ -74,6 +79,9 @@ struct World {
     tcount_at: u32,
     tlist_at: u32,
     first_tri_at: u32,
+    torn_at: u32,
+    edge_tris_at: u32,
+    dead_at: u32,
 }
 
 // One substep of one step (binding 1, a dynamic offset per substep).
@@ -158,6 +166,7 @@ const FLAG_DIHEDRAL: u32 = 4u;
 const FLAG_ACCUMULATE: u32 = 8u;
 const FLAG_SC: u32 = 16u;
 const FLAG_TETHERS: u32 = 32u;
+const FLAG_TEARING: u32 = 64u;
 
 @group(0) @binding(0) var<uniform> P: World;
 @group(0) @binding(1) var<uniform> S: Substep;

@@ -32,6 +32,11 @@ fn setp(shared_mem: bool, base: u32, k: u32, v: vec4<f32>) {
 
 // `distance::distance_correction` applied to constraint `i`.
 fn project_distance(i: u32, base: u32, shared_mem: bool, flags: u32, first_iteration: bool) {
+    // A torn edge holds nothing from the step after `tear_check` found it, as on the CPU,
+    // which tears at once, until the host's tear removes it from the topology.
+    if (flags & FLAG_TEARING) != 0u && atomicLoad(&scratch[P.torn_at + i]) != 0u {
+        return;
+    }
     let c = cons[i];
     let pa = getp(shared_mem, base, c.x);
     let pb = getp(shared_mem, base, c.y);

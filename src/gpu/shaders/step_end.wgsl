@@ -39,9 +39,12 @@ fn step_end(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 // End of a step: flags a cloth with an edge stretched past its tear threshold
-// (`tear::overstretched_edges`); the host reads the state back and tears on the CPU, which
+// (`tear::overstretched_edges`, over the edges not torn yet), and the edge torn: its distance
+// constraint holds nothing from the next step on and its triangles are dead, as the CPU's
+// tear (`Topology::without_edges`) would have them; `tear_release` then lets go of the edges
+// left without a triangle. The host reads the state back and tears on the CPU, which
 // rebuilds the topology and uploads it again. The tearing cloths' edges: (a, b, rest bits,
-// cloth), global vertices.
+// constraint slot), global vertices.
 @compute @workgroup_size(64)
 fn tear_check(@builtin(global_invocation_id) id: vec3<u32>) {
     let e = id.x;
@@ -49,8 +52,12 @@ fn tear_check(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let at = P.edges_at + 4u * e;
-    let c = topo[at + 3u];
+    let c = vertex_cloth(topo[at]);
     if !cloth_active(c) {
+        return;
+    }
+    let slot = topo[at + 3u];
+    if slot != NO_PIN && atomicLoad(&scratch[P.torn_at + slot]) != 0u {
         return;
     }
     let cl = cloth_of(c);
@@ -58,7 +65,43 @@ fn tear_check(@builtin(global_invocation_id) id: vec3<u32>) {
     let d = state[topo[at]].xyz - state[topo[at + 1u]].xyz;
     if rest > 0.0 && cl.tear > 1.0 && length(d) > cl.tear * rest {
         state[P.status_at + cl.status].y = 1.0;
+        if slot != NO_PIN {
+            atomicStore(&scratch[P.torn_at + slot], 1u);
+            let end = topo[P.edge_tris_at + e + 1u];
+            for (var k = topo[P.edge_tris_at + e]; k < end; k++) {
+                atomicStore(&scratch[P.dead_at + topo[k]], 1u);
+            }
+        }
     }
+}
+
+// After `tear_check`: an edge whose triangles all died holds nothing from the next step on
+// (the CPU's rebuilt topology keeps no edge without a triangle).
+@compute @workgroup_size(64)
+fn tear_release(@builtin(global_invocation_id) id: vec3<u32>) {
+    let e = id.x;
+    if e >= P.edges {
+        return;
+    }
+    let at = P.edges_at + 4u * e;
+    let slot = topo[at + 3u];
+    if slot == NO_PIN || !cloth_active(vertex_cloth(topo[at])) {
+        return;
+    }
+    if atomicLoad(&scratch[P.torn_at + slot]) != 0u {
+        return;
+    }
+    let first = topo[P.edge_tris_at + e];
+    let end = topo[P.edge_tris_at + e + 1u];
+    if first == end {
+        return;
+    }
+    for (var k = first; k < end; k++) {
+        if atomicLoad(&scratch[P.dead_at + topo[k]]) == 0u {
+            return;
+        }
+    }
+    atomicStore(&scratch[P.torn_at + slot], 2u);
 }
 
 // After a rebuild, for a cloth that goes on from an earlier world (its vertices `L.first`,

@@ -776,6 +776,27 @@ impl ConstraintBatches {
         self.parts.iter().chain(self.after_parts())
     }
 
+    /// Makes the distance constraints of `edges` (indices into the topology's edges) hold
+    /// nothing from now on: each one's second end becomes its first, so it has no length to
+    /// correct. What an edge flagged torn does on the GPU between its tear check and the
+    /// host's tear (the CPU tears at once, removing the edge from the topology); its hinges
+    /// and triangles stay until then.
+    pub fn release_edges(&mut self, edges: &[u32]) {
+        let parts = self
+            .parts
+            .iter_mut()
+            .chain(self.seams.iter_mut().flatten())
+            .chain(core::iter::once(&mut self.boundary));
+        for part in parts {
+            let d = &mut part.distance;
+            for (i, e) in d.edge.iter().enumerate() {
+                if edges.contains(e) {
+                    d.b[i] = d.a[i];
+                }
+            }
+        }
+    }
+
     /// Every distance constraint's vertices in global indices, colour by colour:
     /// `(part, colour) → [(a, b)]`. Used to check colourings.
     #[must_use]
@@ -825,6 +846,7 @@ impl ConstraintBatches {
 mod tests {
     use super::*;
     use crate::solver::mesh::{Grid, TopologyOptions};
+    use glam::Vec3;
     use std::collections::HashSet;
 
     fn batches(n: u32, parts: usize) -> (Topology, ConstraintBatches) {
@@ -833,6 +855,51 @@ mod tests {
             .unwrap();
         let b = ConstraintBatches::new(&t, Solver::default(), parts);
         (t, b)
+    }
+
+    #[test]
+    fn released_edges_hold_nothing_and_the_others_still_hold() {
+        // Four parts, so that the released edges lie in parts, seams and the boundary.
+        let g = Grid::new(8, 8, 1.0, 1.0);
+        let t = g.topology(TopologyOptions::default()).unwrap();
+        let v = g.index(3, 4);
+        let pulled: Vec<Vec4> = g
+            .positions()
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (*p + Vec3::X * if i == v as usize { 0.5 } else { 0.0 }).extend(1.0))
+            .collect();
+        let project = |b: &mut ConstraintBatches| {
+            let mut pos = pulled.clone();
+            let mode = b.mode(1.0 / 60.0);
+            let parts = b.parts.iter_mut().chain(b.seams.iter_mut().flatten());
+            for p in parts.chain(core::iter::once(&mut b.boundary)) {
+                // A part's indices are local to its range.
+                p.distance.project::<false>(&mut pos[p.range.clone()], mode);
+            }
+            pos
+        };
+        let mut b = ConstraintBatches::new(&t, Solver::default(), 4);
+        assert_ne!(project(&mut b)[v as usize], pulled[v as usize]);
+        let at_v: Vec<u32> = (0..t.edges().len() as u32)
+            .filter(|&e| t.edges()[e as usize].v.contains(&v))
+            .collect();
+        b.release_edges(&at_v);
+        let pos = project(&mut b);
+        assert_eq!(pos[v as usize], pulled[v as usize]);
+        // Those and no others.
+        let released: usize = b
+            .all_parts()
+            .map(|p| {
+                p.distance
+                    .a
+                    .iter()
+                    .zip(&p.distance.b)
+                    .filter(|(a, b)| a == b)
+                    .count()
+            })
+            .sum();
+        assert_eq!(released, at_v.len());
     }
 
     #[test]

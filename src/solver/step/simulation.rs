@@ -336,10 +336,23 @@ impl Simulation {
             return Vec::new();
         };
         let over = overstretched_edges(&self.state.positions, self.topology.edges(), threshold);
-        if over.is_empty() {
-            return over;
+        self.tear_edges(&over)
+    }
+
+    /// Tears `edges` (vertex pairs, either order; pairs that are not edges of the topology
+    /// are ignored) as [`Self::tear`] tears the edges past the threshold, and returns every
+    /// edge that left. The GPU backend calls it with the edges its tear check found, which
+    /// it reads back a few frames after the GPU let go of them.
+    pub fn tear_edges(&mut self, edges: &[[u32; 2]]) -> Vec<[u32; 2]> {
+        if edges.is_empty() {
+            return Vec::new();
         }
-        let torn = self.topology.without_edges(&over);
+        let torn = self.topology.without_edges(edges);
+        if torn.triangles().len() == self.topology.triangles().len()
+            && torn.edges().len() == self.topology.edges().len()
+        {
+            return Vec::new();
+        }
         let gone = vanished_edges(self.topology.edges(), torn.edges());
         self.topology = torn;
         self.scratch.implicit.invalidate();

@@ -90,6 +90,36 @@ mod tests {
     }
 
     #[test]
+    fn tearing_given_edges_tears_as_the_threshold_does_and_ignores_non_edges() {
+        use crate::solver::{Features, Simulation, SolverParams};
+        let g = Grid::new(6, 6, 1.0, 1.0);
+        let t = g.topology(TopologyOptions::default()).unwrap();
+        let mut a = Simulation::new(t, &[0.01; 36], SolverParams::default()).unwrap();
+        a.set_features(Features {
+            tear_threshold: Some(1.5),
+            ..Default::default()
+        })
+        .unwrap();
+        let mut b = a.clone();
+        for s in [&mut a, &mut b] {
+            s.state_mut().positions[g.index(2, 2) as usize].x += 0.4;
+        }
+        let over = overstretched_edges(&a.state().positions, a.topology().edges(), 1.5);
+        assert!(!over.is_empty());
+        let by_threshold = a.tear();
+        // The same edges given, either way round, with a pair that is no edge.
+        let mut given: Vec<[u32; 2]> = over.iter().map(|e| [e[1], e[0]]).collect();
+        given.push([g.index(0, 0), g.index(5, 5)]);
+        assert_eq!(b.tear_edges(&given), by_threshold);
+        assert_eq!(b.topology().triangles(), a.topology().triangles());
+        assert!(by_threshold.len() >= over.len());
+        // Nothing that is an edge: nothing tears, the topology stays.
+        let before = b.topology().triangles().len();
+        assert!(b.tear_edges(&[[g.index(0, 0), g.index(5, 5)]]).is_empty());
+        assert_eq!(b.topology().triangles().len(), before);
+    }
+
+    #[test]
     fn only_edges_past_the_threshold_tear() {
         let g = Grid::new(3, 2, 2.0, 1.0);
         let t = g.topology(TopologyOptions::default()).unwrap();
