@@ -175,9 +175,24 @@ fn push_distances(part: &Part, range: core::ops::Range<usize>, out: &mut Distanc
     }
 }
 
+/// The hinges of `cons` as they are laid out (three vec4 each), with the topology bend (of
+/// its cloth) each one holds.
+#[derive(Default)]
+struct Hinges {
+    cons: Vec<[[u32; 4]; 3]>,
+    bend: Vec<u32>,
+}
+
+impl Hinges {
+    fn len(&self) -> usize {
+        self.cons.len()
+    }
+}
+
 /// Appends hinges: four local vertices, then four weights (isometric) or the rest angle
-/// (dihedral), then the material parameter.
-fn push_hinges(part: &Part, range: core::ops::Range<usize>, out: &mut Vec<[[u32; 4]; 3]>) {
+/// (dihedral), then the material parameter and, for a tearing cloth, the hinge's two
+/// triangles (written once its cloth's groups are laid out; `NO_PIN` otherwise).
+fn push_hinges(part: &Part, range: core::ops::Range<usize>, out: &mut Hinges) {
     let b = &part.bending;
     for i in range {
         let a = if b.iso {
@@ -185,11 +200,12 @@ fn push_hinges(part: &Part, range: core::ops::Range<usize>, out: &mut Vec<[[u32;
         } else {
             [b.rest[i].to_bits(), 0, 0, 0]
         };
-        out.push([
+        out.cons.push([
             [0, 1, 2, 3].map(|k| b.v()[k][i]),
             a,
-            [b.param[i].to_bits(), 0, 0, 0],
+            [b.param[i].to_bits(), NO_PIN, NO_PIN, 0],
         ]);
+        out.bend.push(b.bend[i]);
     }
 }
 
@@ -202,7 +218,7 @@ fn group(
     bending: bool,
     shared: bool,
     dist: &mut Distances,
-    hinges: &mut Vec<[[u32; 4]; 3]>,
+    hinges: &mut Hinges,
 ) -> GroupSpec {
     let mut record = [0u32; GROUP_WORDS];
     record[0] = cloth;
@@ -263,7 +279,7 @@ impl WorldLayout {
             ..Default::default()
         };
         let mut dist = Distances::default();
-        let mut hinges: Vec<[[u32; 4]; 3]> = Vec::new();
+        let mut hinges = Hinges::default();
         let mut levels: [Vec<GroupSpec>; 4] = Default::default();
         let mut vertex_cloth = Vec::new();
         let mut vertex_pin = Vec::new();
@@ -370,6 +386,7 @@ impl WorldLayout {
             records.push(rec);
             // Groups: parts (in workgroup memory when they fit), seams, the boundary.
             let first_distance = dist.len();
+            let first_hinge = hinges.len();
             if !key.lab {
                 let bending = batches.bending;
                 for part in &batches.parts {
@@ -420,6 +437,29 @@ impl WorldLayout {
                         .zip(slot)
                         .map(|(e, slot)| [vbase + e.v[0], vbase + e.v[1], e.rest.to_bits(), slot]),
                 );
+                // Each hinge's two triangles, which hold it only while neither tore.
+                let mut triangle_of: Vec<([u32; 3], u32)> = t
+                    .triangles()
+                    .iter()
+                    .enumerate()
+                    .map(|(k, tri)| {
+                        let mut key = *tri;
+                        key.sort_unstable();
+                        (key, tri_base + k as u32)
+                    })
+                    .collect();
+                triangle_of.sort_unstable();
+                let find = |mut key: [u32; 3]| {
+                    key.sort_unstable();
+                    triangle_of
+                        .binary_search_by_key(&key, |x| x.0)
+                        .map_or(NO_PIN, |i| triangle_of[i].1)
+                };
+                for k in first_hinge..hinges.len() {
+                    let v = t.bends()[hinges.bend[k] as usize].v;
+                    hinges.cons[k][2][1] = find([v[0], v[1], v[2]]);
+                    hinges.cons[k][2][2] = find([v[0], v[1], v[3]]);
+                }
             }
             out.any_tethers |= flags & FLAG_TETHERS != 0;
             out.any_accumulate |= flags & FLAG_ACCUMULATE != 0;
@@ -457,7 +497,7 @@ impl WorldLayout {
         out.hinges = hinges.len() as u32;
         out.bend_at = dist.len() as u32;
         out.cons = dist.cons;
-        out.cons.extend(hinges.iter().flatten());
+        out.cons.extend(hinges.cons.iter().flatten());
         // `topo`.
         let n = out.n as usize;
         let mut topo: Vec<u32> = Vec::new();
@@ -639,6 +679,54 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn each_tearing_cloths_flags_name_its_own_edges() {
+        // Three cloths, the first and last tearing: every flag of a tearing cloth is one of
+        // its edges, each edge has one flag, and its triangles are those that have the edge.
+        let tearing = |n: u32| {
+            let mut c = HangingCloth::new(n);
+            c.features.tear_threshold = Some(1.5);
+            c.build().unwrap()
+        };
+        let (a, b, c) = (tearing(20), standard(12), tearing(40));
+        let world = WorldLayout::build(&[&a, &b, &c]);
+        let tables = crate::gpu::world::torn_edge_tables(&world);
+        assert!(tables[1].is_none());
+        let lists = &world.topo[world.edge_tris_at as usize..];
+        let mut tear_edge = 0;
+        for (k, sim) in [(0, &a), (2, &c)] {
+            let layout = &world.cloths[k];
+            let table = tables[k].as_ref().unwrap();
+            assert_eq!(table.len(), layout.distances.len());
+            let mut flags: Vec<[u32; 2]> = table.to_vec();
+            flags.sort_unstable();
+            let mut edges: Vec<[u32; 2]> = sim.topology().edges().iter().map(|e| e.v).collect();
+            edges.sort_unstable();
+            assert_eq!(flags, edges);
+            for e in sim.topology().edges() {
+                let (from, to) = (lists[tear_edge] as usize, lists[tear_edge + 1] as usize);
+                let mut tris: Vec<u32> = world.topo[from..to].to_vec();
+                tris.sort_unstable();
+                let base = if k == 0 {
+                    0
+                } else {
+                    (a.topology().triangles().len() + b.topology().triangles().len()) as u32
+                };
+                let expected: Vec<u32> = sim
+                    .topology()
+                    .triangles()
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, t)| t.contains(&e.v[0]) && t.contains(&e.v[1]))
+                    .map(|(i, _)| base + i as u32)
+                    .collect();
+                assert_eq!(tris, expected);
+                tear_edge += 1;
+            }
+        }
+        assert_eq!(tear_edge, world.edges as usize);
     }
 
     #[test]

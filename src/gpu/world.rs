@@ -373,7 +373,7 @@ struct ScratchRegions {
 
 /// Per cloth of `layout`, the edge (its own vertices) of each of its torn-edge flags, for a
 /// tearing cloth with distance constraints.
-fn torn_edge_tables(layout: &WorldLayout) -> Vec<Option<Arc<[[u32; 2]]>>> {
+pub(crate) fn torn_edge_tables(layout: &WorldLayout) -> Vec<Option<Arc<[[u32; 2]]>>> {
     let edges = &layout.topo[layout.edges_at as usize..][..4 * layout.edges as usize];
     layout
         .cloths

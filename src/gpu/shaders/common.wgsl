@@ -15,7 +15,8 @@
 //
 // `cons` (vec4<u32>): distance constraints (a, b: vertices local to their group; rest length
 // and material parameter as f32 bits), then hinges, three vec4 each (four local vertices;
-// four weights, or the rest angle in the first; the material parameter in the first).
+// four weights, or the rest angle in the first; the material parameter in the first and, for
+// a tearing cloth, the hinge's two triangles (global) in the second and third).
 //
 // `topo` (u32): per cloth its record (`CLOTH_WORDS`) | per vertex its cloth | per vertex its
 // pin (NO_PIN: none) | per group its record (`GROUP_WORDS`) and colour bounds | per vertex

@@ -64,8 +64,22 @@ fn project_distance(i: u32, base: u32, shared_mem: bool, flags: u32, first_itera
     }
 }
 
+// Whether hinge `j` of a tearing cloth lost a triangle to a tear: it then holds nothing, as
+// on the CPU, whose tear removes it, until the host's tear removes it here too.
+fn hinge_torn(j: u32, flags: u32) -> bool {
+    if (flags & FLAG_TEARING) == 0u {
+        return false;
+    }
+    let t = cons[P.bend_at + 3u * j + 2u];
+    return (t.y != NO_PIN && atomicLoad(&scratch[P.dead_at + t.y]) != 0u)
+        || (t.z != NO_PIN && atomicLoad(&scratch[P.dead_at + t.z]) != 0u);
+}
+
 // `isometric::iso_correction` applied to hinge `j`.
 fn project_iso(j: u32, base: u32, shared_mem: bool, flags: u32, first_iteration: bool) {
+    if hinge_torn(j, flags) {
+        return;
+    }
     let v = cons[P.bend_at + 3u * j];
     let a = bitcast<vec4<f32>>(cons[P.bend_at + 3u * j + 1u]);
     let param = bitcast<f32>(cons[P.bend_at + 3u * j + 2u].x);
@@ -98,6 +112,9 @@ fn project_iso(j: u32, base: u32, shared_mem: bool, flags: u32, first_iteration:
 // `dihedral::bend_correction` applied to hinge `j` (signed angle, rest angle in the first
 // weight).
 fn project_dihedral(j: u32, base: u32, shared_mem: bool, flags: u32, first_iteration: bool) {
+    if hinge_torn(j, flags) {
+        return;
+    }
     let v = cons[P.bend_at + 3u * j];
     let rest = bitcast<f32>(cons[P.bend_at + 3u * j + 1u].x);
     let param = bitcast<f32>(cons[P.bend_at + 3u * j + 2u].x);

@@ -797,6 +797,36 @@ impl ConstraintBatches {
         }
     }
 
+    /// Makes the hinges of `bends` (indices into the topology's bends) hold nothing from now
+    /// on: an isometric hinge's weights become zero, a dihedral hinge's four vertices one, so
+    /// it has no shape to correct. What a hinge that lost a triangle to a tear does on the GPU
+    /// between its tear check and the host's tear (the CPU's tear removes it at once).
+    pub fn release_bends(&mut self, bends: &[u32]) {
+        let parts = self
+            .parts
+            .iter_mut()
+            .chain(self.seams.iter_mut().flatten())
+            .chain(core::iter::once(&mut self.boundary));
+        for part in parts {
+            let b = &mut part.bending;
+            for i in 0..b.bend.len() {
+                if !bends.contains(&b.bend[i]) {
+                    continue;
+                }
+                if b.iso {
+                    for a in &mut b.a {
+                        a[i] = 0.0;
+                    }
+                } else {
+                    let first = b.v[0][i];
+                    for v in &mut b.v[1..] {
+                        v[i] = first;
+                    }
+                }
+            }
+        }
+    }
+
     /// Every distance constraint's vertices in global indices, colour by colour:
     /// `(part, colour) → [(a, b)]`. Used to check colourings.
     #[must_use]
@@ -900,6 +930,51 @@ mod tests {
             })
             .sum();
         assert_eq!(released, at_v.len());
+    }
+
+    #[test]
+    fn released_hinges_hold_nothing_in_either_model() {
+        for model in [BendingModel::Isometric, BendingModel::Dihedral] {
+            let g = Grid::new(8, 8, 1.0, 1.0);
+            let options = TopologyOptions {
+                bending: model,
+                ..Default::default()
+            };
+            let t = g.topology(options).unwrap();
+            let v = g.index(3, 4);
+            // v lifted out of the plane: the hinges around it bend.
+            let lifted: Vec<Vec4> = g
+                .positions()
+                .iter()
+                .enumerate()
+                .map(|(i, p)| (*p + Vec3::Y * if i == v as usize { 0.1 } else { 0.0 }).extend(1.0))
+                .collect();
+            let project = |b: &mut ConstraintBatches| {
+                let mut pos = lifted.clone();
+                let mode = b.mode(1.0 / 60.0);
+                let parts = b.parts.iter_mut().chain(b.seams.iter_mut().flatten());
+                for p in parts.chain(core::iter::once(&mut b.boundary)) {
+                    p.bending.project::<false>(&mut pos[p.range.clone()], mode);
+                }
+                pos
+            };
+            let mut b = ConstraintBatches::new(&t, Solver::default(), 4);
+            assert_ne!(project(&mut b), lifted, "{model:?}");
+            let at_v: Vec<u32> = (0..t.bends().len() as u32)
+                .filter(|&i| t.bends()[i as usize].v.contains(&v))
+                .collect();
+            // All but one of them released: that one still acts; then none does (the other
+            // hinges are flat).
+            let (last, rest) = at_v.split_last().unwrap();
+            b.release_bends(rest);
+            assert_ne!(
+                project(&mut b),
+                lifted,
+                "{model:?}: hinge {last} still acts"
+            );
+            b.release_bends(&[*last]);
+            assert_eq!(project(&mut b), lifted, "{model:?}: nothing holds");
+        }
     }
 
     #[test]
