@@ -467,6 +467,9 @@ pub struct GpuWorld {
     layout: WorldLayout,
     /// Per tearing cloth, the edge (its own vertices) of each of its torn-edge flags.
     torn_edge_of: Vec<Option<Arc<[[u32; 2]]>>>,
+    /// A tearing cloth was carried in and the tear check has not run on its state yet (the
+    /// frame of the carry may have no step).
+    tear_after_carry: bool,
     regions: Regions,
     scratch_regions: ScratchRegions,
     uniform: wgpu::Buffer,
@@ -640,6 +643,7 @@ impl GpuWorld {
             impulse_words: 0,
             carries: Vec::new(),
             torn_edge_of: torn_edge_tables(&layout),
+            tear_after_carry: false,
             layout,
         };
         // Zeroed scratch (empty hash) and state (status clear), then the rest positions and
@@ -1243,6 +1247,7 @@ impl GpuWorld {
             size,
         );
         self.carries.push((new.vbase, new.n));
+        self.tear_after_carry |= self.layout.any_tearing;
     }
 
     /// Records the frame [`Self::prepare`] wrote for into `encoder` (one compute pass).
@@ -1255,7 +1260,16 @@ impl GpuWorld {
             });
             replay(&mut pass, bg, &cmds);
         }
+        self.recorded();
+    }
+
+    /// After a frame is recorded: its carries are done, and so is the tear check after them
+    /// if it had a step to record it in.
+    fn recorded(&mut self) {
         self.carries.clear();
+        if self.steps > 0 {
+            self.tear_after_carry = false;
+        }
     }
 
     /// As [`Self::record`], one compute pass per stage run, each with timestamps into
@@ -1298,7 +1312,7 @@ impl GpuWorld {
             replay(&mut pass, bg, &cmds[start..end]);
             stages.push(stage);
         }
-        self.carries.clear();
+        self.recorded();
         stages
     }
 
@@ -1366,7 +1380,7 @@ impl GpuWorld {
             enter(&mut out, GpuStage::Begin, [0, 0]);
             out.push(Cmd::Run(&kernels.impulse_clear, groups(self.impulse_words)));
         }
-        if !self.carries.is_empty() && l.any_tearing && l.edges > 0 {
+        if self.tear_after_carry && l.edges > 0 {
             // A rebuilt world carrying a tearing cloth (the host's tear lags the GPU's by a
             // few steps): its edges past the threshold in the carried state hold nothing
             // before the first step, as they did in the old world.
