@@ -447,6 +447,38 @@ fn a_gpu_cloth_tears_when_pulled_apart() {
     assert!(sim.simulation().state().is_finite());
 }
 
+/// Tearing switched on at runtime (as the editor's toggle does) on a GPU cloth already
+/// stretched past the threshold: its world is rebuilt with the cloth's state carried over,
+/// the edges past the threshold tear within a few frames, and the cloth stays on the GPU;
+/// switched off again, nothing more tears.
+#[test]
+fn tearing_switched_on_at_runtime_tears_a_stretched_gpu_cloth() {
+    if common::gpu_or_skip("tearing_switched_on_at_runtime_tears_a_stretched_gpu_cloth").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    let (cloth, anchors) = spawn_held(&mut app, 0.0, ClothBackend::Gpu);
+    app.world_mut().entity_mut(cloth).remove::<ClothTearing>();
+    common::run(&mut app, 5);
+    assert!(in_use(&app, cloth).gpu, "{:?}", in_use(&app, cloth));
+    // Pulled to 2.6 times its width with nothing tearing.
+    pull_apart(&mut app, &[(cloth, anchors, 0.0)]);
+    let torn = |app: &App| app.world().get::<ClothSim>(cloth).unwrap().torn_edges();
+    assert_eq!(torn(&app), 0);
+    app.world_mut()
+        .entity_mut(cloth)
+        .insert(ClothTearing { threshold: 1.4 });
+    common::run(&mut app, 10);
+    let after = torn(&app);
+    assert!(after > 0, "nothing tore");
+    assert!(in_use(&app, cloth).gpu, "it stays on the GPU");
+    app.world_mut().entity_mut(cloth).remove::<ClothTearing>();
+    common::run(&mut app, 10);
+    assert_eq!(torn(&app), after, "tearing is off again");
+    let sim = app.world().get::<ClothSim>(cloth).unwrap();
+    assert!(sim.simulation().state().is_finite());
+}
+
 /// The `tearing` example's curtain at `x`: 28×28 vertices, 1.4 m, hanging from two anchors
 /// along its left and right columns, a slit at the top of its middle, tearing past 1.5×.
 /// Returns the cloth and its anchors.
