@@ -601,6 +601,15 @@ impl Part {
     }
 }
 
+/// `true` at each listed index.
+fn mask(indices: &[u32]) -> Vec<bool> {
+    let mut out = vec![false; indices.iter().map(|&i| i as usize + 1).max().unwrap_or(0)];
+    for &i in indices {
+        out[i as usize] = true;
+    }
+    out
+}
+
 /// Number of parts for `n` vertices: about 2048 vertices a part, at most 16.
 #[must_use]
 pub fn default_part_count(n: usize) -> usize {
@@ -782,6 +791,7 @@ impl ConstraintBatches {
     /// host's tear (the CPU tears at once, removing the edge from the topology); its hinges
     /// and triangles stay until then.
     pub fn release_edges(&mut self, edges: &[u32]) {
+        let listed = mask(edges);
         let parts = self
             .parts
             .iter_mut()
@@ -789,8 +799,8 @@ impl ConstraintBatches {
             .chain(core::iter::once(&mut self.boundary));
         for part in parts {
             let d = &mut part.distance;
-            for (i, e) in d.edge.iter().enumerate() {
-                if edges.contains(e) {
+            for (i, &e) in d.edge.iter().enumerate() {
+                if listed.get(e as usize).copied().unwrap_or(false) {
                     d.b[i] = d.a[i];
                 }
             }
@@ -802,6 +812,7 @@ impl ConstraintBatches {
     /// it has no shape to correct. What a hinge that lost a triangle to a tear does on the GPU
     /// between its tear check and the host's tear (the CPU's tear removes it at once).
     pub fn release_bends(&mut self, bends: &[u32]) {
+        let listed = mask(bends);
         let parts = self
             .parts
             .iter_mut()
@@ -810,7 +821,7 @@ impl ConstraintBatches {
         for part in parts {
             let b = &mut part.bending;
             for i in 0..b.bend.len() {
-                if !bends.contains(&b.bend[i]) {
+                if !listed.get(b.bend[i] as usize).copied().unwrap_or(false) {
                     continue;
                 }
                 if b.iso {
