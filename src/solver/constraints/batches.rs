@@ -744,16 +744,10 @@ impl ConstraintBatches {
         };
         self.bending = solver.bending_enabled();
         self.mode_is_xpbd = matches!(solver, Solver::Xpbd { .. });
-        let [even, odd] = &mut self.seams;
-        for part in self
-            .parts
-            .iter_mut()
-            .chain(even.iter_mut())
-            .chain(odd.iter_mut())
-            .chain(core::iter::once(&mut self.boundary))
-        {
+        let xpbd = self.mode_is_xpbd;
+        for part in self.all_parts_mut() {
             part.distance.set_params(topology, stretch, shear);
-            part.bending.set_params(bending, self.mode_is_xpbd);
+            part.bending.set_params(bending, xpbd);
         }
     }
 
@@ -785,6 +779,14 @@ impl ConstraintBatches {
         self.parts.iter().chain(self.after_parts())
     }
 
+    /// [`Self::all_parts`], to change.
+    fn all_parts_mut(&mut self) -> impl Iterator<Item = &mut Part> {
+        self.parts
+            .iter_mut()
+            .chain(self.seams.iter_mut().flatten())
+            .chain(core::iter::once(&mut self.boundary))
+    }
+
     /// Makes the distance constraints of `edges` (indices into the topology's edges) hold
     /// nothing from now on: each one's second end becomes its first, so it has no length to
     /// correct. What an edge flagged torn does on the GPU between its tear check and the
@@ -792,12 +794,7 @@ impl ConstraintBatches {
     /// and triangles stay until then.
     pub fn release_edges(&mut self, edges: &[u32]) {
         let listed = mask(edges);
-        let parts = self
-            .parts
-            .iter_mut()
-            .chain(self.seams.iter_mut().flatten())
-            .chain(core::iter::once(&mut self.boundary));
-        for part in parts {
+        for part in self.all_parts_mut() {
             let d = &mut part.distance;
             for (i, &e) in d.edge.iter().enumerate() {
                 if listed.get(e as usize).copied().unwrap_or(false) {
@@ -813,12 +810,7 @@ impl ConstraintBatches {
     /// between its tear check and the host's tear (the CPU's tear removes it at once).
     pub fn release_bends(&mut self, bends: &[u32]) {
         let listed = mask(bends);
-        let parts = self
-            .parts
-            .iter_mut()
-            .chain(self.seams.iter_mut().flatten())
-            .chain(core::iter::once(&mut self.boundary));
-        for part in parts {
+        for part in self.all_parts_mut() {
             let b = &mut part.bending;
             for i in 0..b.bend.len() {
                 if !listed.get(b.bend[i] as usize).copied().unwrap_or(false) {
@@ -898,28 +890,37 @@ mod tests {
         (t, b)
     }
 
+    /// The grid's rest positions with vertex `v` moved by `by`.
+    fn moved(g: &Grid, v: u32, by: Vec3) -> Vec<Vec4> {
+        let mut pos: Vec<Vec4> = g.positions().iter().map(|p| p.extend(1.0)).collect();
+        pos[v as usize] += by.extend(0.0);
+        pos
+    }
+
+    /// `from` after one projection of every part's distances (`bending`: hinges instead).
+    fn project_once(b: &mut ConstraintBatches, from: &[Vec4], bending: bool) -> Vec<Vec4> {
+        let mut pos = from.to_vec();
+        let mode = b.mode(1.0 / 60.0);
+        for p in b.all_parts_mut() {
+            // A part's indices are local to its range.
+            let pos = &mut pos[p.range.clone()];
+            if bending {
+                p.bending.project::<false>(pos, mode);
+            } else {
+                p.distance.project::<false>(pos, mode);
+            }
+        }
+        pos
+    }
+
     #[test]
     fn released_edges_hold_nothing_and_the_others_still_hold() {
         // Four parts, so that the released edges lie in parts, seams and the boundary.
         let g = Grid::new(8, 8, 1.0, 1.0);
         let t = g.topology(TopologyOptions::default()).unwrap();
         let v = g.index(3, 4);
-        let pulled: Vec<Vec4> = g
-            .positions()
-            .iter()
-            .enumerate()
-            .map(|(i, p)| (*p + Vec3::X * if i == v as usize { 0.5 } else { 0.0 }).extend(1.0))
-            .collect();
-        let project = |b: &mut ConstraintBatches| {
-            let mut pos = pulled.clone();
-            let mode = b.mode(1.0 / 60.0);
-            let parts = b.parts.iter_mut().chain(b.seams.iter_mut().flatten());
-            for p in parts.chain(core::iter::once(&mut b.boundary)) {
-                // A part's indices are local to its range.
-                p.distance.project::<false>(&mut pos[p.range.clone()], mode);
-            }
-            pos
-        };
+        let pulled = moved(&g, v, Vec3::X * 0.5);
+        let project = |b: &mut ConstraintBatches| project_once(b, &pulled, false);
         let mut b = ConstraintBatches::new(&t, Solver::default(), 4);
         assert_ne!(project(&mut b)[v as usize], pulled[v as usize]);
         let at_v: Vec<u32> = (0..t.edges().len() as u32)
@@ -954,21 +955,8 @@ mod tests {
             let t = g.topology(options).unwrap();
             let v = g.index(3, 4);
             // v lifted out of the plane: the hinges around it bend.
-            let lifted: Vec<Vec4> = g
-                .positions()
-                .iter()
-                .enumerate()
-                .map(|(i, p)| (*p + Vec3::Y * if i == v as usize { 0.1 } else { 0.0 }).extend(1.0))
-                .collect();
-            let project = |b: &mut ConstraintBatches| {
-                let mut pos = lifted.clone();
-                let mode = b.mode(1.0 / 60.0);
-                let parts = b.parts.iter_mut().chain(b.seams.iter_mut().flatten());
-                for p in parts.chain(core::iter::once(&mut b.boundary)) {
-                    p.bending.project::<false>(&mut pos[p.range.clone()], mode);
-                }
-                pos
-            };
+            let lifted = moved(&g, v, Vec3::Y * 0.1);
+            let project = |b: &mut ConstraintBatches| project_once(b, &lifted, true);
             let mut b = ConstraintBatches::new(&t, Solver::default(), 4);
             assert_ne!(project(&mut b), lifted, "{model:?}");
             let at_v: Vec<u32> = (0..t.bends().len() as u32)
