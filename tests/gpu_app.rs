@@ -386,23 +386,25 @@ fn spawn_held(app: &mut App, x: f32, backend: ClothBackend) -> (Entity, [Entity;
     (cloth, [left, right])
 }
 
+/// Puts two anchors at `x ∓ d`.
+fn spread(app: &mut App, [left, right]: [Entity; 2], x: f32, d: f32) {
+    for (anchor, at) in [(left, x - d), (right, x + d)] {
+        app.world_mut()
+            .get_mut::<Transform>(anchor)
+            .unwrap()
+            .translation
+            .x = at;
+    }
+}
+
 /// Moves each cloth's anchors apart 2 cm a frame on either side for 60 frames, then 5 more
 /// frames; returns the `ClothTorn` messages each cloth sent.
 fn pull_apart(app: &mut App, held: &[(Entity, [Entity; 2], f32)]) -> Vec<usize> {
     let mut messages = vec![0; held.len()];
     for k in 0..60 {
         let d = 0.5 + 0.02 * k as f32;
-        for &(_, [left, right], x) in held {
-            app.world_mut()
-                .get_mut::<Transform>(left)
-                .unwrap()
-                .translation
-                .x = x - d;
-            app.world_mut()
-                .get_mut::<Transform>(right)
-                .unwrap()
-                .translation
-                .x = x + d;
+        for &(_, anchors, x) in held {
+            spread(app, anchors, x, d);
         }
         app.update();
         for (m, (cloth, _, _)) in messages.iter_mut().zip(held) {
@@ -563,17 +565,8 @@ fn the_gpu_tears_as_much_as_the_cpu() {
     assert!(in_use(&app, gpu).gpu && !in_use(&app, cpu).gpu);
     for k in 1..=150 {
         let d = 0.7 + 0.4 * k as f32 / 60.0;
-        for (x, [left, right]) in [(-2.0, gpu_anchors), (2.0, cpu_anchors)] {
-            app.world_mut()
-                .get_mut::<Transform>(left)
-                .unwrap()
-                .translation
-                .x = x - d;
-            app.world_mut()
-                .get_mut::<Transform>(right)
-                .unwrap()
-                .translation
-                .x = x + d;
+        for (x, anchors) in [(-2.0, gpu_anchors), (2.0, cpu_anchors)] {
+            spread(&mut app, anchors, x, d);
         }
         app.update();
     }

@@ -14,7 +14,7 @@ use super::append_lists;
 use super::kernels::TILE;
 use crate::solver::collision::first_corner_reach;
 use crate::solver::constraints::{ConstraintBatches, Part};
-use crate::solver::{Simulation, Solver, Tethers};
+use crate::solver::{Simulation, Solver, Tethers, Topology};
 
 /// Words of a cloth's record in `topo` (`common.wgsl`'s `CLOTH_WORDS`).
 pub(crate) const CLOTH_WORDS: usize = 20;
@@ -254,6 +254,27 @@ fn group(
     }
 }
 
+/// Per edge of `t`, the triangles it belongs to.
+fn edge_triangles(t: &Topology) -> Vec<Vec<u32>> {
+    let mut index: Vec<([u32; 2], usize)> = t
+        .edges()
+        .iter()
+        .enumerate()
+        .map(|(i, e)| (e.v, i))
+        .collect();
+    index.sort_unstable();
+    let mut out = vec![Vec::new(); t.edges().len()];
+    for (k, tri) in t.triangles().iter().enumerate() {
+        for j in 0..3 {
+            let (a, b) = (tri[j], tri[(j + 1) % 3]);
+            if let Ok(i) = index.binary_search_by_key(&[a.min(b), a.max(b)], |x| x.0) {
+                out[index[i].1].push(k as u32);
+            }
+        }
+    }
+    out
+}
+
 impl WorldLayout {
     /// The layout of `sims`, which must share their substep and iteration counts and be all
     /// lab-solver cloths or none (the caller groups cloths by [`WorldKey`]).
@@ -414,22 +435,11 @@ impl WorldLayout {
                     slot[e as usize] = (first_distance + k) as u32;
                 }
                 // And each edge's triangles, which its tear takes with it.
-                let edge_base = tear_edges.len() as u32;
                 let t = sim.topology();
-                let mut index: Vec<([u32; 2], u32)> = t
-                    .edges()
-                    .iter()
-                    .enumerate()
-                    .map(|(i, e)| (e.v, i as u32))
-                    .collect();
-                index.sort_unstable();
-                for (k, tri) in t.triangles().iter().enumerate() {
-                    for j in 0..3 {
-                        let (a, b) = (tri[j], tri[(j + 1) % 3]);
-                        if let Ok(i) = index.binary_search_by_key(&[a.min(b), a.max(b)], |x| x.0) {
-                            edge_tris.push((edge_base + index[i].1, [tri_base + k as u32]));
-                        }
-                    }
+                let tris_of = edge_triangles(t);
+                let edge_base = tear_edges.len() as u32;
+                for (e, tris) in tris_of.iter().enumerate() {
+                    edge_tris.extend(tris.iter().map(|&k| (edge_base + e as u32, [tri_base + k])));
                 }
                 tear_edges.extend(
                     t.edges()
@@ -437,28 +447,18 @@ impl WorldLayout {
                         .zip(slot)
                         .map(|(e, slot)| [vbase + e.v[0], vbase + e.v[1], e.rest.to_bits(), slot]),
                 );
-                // Each hinge's two triangles, which hold it only while neither tore.
-                let mut triangle_of: Vec<([u32; 3], u32)> = t
-                    .triangles()
-                    .iter()
-                    .enumerate()
-                    .map(|(k, tri)| {
-                        let mut key = *tri;
-                        key.sort_unstable();
-                        (key, tri_base + k as u32)
-                    })
-                    .collect();
-                triangle_of.sort_unstable();
-                let find = |mut key: [u32; 3]| {
-                    key.sort_unstable();
-                    triangle_of
-                        .binary_search_by_key(&key, |x| x.0)
-                        .map_or(NO_PIN, |i| triangle_of[i].1)
-                };
+                // Each hinge's two triangles (those of its edge with either opposite corner),
+                // which hold it only while neither tore.
                 for k in first_hinge..hinges.len() {
-                    let v = t.bends()[hinges.bend[k] as usize].v;
-                    hinges.cons[k][2][1] = find([v[0], v[1], v[2]]);
-                    hinges.cons[k][2][2] = find([v[0], v[1], v[3]]);
+                    let bend = t.bends()[hinges.bend[k] as usize];
+                    let with = |corner: u32| {
+                        tris_of[bend.edge as usize]
+                            .iter()
+                            .find(|&&tri| t.triangles()[tri as usize].contains(&corner))
+                            .map_or(NO_PIN, |&tri| tri_base + tri)
+                    };
+                    hinges.cons[k][2][1] = with(bend.v[2]);
+                    hinges.cons[k][2][2] = with(bend.v[3]);
                 }
             }
             out.any_tethers |= flags & FLAG_TETHERS != 0;

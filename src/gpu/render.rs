@@ -542,17 +542,8 @@ pub(crate) fn send_gpu_results(
             });
             // The edges the GPU tore past the threshold (flag 1; those it let go of for want
             // of a triangle go with them on the CPU).
-            let torn = r.torn.get(i).and_then(Option::as_ref).map(|f| {
-                let at = f.at as usize;
-                let flags: Vec<u32> =
-                    bytemuck::pod_collect_to_vec(&data[at..at + f.bytes as usize]);
-                flags
-                    .iter()
-                    .zip(f.edges.iter())
-                    .filter(|(f, _)| **f == 1)
-                    .map(|(_, e)| *e)
-                    .collect()
-            });
+            let torn = r.torn.get(i).and_then(Option::as_ref);
+            let torn = torn.map(|f| f.edges(&data[f.at as usize..]).torn);
             cloths.push(GpuResult {
                 entity,
                 generation,

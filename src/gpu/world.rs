@@ -42,7 +42,25 @@ pub struct TornFlags {
     /// Bytes of flags (4 each).
     pub bytes: u64,
     /// The edge of each flag (the cloth's own vertex indices).
-    pub edges: Arc<[[u32; 2]]>,
+    pub edge_of: Arc<[[u32; 2]]>,
+}
+
+impl TornFlags {
+    /// The edges of `flags` (the flags' bytes as read back, [`Self::bytes`] of them).
+    #[must_use]
+    pub fn edges(&self, flags: &[u8]) -> TornEdges {
+        let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&flags[..self.bytes as usize]);
+        let mut out = TornEdges::default();
+        for (&f, &e) in flags.iter().zip(self.edge_of.iter()) {
+            if f == 1 {
+                out.torn.push(e);
+            }
+            if f != 0 {
+                out.released.push(e);
+            }
+        }
+        out
+    }
 }
 
 /// What a world's GPU tore of a cloth ([`GpuWorld::read_torn_edges`]).
@@ -1507,19 +1525,17 @@ impl GpuWorld {
     #[must_use]
     pub fn torn_flags(&self, cloth: usize) -> Option<TornFlags> {
         let c = self.cloth(cloth);
-        let edges = self.torn_edge_of.get(cloth)?.clone()?;
+        let edge_of = self.torn_edge_of.get(cloth)?.clone()?;
         Some(TornFlags {
             at: u64::from(self.scratch_regions.torn + c.distances.start) * 4,
             bytes: u64::from(c.distances.end - c.distances.start) * 4,
-            edges,
+            edge_of,
         })
     }
 
     /// What the GPU tore of cloth `cloth` since the world was built (blocking, as
-    /// [`Self::read_state`]), as edges in its own vertex indices, in its topology's edge
-    /// order: the edges `tear_check` found past the tear threshold, and every edge whose
-    /// distance constraint holds nothing since (those and the edges their tears left without
-    /// a triangle). Empty for a cloth that does not tear.
+    /// [`Self::read_state`]; [`TornFlags::edges`] read from its flags). Empty for a cloth that
+    /// does not tear.
     #[must_use]
     pub fn read_torn_edges(
         &self,
@@ -1527,34 +1543,10 @@ impl GpuWorld {
         queue: &wgpu::Queue,
         cloth: usize,
     ) -> TornEdges {
-        let c = self.cloth(cloth);
-        if !c.tearing || c.distances.is_empty() {
+        let Some(flags) = self.torn_flags(cloth) else {
             return TornEdges::default();
-        }
-        let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&self.read_bytes(
-            device,
-            queue,
-            &self.scratch,
-            u64::from(self.scratch_regions.torn) * 4,
-            u64::from(self.layout.distances) * 4,
-        ));
-        let l = &self.layout;
-        let mut out = TornEdges::default();
-        for e in l.topo[l.edges_at as usize..][..4 * l.edges as usize].chunks_exact(4) {
-            if !(c.vbase..c.vbase + c.n).contains(&e[0]) {
-                continue;
-            }
-            let v = [e[0] - c.vbase, e[1] - c.vbase];
-            match flags.get(e[3] as usize) {
-                Some(1) => {
-                    out.torn.push(v);
-                    out.released.push(v);
-                }
-                Some(2) => out.released.push(v),
-                _ => {}
-            }
-        }
-        out
+        };
+        flags.edges(&self.read_bytes(device, queue, &self.scratch, flags.at, flags.bytes))
     }
 
     /// Where the impulse slots of the last prepared frame sit in [`Self::scratch_buffer`]:
