@@ -420,8 +420,9 @@ fn pull_apart(app: &mut App, held: &[(Entity, [Entity; 2], f32)]) -> Vec<usize> 
     messages
 }
 
-/// Tearing on the GPU backend: the kernels flag an edge past the threshold, the plugin reads
-/// the state back and tears on the CPU; the cloth stays on the GPU with the new topology,
+/// Tearing on the GPU backend: the kernels let go of an edge past the threshold, the plugin
+/// reads the torn edges back and tears them on the CPU; the cloth stays on the GPU with the
+/// new topology,
 /// `ClothTorn` arrives, the mesh's index buffer loses the torn triangles.
 #[test]
 fn a_gpu_cloth_tears_when_pulled_apart() {

@@ -1506,8 +1506,8 @@ impl GpuWorld {
 
     /// Whether a step since cloth `cloth`'s upload left a NaN or infinite position or
     /// velocity, and whether one ended with an edge past the tear threshold (blocking, as
-    /// [`Self::read_state`]). The GPU does not tear: the caller does, on the CPU, and uploads
-    /// the torn cloth.
+    /// [`Self::read_state`]). The GPU lets go of a torn edge at once; the caller tears the
+    /// cloth's topology on the CPU ([`Self::read_torn_edges`] says which edges) and uploads it.
     #[must_use]
     pub fn read_status(
         &self,
