@@ -422,8 +422,7 @@ fn pull_apart(app: &mut App, held: &[(Entity, [Entity; 2], f32)]) -> Vec<usize> 
 
 /// Tearing on the GPU backend: the kernels let go of an edge past the threshold, the plugin
 /// reads the torn edges back and tears them on the CPU; the cloth stays on the GPU with the
-/// new topology,
-/// `ClothTorn` arrives, the mesh's index buffer loses the torn triangles.
+/// new topology, `ClothTorn` arrives, the mesh's index buffer loses the torn triangles.
 #[test]
 fn a_gpu_cloth_tears_when_pulled_apart() {
     if common::gpu_or_skip("a_gpu_cloth_tears_when_pulled_apart").is_none() {
