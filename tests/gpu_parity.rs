@@ -1927,3 +1927,219 @@ fn the_lab_solver_matches_the_cpu() {
     let out = compare(&g, &[case], 40, 1, |_| Vec::new(), true);
     check(&g, "lab", &out, true);
 }
+
+/// The torn triangles a GPU cloth hides (`hide.wgsl`) against its CPU twin
+/// (`hide_torn_triangles`) and against what the CPU's tear removes from the drawn mesh
+/// (`Topology::without_edges`, `MeshBinding::retain`): a cloth pulled apart by its corners
+/// on the GPU alone, drawn through a mesh whose triangles are listed backwards with their
+/// corners turned (so the writer's map from drawn to cloth triangles is not the identity),
+/// held in a 32-bit and a 16-bit index slab from an odd index on, between sentinels. Every
+/// frame the slabs must equal the twin's lists bit for bit, their drawn triangles must be the
+/// CPU's after tearing what the GPU tore, and the sentinels (another mesh's indices, one
+/// sharing a word with the first 16-bit index) must stay. A slab that already holds the
+/// host's new list is left as it is.
+#[test]
+fn torn_triangles_leave_the_drawn_mesh_as_on_the_cpu() {
+    use bevy_cloth::gpu::mesh::{
+        MeshKernel, MeshWriter, VertexLayout, drawn_cloth_triangles, hide_torn_triangles,
+    };
+    use bevy_cloth::solver::{MeshAttributes, MeshBinding};
+    use wgpu::util::DeviceExt;
+    let Some(g) = gpu("torn_triangles_leave_the_drawn_mesh_as_on_the_cpu") else {
+        return;
+    };
+    let n = 16;
+    let mut s = sim(n, SolverParams::default(), |p| {
+        Vec3::new(p.x, 1.0 - (p.z + 0.5), 0.0)
+    });
+    s.set_features(Features {
+        tear_threshold: Some(1.6),
+        ..Default::default()
+    })
+    .unwrap();
+    let start = corners(&mut s, n);
+    let mut world = GpuWorld::new(&g.device, &g.queue, &g.kernels, &[&s]).unwrap();
+    // The mesh: the grid's triangles backwards, each one's corners turned.
+    let grid = Grid::new(n, n, 1.0, 1.0);
+    let positions: Vec<Vec3> = s.state().positions.iter().map(|p| p.truncate()).collect();
+    let indices: Vec<u32> = grid
+        .indices()
+        .chunks_exact(3)
+        .rev()
+        .flat_map(|t| [t[1], t[2], t[0]])
+        .collect();
+    let mut binding = MeshBinding::new(
+        &positions,
+        MeshAttributes {
+            normals: None,
+            uvs: None,
+            tangents: None,
+        },
+        &indices,
+        1e-6,
+    )
+    .unwrap();
+    let drawn: Vec<u32> = binding.drawn_indices().collect();
+    let cloth_triangles = drawn_cloth_triangles(binding.weld(), &drawn, s.topology().triangles());
+    assert!(
+        cloth_triangles.iter().all(|&t| t != u32::MAX),
+        "every drawn triangle is a cloth triangle"
+    );
+    assert_ne!(
+        cloth_triangles,
+        (0..cloth_triangles.len() as u32).collect::<Vec<_>>(),
+        "the map must not be the identity"
+    );
+    let kernel = MeshKernel::new(&g.device);
+    let layout = VertexLayout {
+        stride: 24,
+        position: 0,
+        normal: 12,
+        tangent: None,
+    };
+    let writer = MeshWriter::new(&g.device, binding.weld(), &drawn, layout, None).hiding_torn(
+        &g.device,
+        &drawn,
+        &cloth_triangles,
+    );
+    // Slabs: 7 indices of another mesh, this mesh's, then 5 more.
+    let first = 7usize;
+    let sentinel = |i: usize| 0x1234 + i as u32;
+    let mut list: Vec<u32> = (0..first).map(sentinel).collect();
+    list.extend_from_slice(&drawn);
+    list.extend((0..5).map(|i| sentinel(100 + i)));
+    let make = |bytes: &[u8]| {
+        g.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: None,
+                contents: bytes,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::INDEX
+                    | wgpu::BufferUsages::COPY_SRC,
+            })
+    };
+    let u16_list: Vec<u16> = list.iter().map(|&i| i as u16).collect();
+    let mut u16_bytes: Vec<u8> = bytemuck::cast_slice(&u16_list).to_vec();
+    u16_bytes.resize(u16_bytes.len().div_ceil(4) * 4, 0);
+    let slab32 = make(bytemuck::cast_slice(&list));
+    let slab16 = make(&u16_bytes);
+    let read = |buffer: &wgpu::Buffer| -> Vec<u8> {
+        let staging = g.device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size: buffer.size(),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = g.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, buffer.size());
+        g.queue.submit([encoder.finish()]);
+        staging.map_async(wgpu::MapMode::Read, .., |_| {});
+        let _ = g.device.poll(wgpu::PollType::wait_indefinitely());
+        staging.get_mapped_range(..).to_vec()
+    };
+    let dead_at = world
+        .dead_triangle_flags(0)
+        .expect("a tearing cloth has dead flags");
+    let mut twin = list.clone();
+    let (mut hidden, mut torn_frames) = (0, 0);
+    for k in 0..60 {
+        let t: Vec<Vec3> = start
+            .iter()
+            .enumerate()
+            .map(|(i, p)| *p + Vec3::X * (0.02 * k as f32 * if i == 0 { -1.0 } else { 1.0 }))
+            .collect();
+        let targets = [vec![t]];
+        let frame = GpuFrame::uniform(DT, 1, &[], &targets);
+        world.prepare(&g.device, &g.queue, &g.kernels, &frame);
+        let mut encoder = g.device.create_command_encoder(&Default::default());
+        world.record(&mut encoder, &g.kernels);
+        g.queue.submit([encoder.finish()]);
+        // One submission a slab: a record writes the writer's parameters through the queue.
+        for (slab, u16_indices) in [(&slab32, false), (&slab16, true)] {
+            let mut encoder = g.device.create_command_encoder(&Default::default());
+            writer.record_hide_torn(
+                &g.device,
+                &g.queue,
+                &kernel,
+                &mut encoder,
+                world.scratch_buffer(),
+                dead_at,
+                slab,
+                first as u32,
+                u16_indices,
+            );
+            g.queue.submit([encoder.finish()]);
+        }
+        // The twin: the triangles with an edge the GPU tore are dead.
+        let torn = world.read_torn_edges(&g.device, &g.queue, 0).torn;
+        let dead: Vec<u32> = s
+            .topology()
+            .triangles()
+            .iter()
+            .map(|t| {
+                u32::from((0..3).any(|c| {
+                    let (a, b) = (t[c], t[(c + 1) % 3]);
+                    torn.contains(&[a.min(b), a.max(b)])
+                }))
+            })
+            .collect();
+        hide_torn_triangles(&mut twin[first..], &drawn, &cloth_triangles, &dead);
+        let got32: Vec<u32> = bytemuck::pod_collect_to_vec(&read(&slab32));
+        let got16: Vec<u16> = bytemuck::pod_collect_to_vec(&read(&slab16));
+        let differ = |a: &[u32], b: &[u32]| a.iter().zip(b).position(|(x, y)| x != y);
+        assert!(
+            got32 == twin,
+            "frame {k}: the 32-bit slab differs from the twin from index {:?} on",
+            differ(&got32, &twin)
+        );
+        let got16: Vec<u32> = got16[..twin.len()].iter().map(|&i| u32::from(i)).collect();
+        assert!(
+            got16 == twin,
+            "frame {k}: the 16-bit slab differs from the twin from index {:?} on",
+            differ(&got16, &twin)
+        );
+        // What the CPU's tear leaves drawn is what the GPU still draws.
+        binding.retain(&s.topology().without_edges(&torn));
+        let kept: Vec<u32> = twin[first..first + drawn.len()]
+            .chunks_exact(3)
+            .filter(|t| *t != [0, 0, 0])
+            .flatten()
+            .copied()
+            .collect();
+        assert_eq!(
+            kept,
+            binding.drawn_indices().collect::<Vec<_>>(),
+            "frame {k}: drawn triangles against the CPU's tear"
+        );
+        hidden = drawn.len() / 3 - binding.drawn_count();
+        torn_frames += usize::from(!torn.is_empty());
+    }
+    eprintln!(
+        "{hidden} of {} triangles hidden; {torn_frames} frames with torn edges",
+        drawn.len() / 3
+    );
+    assert!(
+        hidden >= 4 && hidden < drawn.len() / 3 && torn_frames > 10,
+        "the tear must run through the cloth: {hidden} triangles hidden in {torn_frames} frames"
+    );
+    // A slab that already holds the host's new list (the torn triangles gone) is not touched.
+    let mut replaced: Vec<u32> = (0..first).map(sentinel).collect();
+    replaced.extend(binding.drawn_indices());
+    replaced.resize(list.len(), 0);
+    let slab = make(bytemuck::cast_slice(&replaced));
+    let mut encoder = g.device.create_command_encoder(&Default::default());
+    writer.record_hide_torn(
+        &g.device,
+        &g.queue,
+        &kernel,
+        &mut encoder,
+        world.scratch_buffer(),
+        dead_at,
+        &slab,
+        first as u32,
+        false,
+    );
+    g.queue.submit([encoder.finish()]);
+    let got: Vec<u32> = bytemuck::pod_collect_to_vec(&read(&slab));
+    assert_eq!(got, replaced, "a replaced index list must stay as it is");
+}

@@ -223,6 +223,12 @@ impl ClothSim {
         }
     }
 
+    /// Whether the cloth's own mesh keeps 16-bit indices (as the mesh it came from did).
+    #[must_use]
+    pub fn u16_indices(&self) -> bool {
+        self.u16_indices
+    }
+
     /// Asks for the mesh to be written at the next write-back (a cloth coming back from
     /// elsewhere with a new state).
     pub fn mark_changed(&mut self) {

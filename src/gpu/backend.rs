@@ -72,6 +72,11 @@ pub(crate) struct GpuUpload {
     pub sim: Simulation,
     pub weld: crate::solver::Weld,
     pub drawn: Vec<u32>,
+    /// For a tearing cloth, per drawn triangle its cloth triangle (what hides torn triangles
+    /// until the host's tear).
+    pub drawn_cloth_triangles: Option<Vec<u32>>,
+    /// Whether the mesh's indices are 16-bit.
+    pub u16_indices: bool,
     pub layout: VertexLayout,
     pub tangents: Option<TangentSource>,
     /// Start from the GPU state of the previous upload (a settings change), not from `sim`'s.
@@ -382,10 +387,17 @@ fn upload(cloth: &ClothSim, layout: VertexLayout, carry: bool) -> GpuUpload {
             .collect(),
         handedness: shading.handedness().map(<[f32]>::to_vec),
     });
+    let drawn: Vec<u32> = binding.drawn_indices().collect();
+    let sim = cloth.simulation();
+    let drawn_cloth_triangles = sim.features().tear_threshold.map(|_| {
+        super::mesh::drawn_cloth_triangles(binding.weld(), &drawn, sim.topology().triangles())
+    });
     GpuUpload {
-        sim: cloth.simulation().clone(),
+        sim: sim.clone(),
         weld: binding.weld().clone(),
-        drawn: binding.drawn_indices().collect(),
+        drawn,
+        drawn_cloth_triangles,
+        u16_indices: cloth.u16_indices(),
         layout,
         tangents,
         carry,

@@ -75,6 +75,8 @@ pub(crate) struct ClothLayout {
     /// Its distance constraints in `cons` (a cloth's are contiguous): the range of the
     /// world's torn flags that are its own.
     pub distances: core::ops::Range<u32>,
+    /// Its triangles among the world's (the tear's dead-triangle flags: one a triangle).
+    pub triangles: core::ops::Range<u32>,
     /// Gravity, damping (1/s) and, for the lab solver, the velocity kept per step: what the
     /// record's per-frame words (gravity·h, damping factor) are made from.
     pub gravity: Vec3,
@@ -473,6 +475,7 @@ impl WorldLayout {
                 flags,
                 tearing,
                 distances: first_distance as u32..dist.len() as u32,
+                triangles: tri_base..triangles.len() as u32,
                 gravity: params.gravity,
                 damping: params.damping,
                 keep: match params.solver {

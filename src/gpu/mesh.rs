@@ -12,6 +12,21 @@ use crate::solver::Weld;
 /// The WGSL of the mesh-writing kernel.
 pub const MESH_WGSL: &str = include_str!("mesh.wgsl");
 
+/// The WGSL of the kernel that hides a tearing cloth's torn triangles from its index slab.
+pub const HIDE_WGSL: &str = include_str!("hide.wgsl");
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct HideParams {
+    index_base: u32,
+    triangles: u32,
+    u16_indices: u32,
+    drawn_at: u32,
+    cloth_tri_at: u32,
+    dead_at: u32,
+    _pad: [u32; 2],
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 struct MeshParams {
@@ -59,11 +74,13 @@ pub struct TangentSource {
     pub handedness: Option<Vec<f32>>,
 }
 
-/// The compiled mesh-writing kernel.
+/// The compiled mesh-writing kernel, and the one that hides torn triangles.
 #[derive(Debug)]
 pub struct MeshKernel {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
+    hide_layout: wgpu::BindGroupLayout,
+    hide_pipeline: wgpu::ComputePipeline,
 }
 
 impl MeshKernel {
@@ -106,8 +123,93 @@ impl MeshKernel {
             compilation_options: Default::default(),
             cache: None,
         });
-        Self { layout, pipeline }
+        let hide_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("cloth_hide_torn"),
+            source: wgpu::ShaderSource::Wgsl(HIDE_WGSL.into()),
+        });
+        let hide_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("cloth_hide_torn"),
+            entries: &[
+                entry(0, wgpu::BufferBindingType::Uniform),
+                entry(1, wgpu::BufferBindingType::Storage { read_only: true }),
+                entry(2, wgpu::BufferBindingType::Storage { read_only: true }),
+                entry(3, wgpu::BufferBindingType::Storage { read_only: false }),
+            ],
+        });
+        let hide_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("cloth_hide_torn"),
+            bind_group_layouts: &[Some(&hide_layout)],
+            immediate_size: 0,
+        });
+        let hide_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("cloth_hide_torn"),
+            layout: Some(&hide_pipeline_layout),
+            module: &hide_module,
+            entry_point: Some("hide_torn"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Self {
+            layout,
+            pipeline,
+            hide_layout,
+            hide_pipeline,
+        }
     }
+}
+
+/// Per drawn triangle (three mesh vertices each in `drawn`, as the index buffer holds them),
+/// the triangle of `triangles` (a cloth's topology, particle indices) it draws, through the
+/// weld's particle of each mesh vertex; `u32::MAX` for one the topology does not have.
+#[must_use]
+pub fn drawn_cloth_triangles(weld: &Weld, drawn: &[u32], triangles: &[[u32; 3]]) -> Vec<u32> {
+    let key = |mut t: [u32; 3]| {
+        t.sort_unstable();
+        t
+    };
+    let of: std::collections::HashMap<[u32; 3], u32> = triangles
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| (key(t), i as u32))
+        .collect();
+    let particles = weld.particles();
+    drawn
+        .chunks_exact(3)
+        .map(|t| {
+            let p =
+                [t[0], t[1], t[2]].map(|v| particles.get(v as usize).copied().unwrap_or(u32::MAX));
+            of.get(&key(p)).copied().unwrap_or(u32::MAX)
+        })
+        .collect()
+}
+
+/// The CPU twin of `hide.wgsl`: each triangle of `indices` (three a triangle, the mesh's index
+/// list) that draws a dead cloth triangle (`dead[cloth_triangles[t]] != 0`) becomes (0, 0, 0),
+/// where `indices` still holds `drawn`'s vertices for it.
+pub fn hide_torn_triangles(
+    indices: &mut [u32],
+    drawn: &[u32],
+    cloth_triangles: &[u32],
+    dead: &[u32],
+) {
+    for ((slot, expected), &c) in indices
+        .chunks_exact_mut(3)
+        .zip(drawn.chunks_exact(3))
+        .zip(cloth_triangles)
+    {
+        if dead.get(c as usize).is_some_and(|&d| d != 0) && slot == expected {
+            slot.fill(0);
+        }
+    }
+}
+
+/// A tearing cloth's table for `hide.wgsl`: its drawn triangles and the cloth triangle of
+/// each.
+#[derive(Debug)]
+struct HideTorn {
+    params: wgpu::Buffer,
+    table: wgpu::Buffer,
+    triangles: u32,
 }
 
 /// One cloth mesh's kernel inputs.
@@ -120,6 +222,8 @@ pub struct MeshWriter {
     header: [u32; 3],
     /// Where the tangent data starts in `topo`: vertex offsets, UVs, handedness (0: none).
     tangent_header: Option<[u32; 3]>,
+    /// For a tearing cloth: what hides its torn triangles.
+    hide: Option<HideTorn>,
 }
 
 impl MeshWriter {
@@ -194,7 +298,124 @@ impl MeshWriter {
             vertices: m as u32,
             header: [groups_at, offsets_at, triangles_at],
             tangent_header,
+            hide: None,
         }
+    }
+
+    /// Lets [`Self::record_hide_torn`] hide the torn triangles of a tearing cloth: `drawn` as
+    /// given to [`Self::new`], and per drawn triangle its cloth triangle
+    /// ([`drawn_cloth_triangles`]).
+    #[must_use]
+    pub fn hiding_torn(
+        mut self,
+        device: &wgpu::Device,
+        drawn: &[u32],
+        cloth_triangles: &[u32],
+    ) -> Self {
+        let triangles = cloth_triangles.len().min(drawn.len() / 3);
+        let mut table: Vec<u32> = drawn[..3 * triangles].to_vec();
+        table.extend_from_slice(&cloth_triangles[..triangles]);
+        table.push(u32::MAX); // never empty
+        self.hide = Some(HideTorn {
+            params: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("cloth_hide_params"),
+                size: size_of::<HideParams>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            table: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("cloth_hide_table"),
+                contents: bytemuck::cast_slice(&table),
+                usage: wgpu::BufferUsages::STORAGE,
+            }),
+            triangles: triangles as u32,
+        });
+        self
+    }
+
+    /// Records the pass that turns each drawn triangle whose cloth triangle is dead (the flags
+    /// of the cloth from word `dead_at` of `scratch`, a [`GpuWorld`](super::GpuWorld)'s
+    /// scratch buffer: [`GpuWorld::dead_triangle_flags`](super::GpuWorld::dead_triangle_flags))
+    /// into (0, 0, 0) in `slab`, the index slab holding the mesh's indices from index
+    /// `first` on, 16-bit ones if `u16_indices`. Nothing for a writer made without
+    /// [`Self::hiding_torn`]. The pass's parameters go through `queue`: record it once per
+    /// submission (a second record before the submission would give both passes its own).
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "a record call takes all it needs explicitly"
+    )]
+    pub fn record_hide_torn(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        kernel: &MeshKernel,
+        encoder: &mut wgpu::CommandEncoder,
+        scratch: &wgpu::Buffer,
+        dead_at: u32,
+        slab: &wgpu::Buffer,
+        first: u32,
+        u16_indices: bool,
+    ) {
+        let Some(hide) = &self.hide else {
+            return;
+        };
+        if hide.triangles == 0 {
+            return;
+        }
+        // Bind only the mesh's indices (from an aligned offset): a slab may be larger than a
+        // storage binding may be.
+        let size = if u16_indices { 2u64 } else { 4 };
+        let start = u64::from(first) * size;
+        let end = start + u64::from(hide.triangles) * 3 * size;
+        let align = u64::from(device.limits().min_storage_buffer_offset_alignment);
+        let offset = start / align * align;
+        let bytes = (end - offset).div_ceil(4) * 4;
+        if offset + bytes > slab.size() {
+            return;
+        }
+        let p = HideParams {
+            index_base: ((start - offset) / size) as u32,
+            triangles: hide.triangles,
+            u16_indices: u32::from(u16_indices),
+            drawn_at: 0,
+            cloth_tri_at: 3 * hide.triangles,
+            dead_at,
+            _pad: [0; 2],
+        };
+        queue.write_buffer(&hide.params, 0, bytemuck::bytes_of(&p));
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("cloth_hide_torn"),
+            layout: &kernel.hide_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: hide.params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: hide.table.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: scratch.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: slab,
+                        offset,
+                        size: std::num::NonZeroU64::new(bytes),
+                    }),
+                },
+            ],
+        });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("cloth_hide_torn"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&kernel.hide_pipeline);
+        pass.set_bind_group(0, &bind_group, &[]);
+        pass.dispatch_workgroups(hide.triangles.div_ceil(64), 1, 1);
     }
 
     /// Records the write of the cloth whose particles start at `particle_base` in `state`

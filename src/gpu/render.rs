@@ -153,6 +153,8 @@ struct WriterEntry {
     writer: MeshWriter,
     mesh: AssetId<Mesh>,
     transform: bevy::math::Affine3A,
+    /// Whether the mesh's indices are 16-bit.
+    u16_indices: bool,
 }
 
 /// A copy of a world's statuses, read-back states and impulses on its way to the main world.
@@ -343,13 +345,16 @@ pub(crate) fn prepare_gpu_worlds(
             .get(&x.entity)
             .is_none_or(|w| w.generation != x.generation);
         if fresh {
-            let writer = MeshWriter::new(
+            let mut writer = MeshWriter::new(
                 device,
                 &upload.weld,
                 &upload.drawn,
                 upload.layout,
                 upload.tangents.as_ref(),
             );
+            if let Some(cloth_triangles) = &upload.drawn_cloth_triangles {
+                writer = writer.hiding_torn(device, &upload.drawn, cloth_triangles);
+            }
             worlds.writers.insert(
                 x.entity,
                 WriterEntry {
@@ -357,6 +362,7 @@ pub(crate) fn prepare_gpu_worlds(
                     writer,
                     mesh: x.mesh,
                     transform: x.transform,
+                    u16_indices: upload.u16_indices,
                 },
             );
         }
@@ -405,6 +411,23 @@ pub(crate) fn run_gpu_worlds(
                     slice.range.start,
                     writer.transform,
                 );
+                // A tearing cloth's torn triangles, hidden until the host's tear removes
+                // them from the index buffer.
+                if let Some(dead_at) = w.world.dead_triangle_flags(i)
+                    && let Some(indices) = allocator.mesh_index_slice(&writer.mesh)
+                {
+                    writer.writer.record_hide_torn(
+                        device.wgpu_device(),
+                        &queue,
+                        &pipelines.mesh,
+                        encoder,
+                        w.world.scratch_buffer(),
+                        dead_at,
+                        indices.buffer,
+                        indices.range.start,
+                        writer.u16_indices,
+                    );
+                }
             }
         }
         let any_state = w.members.iter().any(|m| m.readback);

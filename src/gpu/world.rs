@@ -1533,6 +1533,17 @@ impl GpuWorld {
         })
     }
 
+    /// Where cloth `cloth`'s dead-triangle flags sit in [`Self::scratch_buffer`]: the word
+    /// of its first triangle's (one `u32` a triangle of its topology, in its order; non-zero
+    /// once an edge of the triangle tore). `None` for a cloth that does not tear (or runs the
+    /// lab solver). What the mesh kernel hides torn triangles by
+    /// ([`MeshWriter::record_hide_torn`](super::mesh::MeshWriter::record_hide_torn)).
+    #[must_use]
+    pub fn dead_triangle_flags(&self, cloth: usize) -> Option<u32> {
+        self.torn_edge_of.get(cloth)?.as_ref()?;
+        Some(self.scratch_regions.dead + self.cloth(cloth).triangles.start)
+    }
+
     /// What the GPU tore of cloth `cloth` since the world was built (blocking, as
     /// [`Self::read_state`]; [`TornFlags::edges`] read from its flags). Empty for a cloth that
     /// does not tear.
