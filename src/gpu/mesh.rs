@@ -47,7 +47,9 @@ struct MeshParams {
     uvs_at: u32,
     handedness_at: u32,
     particle_base: u32,
-    _pad: [u32; 3],
+    cloth_tri_at: u32,
+    dead_at: u32,
+    _pad: u32,
 }
 
 /// Where a mesh keeps positions and normals in its interleaved vertex buffer.
@@ -108,6 +110,7 @@ impl MeshKernel {
                 entry(1, wgpu::BufferBindingType::Storage { read_only: true }),
                 entry(2, wgpu::BufferBindingType::Storage { read_only: true }),
                 entry(3, wgpu::BufferBindingType::Storage { read_only: false }),
+                entry(4, wgpu::BufferBindingType::Storage { read_only: true }),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -203,12 +206,12 @@ pub fn hide_torn_triangles(
     }
 }
 
-/// A tearing cloth's table for `hide.wgsl`: its drawn triangles and the cloth triangle of
-/// each.
+/// What `hide.wgsl` needs of a tearing cloth besides the writer's table (which holds its
+/// drawn triangles and, from `cloth_tri_at`, the cloth triangle of each).
 #[derive(Debug)]
 struct HideTorn {
     params: wgpu::Buffer,
-    table: wgpu::Buffer,
+    cloth_tri_at: u32,
     triangles: u32,
 }
 
@@ -228,8 +231,12 @@ pub struct MeshWriter {
 
 impl MeshWriter {
     /// The mesh's weld (mesh vertex → particle, normal groups), its drawn triangles (mesh
-    /// vertex indices, three per triangle), where its attributes sit, and, for a layout with
-    /// tangents, what they are made from (without it, the tangents are left as they are).
+    /// vertex indices, three per triangle), where its attributes sit, for a layout with
+    /// tangents what they are made from (without it, the tangents are left as they are), and
+    /// for a tearing cloth the cloth triangle of each drawn triangle
+    /// ([`drawn_cloth_triangles`]): its torn triangles then leave the normals and tangents
+    /// ([`Self::record`] with the dead-triangle flags) and the index slab
+    /// ([`Self::record_hide_torn`]) before the host's tear.
     #[must_use]
     pub fn new(
         device: &wgpu::Device,
@@ -237,6 +244,7 @@ impl MeshWriter {
         drawn: &[u32],
         layout: VertexLayout,
         tangents: Option<&TangentSource>,
+        cloth_triangles: Option<&[u32]>,
     ) -> Self {
         let m = weld.vertex_count();
         let (group, groups) = weld.normal_groups();
@@ -280,6 +288,22 @@ impl MeshWriter {
             }
             _ => None,
         };
+        let hide = cloth_triangles
+            .filter(|c| c.len() * 3 == drawn.len())
+            .map(|c| {
+                let cloth_tri_at = topo.len() as u32;
+                topo.extend_from_slice(c);
+                HideTorn {
+                    params: device.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some("cloth_hide_params"),
+                        size: size_of::<HideParams>() as u64,
+                        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                        mapped_at_creation: false,
+                    }),
+                    cloth_tri_at,
+                    triangles: c.len() as u32,
+                }
+            });
         let topo = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("cloth_mesh_topology"),
             contents: bytemuck::cast_slice(&topo),
@@ -298,47 +322,16 @@ impl MeshWriter {
             vertices: m as u32,
             header: [groups_at, offsets_at, triangles_at],
             tangent_header,
-            hide: None,
+            hide,
         }
-    }
-
-    /// Lets [`Self::record_hide_torn`] hide the torn triangles of a tearing cloth: `drawn` as
-    /// given to [`Self::new`], and per drawn triangle its cloth triangle
-    /// ([`drawn_cloth_triangles`]).
-    #[must_use]
-    pub fn hiding_torn(
-        mut self,
-        device: &wgpu::Device,
-        drawn: &[u32],
-        cloth_triangles: &[u32],
-    ) -> Self {
-        let triangles = cloth_triangles.len().min(drawn.len() / 3);
-        let mut table: Vec<u32> = drawn[..3 * triangles].to_vec();
-        table.extend_from_slice(&cloth_triangles[..triangles]);
-        table.push(u32::MAX); // never empty
-        self.hide = Some(HideTorn {
-            params: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("cloth_hide_params"),
-                size: size_of::<HideParams>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }),
-            table: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("cloth_hide_table"),
-                contents: bytemuck::cast_slice(&table),
-                usage: wgpu::BufferUsages::STORAGE,
-            }),
-            triangles: triangles as u32,
-        });
-        self
     }
 
     /// Records the pass that turns each drawn triangle whose cloth triangle is dead (the flags
     /// of the cloth from word `dead_at` of `scratch`, a [`GpuWorld`](super::GpuWorld)'s
     /// scratch buffer: [`GpuWorld::dead_triangle_flags`](super::GpuWorld::dead_triangle_flags))
     /// into (0, 0, 0) in `slab`, the index slab holding the mesh's indices from index
-    /// `first` on, 16-bit ones if `u16_indices`. Nothing for a writer made without
-    /// [`Self::hiding_torn`]. The pass's parameters go through `queue`: record it once per
+    /// `first` on, 16-bit ones if `u16_indices`. Nothing for a writer made without cloth
+    /// triangles. The pass's parameters go through `queue`: record it once per
     /// submission (a second record before the submission would give both passes its own).
     #[expect(
         clippy::too_many_arguments,
@@ -377,8 +370,8 @@ impl MeshWriter {
             index_base: ((start - offset) / size) as u32,
             triangles: hide.triangles,
             u16_indices: u32::from(u16_indices),
-            drawn_at: 0,
-            cloth_tri_at: 3 * hide.triangles,
+            drawn_at: self.header[2],
+            cloth_tri_at: hide.cloth_tri_at,
             dead_at,
             _pad: [0; 2],
         };
@@ -393,7 +386,7 @@ impl MeshWriter {
                 },
                 wgpu::BindGroupEntry {
                     binding: 1,
-                    resource: hide.table.as_entire_binding(),
+                    resource: self.topo.as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
                     binding: 2,
@@ -420,7 +413,10 @@ impl MeshWriter {
 
     /// Records the write of the cloth whose particles start at `particle_base` in `state`
     /// (a [`GpuWorld`](super::GpuWorld)'s state buffer) into `slab` from vertex `first` on,
-    /// placed by `transform` (the entity's world transform).
+    /// placed by `transform` (the entity's world transform). For a writer made with cloth
+    /// triangles, `dead` (the world's scratch buffer and the cloth's first dead-triangle flag
+    /// in it, as for [`Self::record_hide_torn`]) leaves the torn triangles out of the normals
+    /// and tangents, as the CPU's shading leaves out the triangles its tear removed.
     #[expect(
         clippy::too_many_arguments,
         reason = "a record call takes all it needs explicitly"
@@ -436,6 +432,7 @@ impl MeshWriter {
         slab: &wgpu::Buffer,
         first: u32,
         transform: Affine3A,
+        dead: Option<(&wgpu::Buffer, u32)>,
     ) {
         if self.vertices == 0 {
             return;
@@ -470,7 +467,12 @@ impl MeshWriter {
             uvs_at: self.tangent_header.map_or(0, |h| h[1]),
             handedness_at: self.tangent_header.map_or(0, |h| h[2]),
             particle_base,
-            _pad: [0; 3],
+            cloth_tri_at: self.hide.as_ref().map_or(0, |h| h.cloth_tri_at),
+            dead_at: match (&self.hide, dead) {
+                (Some(_), Some((_, at))) => at,
+                _ => u32::MAX,
+            },
+            _pad: 0,
         };
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&p));
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -492,6 +494,10 @@ impl MeshWriter {
                 wgpu::BindGroupEntry {
                     binding: 3,
                     resource: slab.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: dead.map_or(&self.topo, |(b, _)| b).as_entire_binding(),
                 },
             ],
         });

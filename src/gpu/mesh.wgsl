@@ -7,7 +7,10 @@
 // | per group the offsets into the incident list (groups + 1) | incident mesh triangles |
 // mesh triangles, 3 mesh vertices each] and, with tangents: [per mesh vertex the offsets into
 // its incident list (m + 1) | incident drawn triangles | per drawn triangle its corner UVs
-// (6 f32 as bits) | with source handedness: per mesh vertex ±1 (f32 bits)].
+// (6 f32 as bits) | with source handedness: per mesh vertex ±1 (f32 bits)] and, for a
+// tearing cloth, per drawn triangle its cloth triangle (from `cloth_tri_at`): with the
+// world's dead-triangle flags bound (`dead_at`), torn triangles are left out as the CPU's
+// tear leaves them out, before the host has read the tear back.
 //
 // Tangents are `MeshShading::update`'s: per vertex the UV tangents and bitangents of its
 // drawn triangles summed (`shading::triangle_tangent`), made orthogonal to the normal and
@@ -38,15 +41,24 @@ struct MeshParams {
     handedness_at: u32,
     // the cloth's first particle in `particles` (a world holds several cloths)
     particle_base: u32,
+    // a tearing cloth: per drawn triangle its cloth triangle, in `topo`
+    cloth_tri_at: u32,
+    // its first dead-triangle flag in `dead_flags` (the world's scratch); 0xffffffff: none
+    dead_at: u32,
     _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> M: MeshParams;
 @group(0) @binding(1) var<storage, read> particles: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> topo: array<u32>;
 @group(0) @binding(3) var<storage, read_write> slab: array<f32>;
+@group(0) @binding(4) var<storage, read> dead_flags: array<u32>;
+
+// Whether drawn triangle `d` tore (the GPU let go of one of its edges): it no longer counts
+// in the shading, as the CPU's tear removes it from the drawn triangles.
+fn torn(d: u32) -> bool {
+    return M.dead_at != 0xffffffffu && dead_flags[M.dead_at + topo[M.cloth_tri_at + d]] != 0u;
+}
 
 fn at(v: u32) -> vec3<f32> {
     return particles[M.particle_base + topo[v]].xyz;
@@ -80,6 +92,9 @@ fn tangent(v: u32, n: vec3<f32>) -> vec4<f32> {
     var bit = vec3<f32>(0.0);
     for (var k = topo[M.vertex_offsets_at + v]; k < topo[M.vertex_offsets_at + v + 1u]; k++) {
         let d = topo[k];
+        if torn(d) {
+            continue;
+        }
         let t = M.triangles_at + 3u * d;
         let p0 = at(topo[t]);
         let q0 = at(topo[t + 1u]) - p0;
@@ -119,6 +134,9 @@ fn write_mesh(@builtin(global_invocation_id) id: vec3<u32>) {
     let g = topo[M.groups_at + v];
     var sum = vec3<f32>(0.0);
     for (var k = topo[M.offsets_at + g]; k < topo[M.offsets_at + g + 1u]; k++) {
+        if torn(topo[k]) {
+            continue;
+        }
         let t = M.triangles_at + 3u * topo[k];
         let a = at(topo[t]);
         let b = at(topo[t + 1u]);
@@ -139,16 +157,22 @@ fn write_mesh(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let world = sum * M.flip;
     let local = M.normal_x.xyz * world.x + M.normal_y.xyz * world.y + M.normal_z.xyz * world.z;
-    var n = vec3<f32>(0.0, 1.0, 0.0);
+    let o = M.base + v * M.stride;
+    let q = o + M.normal_offset;
+    // Where no triangle is left (a torn-off vertex), last frame's normal stays, as on the
+    // CPU (`MeshShading::update`); (0, 1, 0) where there is none.
+    var n = vec3<f32>(slab[q], slab[q + 1u], slab[q + 2u]);
+    let old = length(n);
+    if !(old > 0.0 && old < 3.0e38) {
+        n = vec3<f32>(0.0, 1.0, 0.0);
+    }
     let len = length(local);
     if len > 0.0 && len < 3.0e38 {
         n = local / len;
     }
-    let o = M.base + v * M.stride;
     slab[o] = p.x;
     slab[o + 1u] = p.y;
     slab[o + 2u] = p.z;
-    let q = o + M.normal_offset;
     slab[q] = n.x;
     slab[q + 1u] = n.y;
     slab[q + 2u] = n.z;

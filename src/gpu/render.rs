@@ -345,16 +345,14 @@ pub(crate) fn prepare_gpu_worlds(
             .get(&x.entity)
             .is_none_or(|w| w.generation != x.generation);
         if fresh {
-            let mut writer = MeshWriter::new(
+            let writer = MeshWriter::new(
                 device,
                 &upload.weld,
                 &upload.drawn,
                 upload.layout,
                 upload.tangents.as_ref(),
+                upload.drawn_cloth_triangles.as_deref(),
             );
-            if let Some(cloth_triangles) = &upload.drawn_cloth_triangles {
-                writer = writer.hiding_torn(device, &upload.drawn, cloth_triangles);
-            }
             worlds.writers.insert(
                 x.entity,
                 WriterEntry {
@@ -400,6 +398,7 @@ pub(crate) fn run_gpu_worlds(
                 && writer.generation == m.generation
                 && let Some(slice) = allocator.mesh_vertex_slice(&writer.mesh)
             {
+                let dead_at = w.world.dead_triangle_flags(i);
                 writer.writer.record(
                     device.wgpu_device(),
                     &queue,
@@ -410,10 +409,11 @@ pub(crate) fn run_gpu_worlds(
                     slice.buffer,
                     slice.range.start,
                     writer.transform,
+                    dead_at.map(|at| (w.world.scratch_buffer(), at)),
                 );
                 // A tearing cloth's torn triangles, hidden until the host's tear removes
                 // them from the index buffer.
-                if let Some(dead_at) = w.world.dead_triangle_flags(i)
+                if let Some(dead_at) = dead_at
                     && let Some(indices) = allocator.mesh_index_slice(&writer.mesh)
                 {
                     writer.writer.record_hide_torn(
