@@ -449,6 +449,106 @@ fn a_gpu_cloth_tears_when_pulled_apart() {
     assert!(sim.simulation().state().is_finite());
 }
 
+/// The mesh's indices as the render world's index slab holds them now (a blocking copy; the
+/// grid meshes here have 32-bit indices), once the mesh is there.
+fn indices_on_the_gpu(app: &App, mesh: AssetId<Mesh>) -> Option<Vec<u32>> {
+    use bevy::render::mesh::allocator::MeshAllocator;
+    use bevy::render::renderer::{RenderDevice, RenderQueue};
+    let render = app
+        .get_sub_app(bevy::render::RenderApp)
+        .expect("the render world is a sub-app without pipelined rendering")
+        .world();
+    let slice = render.resource::<MeshAllocator>().mesh_index_slice(&mesh)?;
+    let device = render.resource::<RenderDevice>().wgpu_device();
+    let (start, end) = (
+        u64::from(slice.range.start) * 4,
+        u64::from(slice.range.end) * 4,
+    );
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: end - start,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(slice.buffer, start, &staging, 0, end - start);
+    render.resource::<RenderQueue>().submit([encoder.finish()]);
+    staging.map_async(wgpu::MapMode::Read, .., |r| r.expect("map_async"));
+    let _ = device.poll(wgpu::PollType::wait_indefinitely());
+    Some(bytemuck::pod_collect_to_vec(&staging.get_mapped_range(..)))
+}
+
+/// A GPU tear shows in the frame the GPU tears: its triangles become (0, 0, 0) in the mesh's
+/// index slab before the host has read the tear back (the host tears a frame or more
+/// later); once the host's tear has rewritten the mesh and the pull has stopped, the slab
+/// holds exactly the main world's index list, with nothing hidden left over.
+#[test]
+fn a_gpu_tear_shows_before_the_host_tears() {
+    if common::gpu_or_skip("a_gpu_tear_shows_before_the_host_tears").is_none() {
+        return;
+    }
+    let mut app = render_app_with(ClothPlugins::default(), false);
+    let (cloth, anchors) = spawn_held(&mut app, 0.0, ClothBackend::Gpu);
+    let mesh = |app: &App| app.world().get::<Mesh3d>(cloth).unwrap().0.id();
+    let (mut first_hidden, mut first_host_tear, mut most_hidden) = (None, None, 0);
+    // Five frames held, then 60 pulling apart; every frame looked at.
+    for k in 0..65u32 {
+        spread(
+            &mut app,
+            anchors,
+            0.0,
+            0.5 + 0.02 * k.saturating_sub(5) as f32,
+        );
+        app.update();
+        let Some(indices) = indices_on_the_gpu(&app, mesh(&app)) else {
+            continue;
+        };
+        let hidden = indices.chunks_exact(3).filter(|t| *t == [0, 0, 0]).count();
+        most_hidden = most_hidden.max(hidden);
+        if hidden > 0 && first_hidden.is_none() {
+            first_hidden = Some(k);
+        }
+        let host = app
+            .world()
+            .get::<ClothSim>(cloth)
+            .map_or(0, ClothSim::torn_edges);
+        if host > 0 && first_host_tear.is_none() {
+            first_host_tear = Some(k);
+        }
+    }
+    eprintln!(
+        "hidden on the GPU from frame {first_hidden:?}, torn by the host from {first_host_tear:?}; \
+         at most {most_hidden} triangles hidden at once"
+    );
+    let (Some(hidden), Some(host)) = (first_hidden, first_host_tear) else {
+        panic!("the cloth must tear: hidden {first_hidden:?}, host {first_host_tear:?}");
+    };
+    assert!(
+        hidden < host,
+        "the tear must show (frame {hidden}) before the host tears (frame {host})"
+    );
+    assert!(in_use(&app, cloth).gpu, "{:?}", in_use(&app, cloth));
+    common::run(&mut app, 10);
+    let main: Vec<u32> = app
+        .world()
+        .resource::<Assets<Mesh>>()
+        .get(mesh(&app))
+        .and_then(|m| match m.indices() {
+            Some(bevy::mesh::Indices::U32(i)) => Some(i.clone()),
+            _ => None,
+        })
+        .expect("32-bit indices");
+    assert!(
+        main.len() < 3 * 11 * 11 * 2,
+        "the main world's mesh lost triangles"
+    );
+    assert_eq!(
+        indices_on_the_gpu(&app, mesh(&app)).expect("the mesh is on the GPU"),
+        main,
+        "the slab holds the host's list once it has caught up"
+    );
+}
+
 /// Tearing switched on at runtime (as the editor's toggle does) on a GPU cloth already
 /// stretched past the threshold: its world is rebuilt with the cloth's state carried over,
 /// the edges past the threshold tear within a few frames, and the cloth stays on the GPU;
