@@ -169,6 +169,14 @@ const FLAG_SC: u32 = 16u;
 const FLAG_TETHERS: u32 = 32u;
 const FLAG_TEARING: u32 = 64u;
 
+// Whether triangle `t` (global) of a cloth with record `flags` lost an edge to a tear
+// (`tear_check` flags it dead): until the host's tear removes it from the topology it counts
+// in nothing (air, self-collision, the drawn mesh), as on the CPU, whose tear removes it at
+// once.
+fn triangle_torn(t: u32, flags: u32) -> bool {
+    return (flags & FLAG_TEARING) != 0u && atomicLoad(&scratch[P.dead_at + t]) != 0u;
+}
+
 @group(0) @binding(0) var<uniform> P: World;
 @group(0) @binding(1) var<uniform> S: Substep;
 @group(0) @binding(2) var<uniform> L: Level;

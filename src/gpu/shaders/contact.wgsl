@@ -142,6 +142,8 @@ struct ScVertex {
     skip2: f32,
     tri_skip2: f32,
     thickness: f32,
+    // its cloth's record flags
+    flags: u32,
 }
 
 // The triangles whose first corner is `j` (at `q`, resting `rest2` from the vertex) that the
@@ -151,6 +153,9 @@ fn sc_triangles_of(v: ScVertex, j: u32, q: vec3<f32>, rest2: f32, tlist: ptr<fun
     let r2 = v.reach * v.reach;
     for (var m = topo[P.first_tri_at + j]; m < topo[P.first_tri_at + j + 1u]; m++) {
         let t = topo[m];
+        if triangle_torn(t, v.flags) {
+            continue;
+        }
         let tb = P.tri_at + 3u * t;
         let k1 = topo[tb + 1u];
         let k2 = topo[tb + 2u];
@@ -254,6 +259,7 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
         v.skip2 = skip * skip;
         v.tri_skip2 = tri_skip * tri_skip;
         v.thickness = thickness;
+        v.flags = cl.flags;
         let size = 2u * cl.n;
         let lo = sc_cell(p - vec3<f32>(radius), inv);
         let hi = sc_cell(p + vec3<f32>(radius), inv);

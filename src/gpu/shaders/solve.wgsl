@@ -71,8 +71,7 @@ fn hinge_torn(j: u32, flags: u32) -> bool {
         return false;
     }
     let t = cons[P.bend_at + 3u * j + 2u];
-    return (t.y != NO_PIN && atomicLoad(&scratch[P.dead_at + t.y]) != 0u)
-        || (t.z != NO_PIN && atomicLoad(&scratch[P.dead_at + t.z]) != 0u);
+    return (t.y != NO_PIN && triangle_torn(t.y, flags)) || (t.z != NO_PIN && triangle_torn(t.z, flags));
 }
 
 // `isometric::iso_correction` applied to hinge `j`.

@@ -45,11 +45,14 @@ fn teleport(@builtin(global_invocation_id) id: vec3<u32>) {
     }
 }
 
-// `air::vertex_area_vectors` for vertex `i`, over its triangles in triangle order (the CPU's
-// summation order).
-fn area_vector(i: u32) -> vec3<f32> {
+// `air::vertex_area_vectors` for vertex `i` of a cloth with record `flags`, over its
+// triangles in triangle order (the CPU's summation order), torn ones left out.
+fn area_vector(i: u32, flags: u32) -> vec3<f32> {
     var acc = vec3<f32>(0.0);
     for (var k = topo[P.tri_offsets_at + i]; k < topo[P.tri_offsets_at + i + 1u]; k++) {
+        if triangle_torn(topo[k], flags) {
+            continue;
+        }
         let t = P.tri_at + 3u * topo[k];
         let a = state[topo[t]].xyz;
         let b = state[topo[t + 1u]].xyz;
@@ -101,7 +104,7 @@ fn step_begin(@builtin(global_invocation_id) id: vec3<u32>) {
         state[P.pin_start_at + p] = x;
     }
     if (cl.flags & FLAG_AIR) != 0u {
-        state[P.area_at + i] = vec4<f32>(area_vector(i), 0.0);
+        state[P.area_at + i] = vec4<f32>(area_vector(i, cl.flags), 0.0);
     }
     if (cl.flags & FLAG_SC) != 0u {
         let v = state[P.vel_at + i].xyz;
