@@ -481,15 +481,22 @@ fn indices_on_the_gpu(app: &App, mesh: AssetId<Mesh>) -> Option<Vec<u32>> {
 /// A GPU tear shows in the frame the GPU tears: its triangles become (0, 0, 0) in the mesh's
 /// index slab before the host has read the tear back (the host tears a frame or more
 /// later); once the host's tear has rewritten the mesh and the pull has stopped, the slab
-/// holds exactly the main world's index list, with nothing hidden left over.
+/// holds exactly the main world's index list, with nothing hidden left over. A second
+/// tearing cloth in the same world, spawned first (its triangles first in the world's) and
+/// too strong to tear, never has a triangle hidden: each cloth reads its own flags.
 #[test]
 fn a_gpu_tear_shows_before_the_host_tears() {
     if common::gpu_or_skip("a_gpu_tear_shows_before_the_host_tears").is_none() {
         return;
     }
     let mut app = render_app_with(ClothPlugins::default(), false);
+    let (strong, _) = spawn_held(&mut app, -3.0, ClothBackend::Gpu);
+    app.world_mut()
+        .entity_mut(strong)
+        .insert(ClothTearing { threshold: 50.0 });
     let (cloth, anchors) = spawn_held(&mut app, 0.0, ClothBackend::Gpu);
     let mesh = |app: &App| app.world().get::<Mesh3d>(cloth).unwrap().0.id();
+    let strong_mesh = |app: &App| app.world().get::<Mesh3d>(strong).unwrap().0.id();
     let (mut first_hidden, mut first_host_tear, mut most_hidden) = (None, None, 0);
     // Five frames held, then 60 pulling apart; every frame looked at.
     for k in 0..65u32 {
@@ -500,6 +507,12 @@ fn a_gpu_tear_shows_before_the_host_tears() {
             0.5 + 0.02 * k.saturating_sub(5) as f32,
         );
         app.update();
+        if let Some(indices) = indices_on_the_gpu(&app, strong_mesh(&app)) {
+            assert!(
+                !indices.chunks_exact(3).any(|t| t == [0, 0, 0]),
+                "frame {k}: a triangle of the cloth that does not tear is hidden"
+            );
+        }
         let Some(indices) = indices_on_the_gpu(&app, mesh(&app)) else {
             continue;
         };
@@ -528,6 +541,12 @@ fn a_gpu_tear_shows_before_the_host_tears() {
         "the tear must show (frame {hidden}) before the host tears (frame {host})"
     );
     assert!(in_use(&app, cloth).gpu, "{:?}", in_use(&app, cloth));
+    assert!(in_use(&app, strong).gpu, "{:?}", in_use(&app, strong));
+    assert_eq!(
+        app.world().get::<ClothSim>(strong).unwrap().torn_edges(),
+        0,
+        "the strong cloth holds"
+    );
     common::run(&mut app, 10);
     let main: Vec<u32> = app
         .world()
