@@ -2063,6 +2063,23 @@ fn torn_triangles_leave_the_drawn_mesh_as_on_the_cpu() {
     let dead_at = world
         .dead_triangle_flags(0)
         .expect("a tearing cloth has dead flags");
+    // The hiding pass into `slab`, one submission each (a record writes the writer's
+    // parameters through the queue).
+    let hide = |world: &GpuWorld, slab: &wgpu::Buffer, u16_indices: bool| {
+        let mut encoder = g.device.create_command_encoder(&Default::default());
+        writer.record_hide_torn(
+            &g.device,
+            &g.queue,
+            &kernel,
+            &mut encoder,
+            world.scratch_buffer(),
+            dead_at,
+            slab,
+            first as u32,
+            u16_indices,
+        );
+        g.queue.submit([encoder.finish()]);
+    };
     let mut twin = list.clone();
     let (mut hidden, mut torn_frames) = (0, 0);
     for k in 0..60 {
@@ -2097,22 +2114,8 @@ fn torn_triangles_leave_the_drawn_mesh_as_on_the_cpu() {
             Some((world.scratch_buffer(), dead_at)),
         );
         g.queue.submit([encoder.finish()]);
-        // One submission a slab: a record writes the writer's parameters through the queue.
-        for (slab, u16_indices) in [(&slab32, false), (&slab16, true)] {
-            let mut encoder = g.device.create_command_encoder(&Default::default());
-            writer.record_hide_torn(
-                &g.device,
-                &g.queue,
-                &kernel,
-                &mut encoder,
-                world.scratch_buffer(),
-                dead_at,
-                slab,
-                first as u32,
-                u16_indices,
-            );
-            g.queue.submit([encoder.finish()]);
-        }
+        hide(&world, &slab32, false);
+        hide(&world, &slab16, true);
         // The twin: the triangles with an edge the GPU tore are dead.
         let torn = world.read_torn_edges(&g.device, &g.queue, 0).torn;
         let dead: Vec<u32> = s
@@ -2186,19 +2189,7 @@ fn torn_triangles_leave_the_drawn_mesh_as_on_the_cpu() {
     replaced.extend(binding.drawn_indices());
     replaced.resize(list.len(), 0);
     let slab = make(bytemuck::cast_slice(&replaced));
-    let mut encoder = g.device.create_command_encoder(&Default::default());
-    writer.record_hide_torn(
-        &g.device,
-        &g.queue,
-        &kernel,
-        &mut encoder,
-        world.scratch_buffer(),
-        dead_at,
-        &slab,
-        first as u32,
-        false,
-    );
-    g.queue.submit([encoder.finish()]);
+    hide(&world, &slab, false);
     let got: Vec<u32> = bytemuck::pod_collect_to_vec(&read(&slab));
     assert_eq!(got, replaced, "a replaced index list must stay as it is");
 }

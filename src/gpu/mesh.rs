@@ -7,6 +7,7 @@ use glam::{Affine3A, Mat4, Vec2};
 use wgpu::util::DeviceExt;
 
 use super::append_lists;
+use super::kernels::{storage_entry, uniform_entry};
 use crate::solver::Weld;
 
 /// The WGSL of the mesh-writing kernel.
@@ -89,69 +90,31 @@ impl MeshKernel {
     /// Compiles the kernel on `device`.
     #[must_use]
     pub fn new(device: &wgpu::Device) -> Self {
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("cloth_mesh"),
-            source: wgpu::ShaderSource::Wgsl(MESH_WGSL.into()),
-        });
-        let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("cloth_mesh"),
-            entries: &[
-                entry(0, wgpu::BufferBindingType::Uniform),
-                entry(1, wgpu::BufferBindingType::Storage { read_only: true }),
-                entry(2, wgpu::BufferBindingType::Storage { read_only: true }),
-                entry(3, wgpu::BufferBindingType::Storage { read_only: false }),
-                entry(4, wgpu::BufferBindingType::Storage { read_only: true }),
+        let (layout, pipeline) = compile(
+            device,
+            "cloth_mesh",
+            MESH_WGSL,
+            "write_mesh",
+            &[
+                uniform_entry(0, false, size_of::<MeshParams>() as u64),
+                storage_entry(1, true),
+                storage_entry(2, true),
+                storage_entry(3, false),
+                storage_entry(4, true),
             ],
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("cloth_mesh"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("cloth_mesh"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("write_mesh"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let hide_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("cloth_hide_torn"),
-            source: wgpu::ShaderSource::Wgsl(HIDE_WGSL.into()),
-        });
-        let hide_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("cloth_hide_torn"),
-            entries: &[
-                entry(0, wgpu::BufferBindingType::Uniform),
-                entry(1, wgpu::BufferBindingType::Storage { read_only: true }),
-                entry(2, wgpu::BufferBindingType::Storage { read_only: true }),
-                entry(3, wgpu::BufferBindingType::Storage { read_only: false }),
+        );
+        let (hide_layout, hide_pipeline) = compile(
+            device,
+            "cloth_hide_torn",
+            HIDE_WGSL,
+            "hide_torn",
+            &[
+                uniform_entry(0, false, size_of::<HideParams>() as u64),
+                storage_entry(1, true),
+                storage_entry(2, true),
+                storage_entry(3, false),
             ],
-        });
-        let hide_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("cloth_hide_torn"),
-            bind_group_layouts: &[Some(&hide_layout)],
-            immediate_size: 0,
-        });
-        let hide_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("cloth_hide_torn"),
-            layout: Some(&hide_pipeline_layout),
-            module: &hide_module,
-            entry_point: Some("hide_torn"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        );
         Self {
             layout,
             pipeline,
@@ -159,6 +122,38 @@ impl MeshKernel {
             hide_pipeline,
         }
     }
+}
+
+/// A one-entry-point compute kernel from `source` with one bind group of `entries`.
+fn compile(
+    device: &wgpu::Device,
+    label: &str,
+    source: &str,
+    entry_point: &str,
+    entries: &[wgpu::BindGroupLayoutEntry],
+) -> (wgpu::BindGroupLayout, wgpu::ComputePipeline) {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(label),
+        entries,
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(&layout)],
+        immediate_size: 0,
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&pipeline_layout),
+        module: &module,
+        entry_point: Some(entry_point),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    (layout, pipeline)
 }
 
 /// Per drawn triangle (three mesh vertices each in `drawn`, as the index buffer holds them),
