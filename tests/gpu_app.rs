@@ -1159,3 +1159,186 @@ fn a_skinned_gpu_cloth_follows_its_skin() {
     );
     assert!(rest_worst > 0.01, "the sheet followed the skin rigidly");
 }
+
+/// What a `FixedUpdate` system changes at the second of four fixed steps in a frame: `App`
+/// with four steps a frame, whose `change` runs once, at fixed step `at` (the second of its
+/// frame), and the render world in the main thread, so a panic there fails the test.
+fn four_steps_a_frame(at: u32, change: fn(&mut Commands, Entity)) -> ExitingApp {
+    #[derive(Resource)]
+    struct Change(u32, fn(&mut Commands, Entity));
+    fn run_change(
+        mut commands: Commands,
+        change: Res<Change>,
+        mut step: Local<u32>,
+        cloths: Query<Entity, With<Cloth>>,
+    ) {
+        *step += 1;
+        if *step == change.0 {
+            for e in &cloths {
+                (change.1)(&mut commands, e);
+            }
+        }
+    }
+    let mut app = render_app_with(ClothPlugins::default(), false);
+    app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+        4.0 / 60.0,
+    )))
+    .insert_resource(Change(at, change))
+    .add_systems(FixedUpdate, run_change);
+    app
+}
+
+/// A tearing cloth whose mesh is replaced between two fixed steps of a frame starts from the
+/// new mesh at that step on the GPU as on the CPU: the frame's earlier steps, queued for the
+/// old cloth (its pins' targets where the old mesh had those vertices), are not run on the new
+/// one. Before, they yanked the new cloth's pinned vertices to the old targets and it tore to
+/// shreds (over 500 edges) where the CPU cloth tore none.
+#[test]
+fn a_mesh_replaced_between_fixed_steps_starts_the_gpu_cloth_afresh() {
+    if common::gpu_or_skip("a_mesh_replaced_between_fixed_steps_starts_the_gpu_cloth_afresh")
+        .is_none()
+    {
+        return;
+    }
+    // Step 62 is the second of the frame of steps 61–64.
+    let mut app = four_steps_a_frame(62, |commands, e| {
+        commands.queue(move |world: &mut World| {
+            // 24 columns over the same width: vertices 0..12 (the pins) are now the left half
+            // of the top edge, not all of it.
+            let wider = grid_mesh(&Grid::new(24, 12, 1.0, 1.0));
+            let mesh = world.resource_mut::<Assets<Mesh>>().add(wider);
+            world.entity_mut(e).insert(Mesh3d(mesh));
+        });
+    });
+    let grid = Grid::new(12, 12, 1.0, 1.0);
+    let cloths: Vec<Entity> = [ClothBackend::Cpu, ClothBackend::Gpu]
+        .into_iter()
+        .enumerate()
+        .map(|(k, backend)| {
+            let mesh = app
+                .world_mut()
+                .resource_mut::<Assets<Mesh>>()
+                .add(grid_mesh(&grid));
+            app.world_mut()
+                .spawn((
+                    Mesh3d(mesh),
+                    Transform::from_xyz(3.0 * k as f32, 1.0, 0.0)
+                        .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2)),
+                    Cloth::default(),
+                    ClothPins::rest((0..12).map(|i| grid.index(i, 0))),
+                    ClothTearing::default(),
+                    ClothReadback,
+                    backend,
+                ))
+                .id()
+        })
+        .collect();
+    common::run(&mut app, 15);
+    assert!(in_use(&app, cloths[1]).gpu, "the GPU cloth runs on the GPU");
+    common::run(&mut app, 20);
+    let sim = |e| app.world().get::<ClothSim>(e).expect("rebuilt");
+    for &e in &cloths {
+        assert_eq!(
+            sim(e).simulation().state().len(),
+            24 * 12,
+            "rebuilt from the new mesh"
+        );
+    }
+    let (cpu, gpu) = (sim(cloths[0]).torn_edges(), sim(cloths[1]).torn_edges());
+    eprintln!("torn edges after the mesh change: CPU {cpu}, GPU {gpu}");
+    assert_eq!(cpu, 0, "the CPU cloth itself tore");
+    assert_eq!(gpu, 0, "the GPU cloth tore where the CPU cloth did not");
+    // And it hangs from its new pins as the CPU cloth does.
+    let strain = |e| sim(e).max_strain();
+    assert!(
+        strain(cloths[1]) < 2.0 * strain(cloths[0]) + 0.05,
+        "GPU strain {} against CPU {}",
+        strain(cloths[1]),
+        strain(cloths[0])
+    );
+}
+
+/// Pins changed between two fixed steps of a frame reach the GPU from that step: the frame's
+/// earlier steps hold the new pins at their targets too (they were queued with one target per
+/// old pin). Before, the render world panicked ("one target per pin") and the cloth froze.
+#[test]
+fn pins_changed_between_fixed_steps_hold_on_the_gpu() {
+    if common::gpu_or_skip("pins_changed_between_fixed_steps_hold_on_the_gpu").is_none() {
+        return;
+    }
+    let grid = Grid::new(12, 12, 1.0, 1.0);
+    let mut app = four_steps_a_frame(62, |commands, e| {
+        let grid = Grid::new(12, 12, 1.0, 1.0);
+        commands.entity(e).insert(ClothPins::rest([
+            grid.index(0, 0),
+            grid.index(6, 0),
+            grid.index(11, 0),
+        ]));
+    });
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    let place = Transform::from_xyz(0.0, 1.0, 0.0)
+        .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2));
+    let cloth = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            place,
+            Cloth::default(),
+            ClothPins::rest([grid.index(0, 0), grid.index(11, 0)]),
+            ClothReadback,
+            ClothBackend::Gpu,
+        ))
+        .id();
+    let middle = |app: &App| {
+        let sim = app.world().get::<ClothSim>(cloth).unwrap();
+        sim.simulation()
+            .state()
+            .position(sim.particle(grid.index(6, 0)) as usize)
+    };
+    common::run(&mut app, 15);
+    assert!(in_use(&app, cloth).gpu, "the cloth runs on the GPU");
+    // Its top edge sags between the two corners before the middle is pinned.
+    let target = place.transform_point(grid.positions()[grid.index(6, 0) as usize]);
+    let sag = middle(&app).distance(target);
+    eprintln!("the top edge's middle, 2 pins: {sag} m from where the third pin holds it");
+    assert!(sag > 1e-3, "the top edge does not sag ({sag} m)");
+    common::run(&mut app, 20);
+    let off = middle(&app).distance(target);
+    let steps = app.world().get::<ClothSim>(cloth).unwrap().steps();
+    eprintln!("3 pins: {off} m from its target after {steps} steps");
+    assert!(off < 1e-4, "the third pin does not hold ({off} m off)");
+}
+
+/// A new `Cloth` (mass, welding: baked into the simulation) builds the cloth again from its
+/// rest shape on the GPU as on the CPU; before, the GPU carried the old state over whenever
+/// the vertex count stayed the same, so the two backends parted.
+#[test]
+fn a_rebuilt_gpu_cloth_starts_from_its_rest_shape_as_on_the_cpu() {
+    if common::gpu_or_skip("a_rebuilt_gpu_cloth_starts_from_its_rest_shape_as_on_the_cpu").is_none()
+    {
+        return;
+    }
+    let mut app = render_app();
+    let cloths = [ClothBackend::Cpu, ClothBackend::Gpu].map(|b| {
+        let e = spawn(&mut app, Some(b), false);
+        app.world_mut().entity_mut(e).insert(ClothReadback);
+        e
+    });
+    common::run(&mut app, 40);
+    assert!(in_use(&app, cloths[1]).gpu);
+    for e in cloths {
+        let y = centre_y(&app, e);
+        assert!(y < 0.7, "cloth {e} did not swing down ({y})");
+        app.world_mut().get_mut::<Cloth>(e).unwrap().mass *= 2.0;
+    }
+    // A few frames for the GPU's state to come back; the free edge falls about 2 cm meanwhile.
+    common::run(&mut app, 5);
+    for e in cloths {
+        let y = centre_y(&app, e);
+        eprintln!("cloth {e} 5 frames after the rebuild: free edge at {y} m");
+        assert!(y > 0.9, "cloth {e} went on from its old state ({y})");
+    }
+}

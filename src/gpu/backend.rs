@@ -170,6 +170,10 @@ pub struct ClothOnGpu {
     key: String,
     /// Per queued step, every pin's target at its end.
     pub(crate) pending: Vec<Vec<Vec3>>,
+    /// How many of the first queued steps hold targets for pins the cloth no longer has
+    /// (its pins changed between two fixed steps of a frame): the next queued step's targets
+    /// replace theirs.
+    stale_targets: usize,
     /// The index of the first queued step among the frame's steps ([`GpuStepQueue`]).
     pub(crate) first_step: u32,
     /// Per queued step, how far the whole cloth jumps at its start (the teleport rule).
@@ -188,6 +192,20 @@ impl ClothOnGpu {
     pub fn queued_steps(&self) -> usize {
         self.pending.len()
     }
+
+    /// Drops the steps queued so far this frame (the GPU cloth sits them out).
+    fn forget_queued_steps(&mut self) {
+        self.pending.clear();
+        self.stale_targets = 0;
+        self.teleports.clear();
+        self.carries.clear();
+        self.motion.clear();
+    }
+}
+
+/// The vertices `sim` pins, in its pins' order.
+fn pinned_vertices(sim: &Simulation) -> Vec<u32> {
+    sim.state().pins().iter().map(|p| p.vertex).collect()
 }
 
 /// Where positions and normals sit in `mesh`'s interleaved vertex buffer (attributes sorted
@@ -220,7 +238,7 @@ pub(crate) fn vertex_layout(mesh: &Mesh) -> Result<VertexLayout, String> {
 /// A short fingerprint of what the GPU buffers were built from: settings, features, pinned
 /// vertices.
 fn settings_key(sim: &Simulation) -> String {
-    let pins: Vec<u32> = sim.state().pins().iter().map(|p| p.vertex).collect();
+    let pins = pinned_vertices(sim);
     format!(
         "{:?}{:?}{pins:?}{}",
         sim.params(),
@@ -241,7 +259,7 @@ pub(crate) fn choose_backends(
     meshes: Option<Res<Assets<Mesh>>>,
     mut cloths: Query<(
         (Entity, Option<&Name>),
-        &ClothSim,
+        Ref<ClothSim>,
         Option<&ClothBackend>,
         Option<&mut ClothBackendInUse>,
         Option<&mut ClothOnGpu>,
@@ -295,15 +313,28 @@ pub(crate) fn choose_backends(
         match (layout, on_gpu) {
             (Ok(layout), Some(mut g)) => {
                 let key = settings_key(cloth.simulation());
-                let edited = cloth.edit_count() != g.edits || g.restart;
+                // A cloth built again (another mesh, new `Cloth` settings) starts from its new
+                // simulation's state, as on the CPU.
+                let rebuilt = cloth.is_added();
+                let edited = cloth.edit_count() != g.edits || g.restart || rebuilt;
                 if key != g.key || edited {
                     // New settings go on from the GPU's state; an edit of the state wins.
                     *generation += 1;
                     g.generation = *generation;
-                    g.upload = Arc::new(upload(cloth, layout, !edited));
+                    let pins_before: Vec<u32> = pinned_vertices(&g.upload.sim);
+                    g.upload = Arc::new(upload(&cloth, layout, !edited));
                     g.key = key;
                     g.edits = cloth.edit_count();
                     g.restart = false;
+                    if edited {
+                        // This frame's earlier steps were queued for a state that is gone: the
+                        // new one starts now and sits them out.
+                        g.forget_queued_steps();
+                    } else if pins_before != pinned_vertices(&g.upload.sim) {
+                        // Other pins: the earlier steps' targets are for the old ones; they
+                        // take this step's targets instead.
+                        g.stale_targets = g.pending.len();
+                    }
                 }
             }
             (Ok(layout), None) => {
@@ -319,11 +350,12 @@ pub(crate) fn choose_backends(
                 commands.entity(entity).insert((
                     ClothOnGpu {
                         generation: *generation,
-                        upload: Arc::new(upload(cloth, layout, false)),
+                        upload: Arc::new(upload(&cloth, layout, false)),
                         edits: cloth.edit_count(),
                         restart: false,
                         key: settings_key(cloth.simulation()),
                         pending: Vec::new(),
+                        stale_targets: 0,
                         first_step: 0,
                         teleports: Vec::new(),
                         carries: Vec::new(),
@@ -515,10 +547,7 @@ pub(crate) fn clear_queued_steps(
     queue.steps.clear();
     queue.entities.clear();
     for mut g in &mut cloths {
-        g.pending.clear();
-        g.teleports.clear();
-        g.carries.clear();
-        g.motion.clear();
+        g.forget_queued_steps();
     }
 }
 
@@ -572,15 +601,18 @@ pub(crate) fn queue_gpu_steps(
         if g.pending.is_empty() {
             g.first_step = step;
         }
-        g.pending.push(
-            cloth
-                .simulation()
-                .state()
-                .pins()
-                .iter()
-                .map(|p| p.target)
-                .collect(),
-        );
+        let targets: Vec<Vec3> = cloth
+            .simulation()
+            .state()
+            .pins()
+            .iter()
+            .map(|p| p.target)
+            .collect();
+        let stale = core::mem::take(&mut g.stale_targets).min(g.pending.len());
+        for t in &mut g.pending[..stale] {
+            t.clone_from(&targets);
+        }
+        g.pending.push(targets);
         cloth.count_external_steps(1);
         g.teleports
             .push(cloth.take_teleport().unwrap_or(Vec3::ZERO));
