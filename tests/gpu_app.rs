@@ -1342,3 +1342,99 @@ fn a_rebuilt_gpu_cloth_starts_from_its_rest_shape_as_on_the_cpu() {
         assert!(y > 0.9, "cloth {e} went on from its old state ({y})");
     }
 }
+
+/// The positions in `mesh`'s vertex slab on the GPU (the render world of `app`), read with
+/// the stride of `layout`'s attributes.
+fn positions_on_the_gpu(app: &App, mesh: AssetId<Mesh>, layout: &Mesh) -> Option<Vec<Vec3>> {
+    use bevy::render::mesh::allocator::MeshAllocator;
+    use bevy::render::renderer::{RenderDevice, RenderQueue};
+    let render = app
+        .get_sub_app(bevy::render::RenderApp)
+        .expect("the render world is a sub-app without pipelined rendering")
+        .world();
+    let slice = render
+        .resource::<MeshAllocator>()
+        .mesh_vertex_slice(&mesh)?;
+    let stride: u64 = layout.attributes().map(|(a, _)| a.format.size()).sum();
+    let device = render.resource::<RenderDevice>().wgpu_device();
+    let (start, end) = (
+        u64::from(slice.range.start) * stride,
+        u64::from(slice.range.end) * stride,
+    );
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: end - start,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(slice.buffer, start, &staging, 0, end - start);
+    render.resource::<RenderQueue>().submit([encoder.finish()]);
+    staging.map_async(wgpu::MapMode::Read, .., |r| r.expect("map_async"));
+    let _ = device.poll(wgpu::PollType::wait_indefinitely());
+    let words: Vec<f32> = bytemuck::pod_collect_to_vec(&staging.get_mapped_range(..));
+    let per = (stride / 4) as usize;
+    // The position is the first attribute (the lowest id).
+    Some(
+        words
+            .chunks_exact(per)
+            .map(|v| Vec3::new(v[0], v[1], v[2]))
+            .collect(),
+    )
+}
+
+/// A mesh put on a GPU cloth's entity after the frame's fixed steps (in `Update`, as a game
+/// swaps a level of detail) is the source of the next build, never a target: the GPU cloth
+/// writes into its own copy only. Before, it wrote its vertices into the new mesh's slab for
+/// the frame until the rebuild (here: a smaller mesh, so past its end into whatever the slab
+/// holds next).
+#[test]
+fn a_mesh_put_in_from_update_is_not_written_by_the_gpu_cloth() {
+    if common::gpu_or_skip("a_mesh_put_in_from_update_is_not_written_by_the_gpu_cloth").is_none() {
+        return;
+    }
+    #[derive(Resource)]
+    struct Swap(Option<(Entity, Handle<Mesh>)>);
+    fn swap(mut commands: Commands, mut swap: ResMut<Swap>) {
+        if let Some((e, mesh)) = swap.0.take() {
+            commands.entity(e).insert(Mesh3d(mesh));
+        }
+    }
+    let mut app = render_app_with(ClothPlugins::default(), false);
+    app.insert_resource(Swap(None)).add_systems(Update, swap);
+    let cloth = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    // A small sheet far above, drawn by an entity of its own.
+    let small = grid_mesh(&Grid::new(4, 4, 0.3, 0.3)).translated_by(Vec3::Y * 5.0);
+    let expected: Vec<Vec3> = match small.attribute(Mesh::ATTRIBUTE_POSITION) {
+        Some(bevy::mesh::VertexAttributeValues::Float32x3(p)) => {
+            p.iter().map(|&v| Vec3::from(v)).collect()
+        }
+        _ => panic!("positions"),
+    };
+    let layout = small.clone();
+    let handle = app.world_mut().resource_mut::<Assets<Mesh>>().add(small);
+    app.world_mut()
+        .spawn((Mesh3d(handle.clone()), Transform::default()));
+    common::run(&mut app, 15);
+    assert!(in_use(&app, cloth).gpu);
+    let before = positions_on_the_gpu(&app, handle.id(), &layout).expect("on the GPU");
+    assert_eq!(before, expected, "the small sheet as uploaded");
+    app.world_mut().resource_mut::<Swap>().0 = Some((cloth, handle.clone()));
+    for frame in 0..3 {
+        app.update();
+        let now = positions_on_the_gpu(&app, handle.id(), &layout).expect("on the GPU");
+        assert_eq!(
+            now, expected,
+            "frame {frame} after the swap: the GPU cloth wrote into the mesh put in"
+        );
+    }
+    // And the cloth was built again from it, on the GPU.
+    common::run(&mut app, 5);
+    assert!(in_use(&app, cloth).gpu);
+    let sim = app.world().get::<ClothSim>(cloth).unwrap();
+    assert_eq!(
+        sim.simulation().state().len(),
+        16,
+        "built from the small sheet"
+    );
+}

@@ -81,6 +81,9 @@ pub(crate) struct GpuUpload {
     pub tangents: Option<TangentSource>,
     /// Start from the GPU state of the previous upload (a settings change), not from `sim`'s.
     pub carry: bool,
+    /// The cloth's own mesh (its copy, drawn through `Mesh3d`), the only one the GPU writes:
+    /// a mesh the game puts in `Mesh3d` is the source of the next build, not a target.
+    pub mesh: AssetId<Mesh>,
 }
 
 /// Copies a GPU cloth's positions and velocities into its [`ClothSim`] every frame, a frame
@@ -433,6 +436,7 @@ fn upload(cloth: &ClothSim, layout: VertexLayout, carry: bool) -> GpuUpload {
         layout,
         tangents,
         carry,
+        mesh: cloth.mesh().id(),
     }
 }
 

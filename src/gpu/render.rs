@@ -46,7 +46,6 @@ pub(crate) struct GpuClothPipelines {
 /// One GPU cloth's frame, in the render world.
 struct ExtractedGpuCloth {
     entity: Entity,
-    mesh: AssetId<Mesh>,
     generation: u64,
     /// `None` for a cloth leaving the GPU (read back, not stepped).
     upload: Option<Arc<GpuUpload>>,
@@ -74,25 +73,16 @@ pub(crate) struct ExtractedGpuCloths {
 pub(crate) fn extract_gpu_cloths(
     mut out: ResMut<ExtractedGpuCloths>,
     queue: Extract<Res<GpuStepQueue>>,
-    cloths: Extract<
-        Query<(
-            Entity,
-            &ClothOnGpu,
-            &Mesh3d,
-            &GlobalTransform,
-            Has<ClothReadback>,
-        )>,
-    >,
-    leaving: Extract<Query<(Entity, &ClothLeavingGpu, &Mesh3d, &GlobalTransform)>>,
+    cloths: Extract<Query<(Entity, &ClothOnGpu, &GlobalTransform, Has<ClothReadback>)>>,
+    leaving: Extract<Query<(Entity, &ClothLeavingGpu, &GlobalTransform)>>,
 ) {
     out.cloths.clear();
     out.queue = queue.clone();
-    for (entity, g, mesh, transform, readback) in &cloths {
+    for (entity, g, transform, readback) in &cloths {
         // A tearing cloth is always read back: the CPU tears it.
         let readback = readback || g.upload.sim.features().tear_threshold.is_some();
         out.cloths.push(ExtractedGpuCloth {
             entity,
-            mesh: mesh.id(),
             generation: g.generation,
             upload: Some(g.upload.clone()),
             pin_targets: g.pending.clone(),
@@ -105,10 +95,9 @@ pub(crate) fn extract_gpu_cloths(
             readback,
         });
     }
-    for (entity, l, mesh, transform) in &leaving {
+    for (entity, l, transform) in &leaving {
         out.cloths.push(ExtractedGpuCloth {
             entity,
-            mesh: mesh.id(),
             generation: l.generation,
             upload: None,
             pin_targets: Vec::new(),
@@ -358,14 +347,13 @@ pub(crate) fn prepare_gpu_worlds(
                 WriterEntry {
                     generation: x.generation,
                     writer,
-                    mesh: x.mesh,
+                    mesh: upload.mesh,
                     transform: x.transform,
                     u16_indices: upload.u16_indices,
                 },
             );
         }
         if let Some(w) = worlds.writers.get_mut(&x.entity) {
-            w.mesh = x.mesh;
             w.transform = x.transform;
         }
     }
