@@ -1438,3 +1438,235 @@ fn a_mesh_put_in_from_update_is_not_written_by_the_gpu_cloth() {
         "built from the small sheet"
     );
 }
+
+/// A game's runtime changes at random fixed steps of four-step frames (a fixed seed), the same
+/// to a CPU cloth and a GPU cloth side by side: new meshes, pins, features, settings, `Cloth`
+/// rebuilds, teleports, the GPU twin sent to the CPU and back. The render world runs in the
+/// main thread (a panic there fails the test); nothing tears (the threshold, 3, is past what
+/// the scene stretches unless a step is run on inputs it was not queued for); every state is
+/// finite; and once left alone each GPU cloth hangs as its CPU twin does.
+#[test]
+fn random_runtime_changes_between_fixed_steps_keep_gpu_cloths_with_their_cpu_twins() {
+    if common::gpu_or_skip(
+        "random_runtime_changes_between_fixed_steps_keep_gpu_cloths_with_their_cpu_twins",
+    )
+    .is_none()
+    {
+        return;
+    }
+    /// The twins (CPU, GPU), and whether the changes go on.
+    #[derive(Resource)]
+    struct Twins(Vec<[Entity; 2]>, bool);
+    fn change(
+        mut commands: Commands,
+        twins: Res<Twins>,
+        mut rng: Local<u64>,
+        mut transforms: Query<&mut Transform>,
+        mut configs: Query<&mut ClothConfig>,
+        mut cloths: Query<&mut Cloth>,
+        features: Query<(Has<ClothSelfCollision>, Has<ClothTethers>)>,
+        backends: Query<&ClothBackend>,
+        mut meshes: ResMut<Assets<Mesh>>,
+    ) {
+        if !twins.1 {
+            return;
+        }
+        // xorshift64*, seeded.
+        let mut next = |n: u64| {
+            if *rng == 0 {
+                *rng = 0x9E37_79B9_7F4A_7C15;
+            }
+            *rng ^= *rng >> 12;
+            *rng ^= *rng << 25;
+            *rng ^= *rng >> 27;
+            (rng.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 33) % n
+        };
+        if next(3) != 0 {
+            return;
+        }
+        let pair = twins.0[next(twins.0.len() as u64) as usize];
+        let op = next(8);
+        let a = next(1000);
+        for (k, e) in pair.into_iter().enumerate() {
+            match op {
+                0 => {
+                    let (c, r) = (6 + (a % 7) as u32, 6 + (a / 7 % 7) as u32);
+                    let mesh = meshes.add(grid_mesh(&Grid::new(c, r, 0.8, 0.8)));
+                    commands.entity(e).insert(Mesh3d(mesh));
+                }
+                1 => {
+                    // Pins along the top edge (the first six vertices of any grid here).
+                    let pins: Vec<u32> = (0..6u32).filter(|i| a >> i & 1 == 1 || *i == 0).collect();
+                    commands.entity(e).insert(ClothPins::rest(pins));
+                }
+                2 => {
+                    if features.get(e).unwrap().0 {
+                        commands.entity(e).remove::<ClothSelfCollision>();
+                    } else {
+                        commands.entity(e).insert(ClothSelfCollision {
+                            thickness: None,
+                            friction: 0.1,
+                        });
+                    }
+                }
+                3 => {
+                    if features.get(e).unwrap().1 {
+                        commands.entity(e).remove::<ClothTethers>();
+                    } else {
+                        commands.entity(e).insert(ClothTethers::default());
+                    }
+                }
+                4 => {
+                    let mut c = configs.get_mut(e).unwrap();
+                    c.substeps = 4 + (a % 9) as u32;
+                    c.iterations = 1 + (a / 9 % 2) as u32;
+                }
+                // A teleport (past `Cloth::teleport_distance`): the whole cloth moves.
+                5 => transforms.get_mut(e).unwrap().translation.y += (a % 2) as f32 * 6.0 - 3.0,
+                6 => {
+                    cloths.get_mut(e).unwrap().mass = 0.1 + a as f32 * 1e-3;
+                }
+                _ => {
+                    if k == 1 {
+                        let to = match backends.get(e) {
+                            Ok(ClothBackend::Cpu) => ClothBackend::Gpu,
+                            _ => ClothBackend::Cpu,
+                        };
+                        commands.entity(e).insert(to);
+                    }
+                }
+            }
+        }
+    }
+    let mut app = four_steps_a_frame(u32::MAX, |_, _| {});
+    app.add_systems(FixedUpdate, change);
+    let grid = Grid::new(10, 10, 0.8, 0.8);
+    let twins: Vec<[Entity; 2]> = (0..3)
+        .map(|p| {
+            [ClothBackend::Cpu, ClothBackend::Gpu].map(|b| {
+                let mesh = app
+                    .world_mut()
+                    .resource_mut::<Assets<Mesh>>()
+                    .add(grid_mesh(&grid));
+                let x = 3.0 * p as f32 + if b == ClothBackend::Gpu { 20.0 } else { 0.0 };
+                app.world_mut()
+                    .spawn((
+                        Mesh3d(mesh),
+                        Transform::from_xyz(x, 2.0, 0.0)
+                            .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2)),
+                        Cloth::default(),
+                        ClothPins::rest(0..6),
+                        ClothTearing { threshold: 3.0 },
+                        ClothReadback,
+                        b,
+                    ))
+                    .id()
+            })
+        })
+        .collect();
+    app.insert_resource(Twins(twins.clone(), true));
+    for frame in 0..150 {
+        app.update();
+        for &e in twins.iter().flatten() {
+            let Some(sim) = app.world().get::<ClothSim>(e) else {
+                continue;
+            };
+            assert!(sim.simulation().state().is_finite(), "frame {frame}: {e}");
+            assert_eq!(
+                sim.torn_edges(),
+                0,
+                "frame {frame}: cloth {e} tore ({:?})",
+                app.world().get::<ClothBackendInUse>(e)
+            );
+        }
+    }
+    // Left alone: every GPU twin back on the GPU, then settled.
+    app.world_mut().resource_mut::<Twins>().1 = false;
+    for [_, gpu] in &twins {
+        app.world_mut().entity_mut(*gpu).insert(ClothBackend::Gpu);
+    }
+    common::run(&mut app, 120);
+    for [cpu, gpu] in &twins {
+        assert!(in_use(&app, *gpu).gpu, "{:?}", in_use(&app, *gpu));
+        let sim = |e: Entity| app.world().get::<ClothSim>(e).expect("built");
+        let (c, g) = (sim(*cpu), sim(*gpu));
+        assert_eq!(c.simulation().state().len(), g.simulation().state().len());
+        assert_eq!(c.torn_edges() + g.torn_edges(), 0);
+        let low = |s: &ClothSim| {
+            let st = s.simulation().state();
+            (0..st.len())
+                .map(|i| st.position(i).y)
+                .fold(f32::INFINITY, f32::min)
+        };
+        // The twins stand 20 m apart along x; their lowest points hang alike.
+        eprintln!(
+            "twins {cpu}/{gpu}: lowest point {} / {} m, strain {} / {}",
+            low(c),
+            low(g),
+            c.max_strain(),
+            g.max_strain()
+        );
+        assert!(
+            (low(c) - low(g)).abs() < 0.05,
+            "lowest points {} and {}",
+            low(c),
+            low(g)
+        );
+        assert!(g.max_strain() < 2.0 * c.max_strain() + 0.05);
+    }
+}
+
+/// A GPU cloth sent to the CPU in the step its entity teleports (10 m) goes on from its last
+/// GPU state, which is some steps old, moved along with its pins (the teleport rule applied
+/// to the gap); before, the CPU started from where the GPU had left it, 10 m from its pins,
+/// and the cloth tore apart.
+#[test]
+fn a_gpu_cloth_sent_to_the_cpu_as_it_teleports_lands_with_its_pins() {
+    if common::gpu_or_skip("a_gpu_cloth_sent_to_the_cpu_as_it_teleports_lands_with_its_pins")
+        .is_none()
+    {
+        return;
+    }
+    let mut app = four_steps_a_frame(62, |commands, e| {
+        commands.queue(move |world: &mut World| {
+            world.get_mut::<Transform>(e).unwrap().translation.x += 10.0;
+        });
+        commands.entity(e).insert(ClothBackend::Cpu);
+    });
+    let grid = Grid::new(12, 12, 1.0, 1.0);
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    let cloth = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(0.0, 1.0, 0.0)
+                .with_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2)),
+            Cloth::default(),
+            ClothPins::rest((0..12).map(|i| grid.index(i, 0))),
+            ClothTearing { threshold: 3.0 },
+            ClothBackend::Gpu,
+        ))
+        .id();
+    common::run(&mut app, 15);
+    assert!(in_use(&app, cloth).gpu);
+    common::run(&mut app, 20);
+    assert!(!in_use(&app, cloth).gpu, "on the CPU");
+    let sim = app.world().get::<ClothSim>(cloth).unwrap();
+    let state = sim.simulation().state();
+    let xs = (0..state.len()).map(|i| state.position(i).x);
+    let (lo, hi) = xs.fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), x| {
+        (l.min(x), h.max(x))
+    });
+    eprintln!(
+        "after the teleport: x from {lo} to {hi}, {} edges torn",
+        sim.torn_edges()
+    );
+    assert_eq!(sim.torn_edges(), 0, "the cloth tore");
+    assert!(
+        lo > 9.0 && hi < 11.0,
+        "the cloth is not where its pins are: x from {lo} to {hi}"
+    );
+}

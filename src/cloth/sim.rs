@@ -7,7 +7,7 @@ use bevy::prelude::*;
 use super::ClothError;
 use super::ClothTorn;
 use crate::foundation::EntityName;
-use crate::solver::{Carry, MeshBinding, Simulation, Weld, WindField, ray_hit};
+use crate::solver::{Carry, MeshBinding, Simulation, Weld, WindField, ray_hit, teleport_offset};
 
 /// The running simulation of a cloth entity, inserted by the plugin on its first step.
 ///
@@ -185,6 +185,26 @@ impl ClothSim {
             *x = g.truncate().extend(x.w);
         }
         state.velocities.copy_from_slice(velocities);
+    }
+
+    /// After [`Self::receive_state`] took over a state some steps old (a cloth back from the
+    /// GPU: its last read-back), the teleport rule applied to the gap: the pins whose vertex
+    /// lies farther than `limit` from its target count as a jump, and the whole cloth moves by
+    /// their mean (the pinned vertices landing on their targets), as a teleport of its anchor
+    /// in the gap moved the cloth where it was stepped. Returns the offset, if any.
+    pub fn catch_up_with_pins(&mut self, limit: f32) -> Option<Vec3> {
+        let state = self.sim.state();
+        let offset = teleport_offset(
+            state
+                .pins()
+                .iter()
+                .map(|p| (state.position(p.vertex as usize), p.target)),
+            limit,
+        )?;
+        let targets: Vec<Vec3> = state.pins().iter().map(|p| p.target).collect();
+        self.sim.state_mut().teleport(offset, targets);
+        self.dirty = true;
+        Some(offset)
     }
 
     /// Tears the edges stretched past the tear threshold in the current state (a backend

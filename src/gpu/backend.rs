@@ -25,7 +25,7 @@ use super::world::{GpuWorld, MotionTargets};
 use crate::cloth::{Cloth, ClothSim, ClothSteppedElsewhere, ClothTorn};
 use crate::collider::{ClothColliders, ClothContactImpulse};
 use crate::foundation::EntityName;
-use crate::solver::{Carry, Collider, ContactImpulse, Simulation};
+use crate::solver::{Carry, Collider, ContactImpulse, DEFAULT_TELEPORT_DISTANCE, Simulation};
 use crate::wind::ClothWindField;
 
 /// Which solver steps a cloth.
@@ -459,6 +459,7 @@ pub(crate) fn apply_gpu_results(
         Option<&mut ClothOnGpu>,
         Option<&mut ClothLeavingGpu>,
         Option<&GlobalTransform>,
+        Option<&Cloth>,
     )>,
 ) {
     // Every frame's impulses happened, whichever result per cloth is the latest.
@@ -472,7 +473,8 @@ pub(crate) fn apply_gpu_results(
             continue;
         }
         seen.push(r.entity);
-        let Ok(((entity, name), mut cloth, on_gpu, leaving, transform)) = cloths.get_mut(r.entity)
+        let Ok(((entity, name), mut cloth, on_gpu, leaving, transform, settings)) =
+            cloths.get_mut(r.entity)
         else {
             continue;
         };
@@ -499,6 +501,12 @@ pub(crate) fn apply_gpu_results(
             cloth.recover(EntityName::new(entity, name), transform.copied());
         } else if let Some((positions, velocities)) = &r.state {
             cloth.receive_state(positions, velocities);
+            if leaving.is_some() {
+                // The last GPU state is some steps old; an anchor that teleported since
+                // takes the cloth along, as it would have on either backend.
+                let limit = settings.map_or(DEFAULT_TELEPORT_DISTANCE, |c| c.teleport_distance);
+                cloth.catch_up_with_pins(limit);
+            }
             // Tear on the CPU the edges the GPU tore (it let go of them at once; the lab
             // solver only says that some edge is past the threshold, so its cloth tears what
             // is in the state read back). The new topology goes to the GPU as a settings
@@ -526,7 +534,7 @@ pub(crate) fn apply_gpu_results(
             g.restart = true;
         }
     }
-    for ((entity, name), mut cloth, _, leaving, _) in &mut cloths {
+    for ((entity, name), mut cloth, _, leaving, _, _) in &mut cloths {
         if let Some(mut l) = leaving {
             l.frames += 1;
             if l.frames > LEAVE_TIMEOUT_FRAMES {
