@@ -1457,6 +1457,7 @@ fn random_runtime_changes_between_fixed_steps_keep_gpu_cloths_with_their_cpu_twi
     /// The twins (CPU, GPU), and whether the changes go on.
     #[derive(Resource)]
     struct Twins(Vec<[Entity; 2]>, bool);
+    #[expect(clippy::too_many_arguments, reason = "a system's inputs")]
     fn change(
         mut commands: Commands,
         twins: Res<Twins>,
