@@ -453,29 +453,41 @@ fn a_gpu_cloth_tears_when_pulled_apart() {
 /// grid meshes here have 32-bit indices), once the mesh is there.
 fn indices_on_the_gpu(app: &App, mesh: AssetId<Mesh>) -> Option<Vec<u32>> {
     use bevy::render::mesh::allocator::MeshAllocator;
-    use bevy::render::renderer::{RenderDevice, RenderQueue};
-    let render = app
-        .get_sub_app(bevy::render::RenderApp)
-        .expect("the render world is a sub-app without pipelined rendering")
-        .world();
+    let render = render_world(app);
     let slice = render.resource::<MeshAllocator>().mesh_index_slice(&mesh)?;
+    let range = u64::from(slice.range.start) * 4..u64::from(slice.range.end) * 4;
+    Some(bytemuck::pod_collect_to_vec(&read_buffer(
+        app,
+        slice.buffer,
+        range,
+    )))
+}
+
+/// The render world of `app` (a sub-app: pipelined rendering off).
+fn render_world(app: &App) -> &World {
+    app.get_sub_app(bevy::render::RenderApp)
+        .expect("the render world is a sub-app without pipelined rendering")
+        .world()
+}
+
+/// Bytes `range` of `buffer`, copied out of the GPU of `app`'s render world.
+fn read_buffer(app: &App, buffer: &wgpu::Buffer, range: core::ops::Range<u64>) -> Vec<u8> {
+    use bevy::render::renderer::{RenderDevice, RenderQueue};
+    let render = render_world(app);
     let device = render.resource::<RenderDevice>().wgpu_device();
-    let (start, end) = (
-        u64::from(slice.range.start) * 4,
-        u64::from(slice.range.end) * 4,
-    );
+    let size = range.end - range.start;
     let staging = device.create_buffer(&wgpu::BufferDescriptor {
         label: None,
-        size: end - start,
+        size,
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
     let mut encoder = device.create_command_encoder(&Default::default());
-    encoder.copy_buffer_to_buffer(slice.buffer, start, &staging, 0, end - start);
+    encoder.copy_buffer_to_buffer(buffer, range.start, &staging, 0, size);
     render.resource::<RenderQueue>().submit([encoder.finish()]);
     staging.map_async(wgpu::MapMode::Read, .., |r| r.expect("map_async"));
     let _ = device.poll(wgpu::PollType::wait_indefinitely());
-    Some(bytemuck::pod_collect_to_vec(&staging.get_mapped_range(..)))
+    staging.get_mapped_range(..).to_vec()
 }
 
 /// A GPU tear shows in the frame the GPU tears: its triangles become (0, 0, 0) in the mesh's
@@ -1347,37 +1359,16 @@ fn a_rebuilt_gpu_cloth_starts_from_its_rest_shape_as_on_the_cpu() {
 /// the stride of `layout`'s attributes.
 fn positions_on_the_gpu(app: &App, mesh: AssetId<Mesh>, layout: &Mesh) -> Option<Vec<Vec3>> {
     use bevy::render::mesh::allocator::MeshAllocator;
-    use bevy::render::renderer::{RenderDevice, RenderQueue};
-    let render = app
-        .get_sub_app(bevy::render::RenderApp)
-        .expect("the render world is a sub-app without pipelined rendering")
-        .world();
-    let slice = render
+    let slice = render_world(app)
         .resource::<MeshAllocator>()
         .mesh_vertex_slice(&mesh)?;
     let stride: u64 = layout.attributes().map(|(a, _)| a.format.size()).sum();
-    let device = render.resource::<RenderDevice>().wgpu_device();
-    let (start, end) = (
-        u64::from(slice.range.start) * stride,
-        u64::from(slice.range.end) * stride,
-    );
-    let staging = device.create_buffer(&wgpu::BufferDescriptor {
-        label: None,
-        size: end - start,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = device.create_command_encoder(&Default::default());
-    encoder.copy_buffer_to_buffer(slice.buffer, start, &staging, 0, end - start);
-    render.resource::<RenderQueue>().submit([encoder.finish()]);
-    staging.map_async(wgpu::MapMode::Read, .., |r| r.expect("map_async"));
-    let _ = device.poll(wgpu::PollType::wait_indefinitely());
-    let words: Vec<f32> = bytemuck::pod_collect_to_vec(&staging.get_mapped_range(..));
-    let per = (stride / 4) as usize;
+    let range = u64::from(slice.range.start) * stride..u64::from(slice.range.end) * stride;
+    let words: Vec<f32> = bytemuck::pod_collect_to_vec(&read_buffer(app, slice.buffer, range));
     // The position is the first attribute (the lowest id).
     Some(
         words
-            .chunks_exact(per)
+            .chunks_exact((stride / 4) as usize)
             .map(|v| Vec3::new(v[0], v[1], v[2]))
             .collect(),
     )
