@@ -1996,3 +1996,68 @@ mod skinned_clothing {
         assert!(p.distance(Vec3::new(-0.5, 2.0, 0.0)) < 1e-4, "{p}");
     }
 }
+
+/// A zero scale, as games use to hide an entity: a cloth spawned at scale 0 waits (neither
+/// built flat nor refused) and is built once its scale is not zero; a running cloth whose
+/// parent shrinks to nothing keeps a finite mesh (its last shape) and goes on when the parent
+/// is back. Before, the first was refused for good ("every triangle has zero area") and the
+/// second's mesh took non-finite positions from the singular transform.
+#[test]
+fn a_zero_scale_hides_a_cloth_without_breaking_it() {
+    let mut app = common::app();
+    let grid = Grid::new(8, 8, 1.0, 1.0);
+    let hang = Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2);
+    let (m1, m2) = (
+        add_mesh(&mut app, grid_mesh(&grid)),
+        add_mesh(&mut app, grid_mesh(&grid)),
+    );
+    let hidden = app
+        .world_mut()
+        .spawn((
+            Mesh3d(m1),
+            Transform::from_xyz(0.0, 2.0, 0.0)
+                .with_rotation(hang)
+                .with_scale(Vec3::ZERO),
+            Cloth::default(),
+            ClothPins::rest(0..8),
+        ))
+        .id();
+    let parent = app
+        .world_mut()
+        .spawn(Transform::from_xyz(3.0, 2.0, 0.0))
+        .id();
+    let child = app
+        .world_mut()
+        .spawn((
+            Mesh3d(m2),
+            Transform::from_rotation(hang),
+            ChildOf(parent),
+            Cloth::default(),
+            ClothPins::rest(0..8),
+        ))
+        .id();
+    common::run(&mut app, 20);
+    assert!(app.world().get::<ClothInvalid>(hidden).is_none(), "refused");
+    assert!(app.world().get::<ClothSim>(hidden).is_none(), "built flat");
+    let finite = |app: &App, e: Entity| {
+        attr3(mesh_of(app, e), Mesh::ATTRIBUTE_POSITION)
+            .iter()
+            .all(|p| p.is_finite())
+    };
+    // The parent shrinks to nothing for half a second.
+    app.world_mut().get_mut::<Transform>(parent).unwrap().scale = Vec3::ZERO;
+    common::run(&mut app, 30);
+    assert!(finite(&app, child), "the mesh took non-finite positions");
+    let steps = sim(&app, child).steps();
+    // Both shown again.
+    app.world_mut().get_mut::<Transform>(parent).unwrap().scale = Vec3::ONE;
+    app.world_mut().get_mut::<Transform>(hidden).unwrap().scale = Vec3::ONE;
+    common::run(&mut app, 30);
+    assert!(finite(&app, child));
+    assert!(sim(&app, child).steps() > steps, "the child cloth stopped");
+    assert!(sim(&app, child).simulation().state().is_finite());
+    // Built at its real size once shown: hanging, barely stretched.
+    let shown = sim(&app, hidden);
+    assert!(shown.steps() > 0, "the hidden cloth was never built");
+    assert!(shown.max_strain() < 0.2, "strain {}", shown.max_strain());
+}

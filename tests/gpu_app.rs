@@ -1662,3 +1662,37 @@ fn a_gpu_cloth_sent_to_the_cpu_as_it_teleports_lands_with_its_pins() {
         "the cloth is not where its pins are: x from {lo} to {hi}"
     );
 }
+
+/// A GPU cloth scaled to nothing (hidden by a zero scale) leaves its mesh's slab at its last
+/// finite shape, as the CPU leaves its mesh; before, the mesh kernel wrote the positions
+/// through the singular transform's inverse (non-finite).
+#[test]
+fn a_gpu_cloth_at_zero_scale_keeps_a_finite_slab() {
+    if common::gpu_or_skip("a_gpu_cloth_at_zero_scale_keeps_a_finite_slab").is_none() {
+        return;
+    }
+    let mut app = render_app_with(ClothPlugins::default(), false);
+    let cloth = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    common::run(&mut app, 15);
+    assert!(in_use(&app, cloth).gpu);
+    let mesh = app.world().get::<Mesh3d>(cloth).unwrap().0.clone();
+    let layout = app
+        .world()
+        .resource::<Assets<Mesh>>()
+        .get(&mesh)
+        .unwrap()
+        .clone();
+    let finite = |app: &App| {
+        positions_on_the_gpu(app, mesh.id(), &layout)
+            .expect("on the GPU")
+            .iter()
+            .all(|p| p.is_finite())
+    };
+    assert!(finite(&app));
+    app.world_mut().get_mut::<Transform>(cloth).unwrap().scale = Vec3::ZERO;
+    common::run(&mut app, 3);
+    assert!(finite(&app), "the slab took non-finite positions");
+    app.world_mut().get_mut::<Transform>(cloth).unwrap().scale = Vec3::ONE;
+    common::run(&mut app, 3);
+    assert!(finite(&app));
+}

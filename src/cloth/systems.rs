@@ -94,6 +94,25 @@ pub(super) fn init_cloths(
         // Where the entity is at this step, even if it was spawned in this fixed step and
         // has no propagated GlobalTransform yet.
         let own = poses.get(entity).unwrap_or_default();
+        let det = own.affine().matrix3.determinant();
+        if !(det.is_finite() && det.abs() > f32::MIN_POSITIVE) {
+            // A zero scale (an entity spawned hidden, to be shown later) flattens the mesh to
+            // nothing: wait until the entity has a shape to build the cloth at.
+            let (since, said) = waiting.get(&entity).copied().unwrap_or((now, false));
+            let said = said || {
+                let late = now.saturating_sub(since) >= MESH_WAIT_WARNING;
+                if late {
+                    warn!(
+                        "cloth {who}: its transform has a zero scale after {} s; it is built \
+                         once the scale is not zero",
+                        MESH_WAIT_WARNING.as_secs()
+                    );
+                }
+                late
+            };
+            still_waiting.insert(entity, (since, said));
+            continue;
+        }
         let built = build(cloth, config, pins, mesh, &own, &poses).and_then(|mut b| {
             // Features are checked before the cloth starts, so a bad one never runs a step.
             let wanted = features(&b.sim, sc, tethers, tearing);

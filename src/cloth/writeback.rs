@@ -39,6 +39,11 @@ pub(super) fn write_back(
         let binding = &cloth.binding;
         let affine = gt.affine();
         let to_local = affine.inverse();
+        if !to_local.is_finite() {
+            // A zero scale (the entity or a parent shrunk to nothing): nothing is drawn, and
+            // the mesh keeps its last shape rather than take non-finite positions.
+            continue;
+        }
         let linear = affine.matrix3;
         let flip = if linear.determinant() < 0.0 {
             -1.0

@@ -426,6 +426,11 @@ fn gather_colliders(
                 .entity(entity)
                 .insert(ClothContactImpulse::default());
         }
+        // Scaled to nothing (an entity hidden by a zero scale): no extent to collide with,
+        // left out without a word until it has one again.
+        if gt.affine().matrix3.determinant() == 0.0 {
+            continue;
+        }
         let baked = runtime.as_ref().and_then(|r| r.baked.as_ref());
         let Some((pose, shape)) = pose_and_shape(gt, &collider.shape, baked) else {
             continue;

@@ -433,6 +433,10 @@ impl MeshWriter {
             return;
         }
         let to_local = Mat4::from(transform.inverse());
+        if !to_local.is_finite() {
+            // A zero scale: nothing is drawn; the slab keeps its last shape (as on the CPU).
+            return;
+        }
         let linear = transform.matrix3;
         let flip = if linear.determinant() < 0.0 {
             -1.0
