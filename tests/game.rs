@@ -2061,3 +2061,51 @@ fn a_zero_scale_hides_a_cloth_without_breaking_it() {
     assert!(shown.steps() > 0, "the hidden cloth was never built");
     assert!(shown.max_strain() < 0.2, "strain {}", shown.max_strain());
 }
+
+/// A mesh with morph targets (a glTF's shape keys) as cloth: the cloth's own copy has none,
+/// since the renderer would add their weighted displacements to the simulated positions and
+/// draw the cloth away from where it is (seen with Khronos' `SimpleMorph`: the cloth drawn
+/// morphed and animating while its simulation hung still). The copy keeps the source's
+/// vertex data and indices; the source keeps its morph targets.
+#[test]
+fn a_mesh_with_morph_targets_is_drawn_as_simulated() {
+    use bevy::mesh::morph::MorphAttributes;
+    let mut app = common::app();
+    let grid = Grid::new(4, 4, 1.0, 1.0);
+    let n = grid.positions().len();
+    let lift = MorphAttributes {
+        position: Vec3::Y,
+        ..default()
+    };
+    let source = grid_mesh(&grid).with_morph_targets(vec![lift; n]);
+    assert!(source.has_morph_targets());
+    let expected = attr3(&source, Mesh::ATTRIBUTE_POSITION);
+    let handle = add_mesh(&mut app, source);
+    let cloth = app
+        .world_mut()
+        .spawn((
+            Mesh3d(handle.clone()),
+            Transform::from_xyz(0.0, 1.0, 0.0),
+            Cloth::default(),
+            ClothPins::rest(0..4),
+        ))
+        .id();
+    common::run(&mut app, 3);
+    assert!(app.world().get::<ClothSim>(cloth).is_some(), "built");
+    let copy = mesh_of(&app, cloth);
+    assert_ne!(app.world().get::<Mesh3d>(cloth).unwrap().0, handle);
+    assert!(
+        !copy.has_morph_targets(),
+        "the cloth's copy kept the morph targets"
+    );
+    assert_eq!(copy.count_vertices(), n);
+    assert_eq!(copy.indices().map(|i| i.len()), Some(grid.indices().len()));
+    let source = app.world().resource::<Assets<Mesh>>().get(&handle).unwrap();
+    assert!(
+        source.has_morph_targets(),
+        "the source lost its morph targets"
+    );
+    assert_eq!(attr3(source, Mesh::ATTRIBUTE_POSITION), expected);
+    common::run(&mut app, 30);
+    assert!(sim(&app, cloth).steps() > 20);
+}

@@ -7,9 +7,22 @@ use bevy::prelude::*;
 use crate::foundation::MeshData;
 
 /// The cloth's own copy of its source mesh: main-world data kept, normals (and tangents when
-/// there are UVs or tangents to follow) present so write-back can fill them.
+/// there are UVs or tangents to follow) present so write-back can fill them. Morph targets
+/// (shape keys) are left out: the renderer would add their displacements to the simulated
+/// positions, so the cloth would be drawn away from where it is.
 pub(crate) fn cloth_mesh(source: &Mesh, data: &MeshData) -> Mesh {
-    let mut mesh = source.clone();
+    let mut mesh = if source.try_has_morph_targets().unwrap_or(false) {
+        let mut copy = Mesh::new(source.primitive_topology(), RenderAssetUsages::default());
+        for (attribute, values) in source.attributes() {
+            copy.insert_attribute(attribute.clone(), values.clone());
+        }
+        if let Some(indices) = source.indices() {
+            copy.insert_indices(indices.clone());
+        }
+        copy
+    } else {
+        source.clone()
+    };
     mesh.asset_usage = RenderAssetUsages::default();
     let n = data.positions.len();
     if !matches!(
