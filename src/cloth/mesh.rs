@@ -14,7 +14,7 @@ pub(crate) fn cloth_mesh(source: &Mesh, data: &MeshData) -> Mesh {
     let mut mesh = if source.try_has_morph_targets().unwrap_or(false) {
         let mut copy = Mesh::new(source.primitive_topology(), RenderAssetUsages::default());
         for (attribute, values) in source.attributes() {
-            copy.insert_attribute(attribute.clone(), values.clone());
+            copy.insert_attribute(*attribute, values.clone());
         }
         if let Some(indices) = source.indices() {
             copy.insert_indices(indices.clone());
