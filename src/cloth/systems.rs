@@ -52,6 +52,17 @@ pub(super) fn init_cloths(
     };
     let now = time.elapsed();
     let mut still_waiting = HashMap::default();
+    // A cloth that cannot be built yet waits; past MESH_WAIT_WARNING it says why, once.
+    let wait = |still: &mut HashMap<Entity, (Duration, bool)>,
+                entity: Entity,
+                why: &dyn Fn() -> String| {
+        let (since, said) = waiting.get(&entity).copied().unwrap_or((now, false));
+        let late = now.saturating_sub(since) >= MESH_WAIT_WARNING;
+        if late && !said {
+            warn!("{}", why());
+        }
+        still.insert(entity, (since, said || late));
+    };
     for ((entity, name), cloth, config, pins, mesh3d, source, (sc, tethers, tearing)) in &new {
         let who = EntityName::new(entity, name);
         // Rebuilding (after a change to `Cloth` or a fix): start from the mesh the user gave,
@@ -74,20 +85,14 @@ pub(super) fn init_cloths(
             }
             // A handle that never loads (a typo in a path the server still tries, a handle
             // made by hand) would leave the cloth silent forever: say so once, and wait on.
-            let (since, said) = waiting.get(&entity).copied().unwrap_or((now, false));
-            let said = said || {
-                let late = now.saturating_sub(since) >= MESH_WAIT_WARNING;
-                if late {
-                    warn!(
-                        "cloth {who}: its mesh {:?} has not loaded after {} s; it is not \
-                         simulated until it does",
-                        source_handle.id(),
-                        MESH_WAIT_WARNING.as_secs()
-                    );
-                }
-                late
-            };
-            still_waiting.insert(entity, (since, said));
+            wait(&mut still_waiting, entity, &|| {
+                format!(
+                    "cloth {who}: its mesh {:?} has not loaded after {} s; it is not \
+                     simulated until it does",
+                    source_handle.id(),
+                    MESH_WAIT_WARNING.as_secs()
+                )
+            });
             continue;
         };
         let fingerprint = mesh_fingerprint(mesh);
@@ -98,19 +103,13 @@ pub(super) fn init_cloths(
         if !(det.is_finite() && det.abs() > f32::MIN_POSITIVE) {
             // A zero scale (an entity spawned hidden, to be shown later) flattens the mesh to
             // nothing: wait until the entity has a shape to build the cloth at.
-            let (since, said) = waiting.get(&entity).copied().unwrap_or((now, false));
-            let said = said || {
-                let late = now.saturating_sub(since) >= MESH_WAIT_WARNING;
-                if late {
-                    warn!(
-                        "cloth {who}: its transform has a zero scale after {} s; it is built \
-                         once the scale is not zero",
-                        MESH_WAIT_WARNING.as_secs()
-                    );
-                }
-                late
-            };
-            still_waiting.insert(entity, (since, said));
+            wait(&mut still_waiting, entity, &|| {
+                format!(
+                    "cloth {who}: its transform has a zero scale after {} s; it is built \
+                     once the scale is not zero",
+                    MESH_WAIT_WARNING.as_secs()
+                )
+            });
             continue;
         }
         let built = build(cloth, config, pins, mesh, &own, &poses).and_then(|mut b| {

@@ -371,39 +371,24 @@ impl MeshWriter {
             _pad: [0; 2],
         };
         queue.write_buffer(&hide.params, 0, bytemuck::bytes_of(&p));
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("cloth_hide_torn"),
-            layout: &kernel.hide_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: hide.params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: self.topo.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: scratch.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: slab,
-                        offset,
-                        size: std::num::NonZeroU64::new(bytes),
-                    }),
-                },
+        let indices = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer: slab,
+            offset,
+            size: std::num::NonZeroU64::new(bytes),
+        });
+        dispatch(
+            device,
+            encoder,
+            "cloth_hide_torn",
+            (&kernel.hide_layout, &kernel.hide_pipeline),
+            [
+                hide.params.as_entire_binding(),
+                self.topo.as_entire_binding(),
+                scratch.as_entire_binding(),
+                indices,
             ],
-        });
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("cloth_hide_torn"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&kernel.hide_pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.dispatch_workgroups(hide.triangles.div_ceil(64), 1, 1);
+            hide.triangles.div_ceil(64),
+        );
     }
 
     /// Records the write of the cloth whose particles start at `particle_base` in `state`
@@ -474,38 +459,51 @@ impl MeshWriter {
             _pad: 0,
         };
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&p));
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("cloth_mesh"),
-            layout: &kernel.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: self.params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: state.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: self.topo.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: slab.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: dead.map_or(&self.topo, |(b, _)| b).as_entire_binding(),
-                },
+        dispatch(
+            device,
+            encoder,
+            "cloth_mesh",
+            (&kernel.layout, &kernel.pipeline),
+            [
+                self.params.as_entire_binding(),
+                state.as_entire_binding(),
+                self.topo.as_entire_binding(),
+                slab.as_entire_binding(),
+                dead.map_or(&self.topo, |(b, _)| b).as_entire_binding(),
             ],
-        });
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("cloth_mesh"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(&kernel.pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.dispatch_workgroups(self.vertices.div_ceil(64), 1, 1);
+            self.vertices.div_ceil(64),
+        );
     }
+}
+
+/// One compute pass: `resources` bound in order from binding 0 to the kernel's layout, then
+/// `groups` workgroups of its pipeline.
+fn dispatch<const N: usize>(
+    device: &wgpu::Device,
+    encoder: &mut wgpu::CommandEncoder,
+    label: &str,
+    (layout, pipeline): (&wgpu::BindGroupLayout, &wgpu::ComputePipeline),
+    resources: [wgpu::BindingResource<'_>; N],
+    groups: u32,
+) {
+    let entries: Vec<wgpu::BindGroupEntry<'_>> = resources
+        .into_iter()
+        .enumerate()
+        .map(|(binding, resource)| wgpu::BindGroupEntry {
+            binding: binding as u32,
+            resource,
+        })
+        .collect();
+    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &entries,
+    });
+    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(label),
+        timestamp_writes: None,
+    });
+    pass.set_pipeline(pipeline);
+    pass.set_bind_group(0, &bind_group, &[]);
+    pass.dispatch_workgroups(groups, 1, 1);
 }
