@@ -1840,6 +1840,80 @@ mod skinned_clothing {
             .collect()
     }
 
+    /// How far each vertex of `cloth` is past its max distance from where the skin puts it
+    /// with the joints moved by `offsets` (the largest excess, 0 when all are within).
+    fn past_max(app: &App, cloth: Entity, verts: &Vertices, offsets: [Vec3; 2]) -> f32 {
+        let s = sim(app, cloth);
+        skinned(verts, offsets)
+            .iter()
+            .zip(verts)
+            .enumerate()
+            .map(|(v, (target, (_, _, max)))| {
+                let p = s
+                    .simulation()
+                    .state()
+                    .position(s.particle(v as u32) as usize);
+                p.distance(*target) - max
+            })
+            .fold(0.0, f32::max)
+    }
+
+    #[test]
+    fn a_skinned_cloth_cloned_with_its_skeleton_is_skinned_to_the_clone() {
+        let (mut app, cloth, joints, verts) = scene(None);
+        let root = app.world_mut().spawn(Transform::IDENTITY).id();
+        for e in [joints[0], joints[1], cloth] {
+            app.world_mut().entity_mut(e).insert(ChildOf(root));
+        }
+        run(&mut app, 5);
+        // The cloth has taken the skin over: the entity has no SkinnedMesh left to clone.
+        assert!(app.world().get::<SkinnedMesh>(cloth).is_none());
+        let twin = app
+            .world_mut()
+            .entity_mut(root)
+            .clone_and_spawn_with_opt_out(|b| {
+                b.linked_cloning(true);
+            });
+        app.update();
+        let kids: Vec<Entity> = app.world().get::<Children>(twin).unwrap().iter().collect();
+        let twin_cloth = *kids
+            .iter()
+            .find(|&&k| app.world().get::<Cloth>(k).is_some())
+            .expect("the cloth was cloned");
+        let bones = [Vec3::new(0.0, 2.0, 0.0), Vec3::new(0.0, 1.0, 0.0)];
+        let twin_joints = bones.map(|b| {
+            *kids
+                .iter()
+                .find(|&&k| {
+                    k != twin_cloth && app.world().get::<Transform>(k).unwrap().translation == b
+                })
+                .expect("the joints were cloned")
+        });
+        // The twin's skeleton moves (the top joint 0.3 m sideways, the bottom one 0.2 m
+        // forward, over half a second); the original's stays.
+        let mut worst = [0.0f32; 2];
+        for frame in 1..=60 {
+            let k = (frame as f32 / 30.0).min(1.0);
+            let offsets = [Vec3::new(0.3 * k, 0.0, 0.0), Vec3::new(0.0, 0.0, 0.2 * k)];
+            for (j, e) in twin_joints.iter().enumerate() {
+                app.world_mut()
+                    .get_mut::<Transform>(*e)
+                    .unwrap()
+                    .translation = bones[j] + offsets[j];
+            }
+            app.update();
+            worst[0] = worst[0].max(past_max(&app, cloth, &verts, [Vec3::ZERO; 2]));
+            worst[1] = worst[1].max(past_max(&app, twin_cloth, &verts, offsets));
+        }
+        // Each within its max distance (1e-4: as the test above) of its own skeleton's skin.
+        assert!(
+            worst[0] <= 1e-4 && worst[1] <= 1e-4,
+            "past the max distance from the skin: original {} m, twin {} m",
+            worst[0],
+            worst[1]
+        );
+    }
+
     #[test]
     fn skinned_cloth_stays_within_its_max_distance_of_the_skin() {
         let (mut app, cloth, joints, verts) = scene(None);
@@ -2108,4 +2182,168 @@ fn a_mesh_with_morph_targets_is_drawn_as_simulated() {
     assert_eq!(attr3(source, Mesh::ATTRIBUTE_POSITION), expected);
     common::run(&mut app, 30);
     assert!(sim(&app, cloth).steps() > 20);
+}
+
+/// Every entity `cape`'s pins and inertia name.
+fn anchors_of(app: &App, cape: Entity) -> Vec<Entity> {
+    let mut out: Vec<Entity> = app
+        .world()
+        .get::<ClothPins>(cape)
+        .unwrap()
+        .0
+        .iter()
+        .filter_map(|p| match p.anchor {
+            PinAnchor::Entity { entity, .. } | PinAnchor::Attached(entity) => Some(entity),
+            _ => None,
+        })
+        .collect();
+    out.extend(app.world().get::<ClothInertia>(cape).unwrap().anchor);
+    out
+}
+
+#[test]
+fn a_character_cloned_with_its_children_wears_its_own_cape() {
+    let mut app = common::app();
+    let (root, bone, cape, top) = common::caped_character(&mut app);
+    run(&mut app, 10);
+    let twin = app
+        .world_mut()
+        .entity_mut(root)
+        .clone_and_spawn_with_opt_out(|b| {
+            b.linked_cloning(true);
+        });
+    app.update();
+    let children =
+        |e: Entity| -> Vec<Entity> { app.world().get::<Children>(e).unwrap().iter().collect() };
+    let twin_cape = *children(twin)
+        .iter()
+        .find(|&&c| app.world().get::<Cloth>(c).is_some())
+        .expect("the cape was cloned with the character");
+    let twin_bone = *children(twin)
+        .iter()
+        .find(|&&c| c != twin_cape)
+        .expect("the bone was cloned");
+    assert!(twin_cape != cape && twin_bone != bone);
+    // Every pin and the inertia name the twin's bone, not the original's.
+    let anchors = anchors_of(&app, twin_cape);
+    assert_eq!(anchors.len(), top.len() + 1);
+    assert!(
+        anchors.iter().all(|&a| a == twin_bone),
+        "the twin's cape is held by {anchors:?}, its bone is {twin_bone}, the original's {bone}"
+    );
+    assert!(anchors_of(&app, cape).iter().all(|&a| a == bone));
+    // The twin walks away; its cape goes with it, the original's stays.
+    common::walk_away(&mut app, twin);
+    let (a, b) = (
+        common::mean_of(&app, cape, &top),
+        common::mean_of(&app, twin_cape, &top),
+    );
+    assert!(
+        a.x.abs() < 0.01 && (b.x - 1.18).abs() < 0.02,
+        "original's top edge at {a}, the twin's at {b} (its bone at x = 1.18)"
+    );
+}
+
+#[test]
+fn a_scene_spawned_twice_pins_each_cape_to_its_own_bone() {
+    use bevy::ecs::entity::EntityHashMap;
+    use bevy::world_serialization::DynamicWorldBuilder;
+    let mut source = common::app();
+    let (root, bone, cape, top) = common::caped_character(&mut source);
+    let registry = source.world().resource::<AppTypeRegistry>().clone();
+    let scene = DynamicWorldBuilder::from_world(source.world(), &registry.read())
+        .deny_all_components()
+        .allow_component::<Transform>()
+        .allow_component::<ChildOf>()
+        .allow_component::<Cloth>()
+        .allow_component::<ClothPins>()
+        .allow_component::<ClothInertia>()
+        .extract_entities([root, bone, cape].into_iter())
+        .build();
+    let mut app = common::app();
+    let mesh = add_mesh(&mut app, grid_mesh(&Grid::new(8, 8, 0.5, 0.5)));
+    // Entities already in the world, so that the scene's ids are taken by others.
+    for _ in 0..8 {
+        app.world_mut().spawn(Transform::from_xyz(-3.0, 0.0, 0.0));
+    }
+    let instances: Vec<EntityHashMap<Entity>> = (0..2)
+        .map(|_| {
+            let mut map = EntityHashMap::default();
+            scene.write_to_world(app.world_mut(), &mut map).unwrap();
+            let c = map[&cape];
+            app.world_mut().entity_mut(c).insert(Mesh3d(mesh.clone()));
+            map
+        })
+        .collect();
+    for map in &instances {
+        let anchors = anchors_of(&app, map[&cape]);
+        assert!(
+            anchors.iter().all(|&a| a == map[&bone]),
+            "a cape of the scene is held by {anchors:?}, its bone is {}",
+            map[&bone]
+        );
+    }
+    common::walk_away(&mut app, instances[1][&root]);
+    let (a, b) = (
+        common::mean_of(&app, instances[0][&cape], &top),
+        common::mean_of(&app, instances[1][&cape], &top),
+    );
+    assert!(
+        a.x.abs() < 0.01 && (b.x - 1.18).abs() < 0.02,
+        "first instance's top edge at {a}, the second's at {b} (its bone at x = 1.18)"
+    );
+}
+
+#[test]
+fn a_cloned_collider_does_not_sweep_from_where_its_original_is() {
+    // A curtain hanging in the plane x = 0, a sphere 0.9 m to its left; the same scene twice.
+    let scene = || {
+        let mut app = app();
+        let grid = Grid::new(10, 10, 1.0, 1.0);
+        let mesh = add_mesh(&mut app, grid_mesh(&grid));
+        let curtain = app
+            .world_mut()
+            .spawn((
+                Mesh3d(mesh),
+                Transform::from_xyz(0.0, 1.5, 0.0)
+                    .with_rotation(Quat::from_rotation_z(core::f32::consts::FRAC_PI_2)),
+                Cloth::default(),
+                ClothPins::rest((0..10).map(|i| grid.index(i, 0))),
+            ))
+            .id();
+        let sphere = app
+            .world_mut()
+            .spawn((
+                Transform::from_xyz(-0.9, 1.3, 0.0),
+                ClothCollider::sphere(0.2),
+            ))
+            .id();
+        run(&mut app, 120);
+        (app, curtain, sphere)
+    };
+    let positions = |app: &App, curtain: Entity| -> Vec<Vec3> {
+        let s = sim(app, curtain).simulation().state();
+        (0..s.len()).map(|i| s.position(i)).collect()
+    };
+    let (mut alone, curtain, _) = scene();
+    let (mut app, same, sphere) = scene();
+    // In one of them, a copy of the sphere is put 0.9 m to the right of the curtain, in one
+    // frame: it is there, it did not travel there through the curtain.
+    let copy = app.world_mut().entity_mut(sphere).clone_and_spawn();
+    app.world_mut()
+        .get_mut::<Transform>(copy)
+        .unwrap()
+        .translation
+        .x = 0.9;
+    for _ in 0..5 {
+        alone.update();
+        app.update();
+        let apart = positions(&alone, curtain)
+            .iter()
+            .zip(&positions(&app, same))
+            .map(|(a, b)| a.distance(*b))
+            .fold(0.0, f32::max);
+        // Out of the copy's reach the curtain steps as in the scene without it, bit for bit.
+        assert!(apart == 0.0, "the copy moved a vertex {apart} m");
+    }
 }

@@ -1701,3 +1701,52 @@ fn a_gpu_cloth_at_zero_scale_keeps_a_finite_slab() {
     common::run(&mut app, 3);
     assert!(finite(&app));
 }
+
+#[test]
+fn a_gpu_character_cloned_with_its_children_wears_its_own_cape() {
+    if common::gpu_or_skip("a_gpu_character_cloned_with_its_children_wears_its_own_cape").is_none()
+    {
+        return;
+    }
+    let mut app = render_app();
+    let (root, _, cape, top) = common::caped_character(&mut app);
+    app.world_mut()
+        .entity_mut(cape)
+        .insert((ClothBackend::Gpu, ClothReadback));
+    common::run(&mut app, 20);
+    assert!(in_use(&app, cape).gpu);
+    let twin = app
+        .world_mut()
+        .entity_mut(root)
+        .clone_and_spawn_with_opt_out(|b| {
+            b.linked_cloning(true);
+        });
+    app.update();
+    let twin_cape = app
+        .world()
+        .get::<Children>(twin)
+        .unwrap()
+        .iter()
+        .find(|&c| app.world().get::<Cloth>(c).is_some())
+        .expect("the cape was cloned with the character");
+    common::walk_away(&mut app, twin);
+    // Read back a few frames late: let the last positions arrive.
+    common::run(&mut app, 10);
+    assert!(in_use(&app, twin_cape).gpu, "{:?}", in_use(&app, twin_cape));
+    let (a, b) = (
+        common::mean_of(&app, cape, &top),
+        common::mean_of(&app, twin_cape, &top),
+    );
+    assert!(
+        a.x.abs() < 0.01 && (b.x - 1.18).abs() < 0.02,
+        "original's top edge at {a}, the twin's at {b} (its bone at x = 1.18)"
+    );
+    // Both cloths hang below their edges: the twin runs its own GPU cloth.
+    for e in [cape, twin_cape] {
+        let s = app.world().get::<ClothSim>(e).unwrap().simulation().state();
+        let low = (0..s.len())
+            .map(|i| s.position(i).y)
+            .fold(f32::MAX, f32::min);
+        assert!(low < 1.2, "cloth {e} hangs no lower than {low}");
+    }
+}

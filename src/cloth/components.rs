@@ -1,6 +1,7 @@
 //! The components a user puts on a cloth entity.
 
 use bevy::ecs::component::{Component, Mutable, StorageType};
+use bevy::ecs::entity::{EntityMapper, MapEntities};
 use bevy::prelude::*;
 use bevy::reflect::impl_reflect_opaque;
 
@@ -173,6 +174,10 @@ impl Default for ClothTethers {
 /// Values outside `0..=1`, or an anchor that does not exist, are reported once
 /// ([`ClothFailed`](super::ClothFailed)) and the cloth feels all of its motion until fixed.
 /// Both backends: the GPU applies each step's carried motion in its `teleport` kernel.
+///
+/// `anchor` is mapped as Bevy maps entity references: a scene spawned twice, or a character
+/// cloned with its children (`clone_and_spawn_with_opt_out(|b| { b.linked_cloning(true); })`),
+/// gives each copy of the cloth its own copy of the anchor.
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component, Default, Clone, PartialEq)]
 pub struct ClothInertia {
@@ -181,6 +186,7 @@ pub struct ClothInertia {
     /// Share of the anchor's rotation felt, `0..=1`.
     pub angular: f32,
     /// The entity whose motion is the reference; `None`: the cloth's own entity.
+    #[entities]
     pub anchor: Option<Entity>,
 }
 
@@ -337,9 +343,29 @@ pub struct ClothPin {
 /// anchors jumped farther than [`Cloth::teleport_distance`], the whole cloth moves with them.
 /// An invalid pin list (a vertex out of range, a non-finite anchor) is reported once and the
 /// old pins are kept until the list is valid again.
+///
+/// The entities of [`PinAnchor::Entity`] and [`PinAnchor::Attached`] are mapped as Bevy maps
+/// entity references: in a scene spawned twice each cloth is pinned to its own instance's
+/// bone, and a character cloned with its children
+/// (`clone_and_spawn_with_opt_out(|b| { b.linked_cloning(true); })`) gives the cloned cape
+/// pins on the cloned bones. A cloth cloned on its own stays pinned to the same entities.
 #[derive(Component, Reflect, Clone, Debug, Default, PartialEq)]
+#[component(map_entities)]
 #[reflect(Component, Default, Clone, PartialEq)]
 pub struct ClothPins(pub Vec<ClothPin>);
+
+impl MapEntities for ClothPins {
+    fn map_entities<E: EntityMapper>(&mut self, mapper: &mut E) {
+        for pin in &mut self.0 {
+            match &mut pin.anchor {
+                PinAnchor::Entity { entity, .. } | PinAnchor::Attached(entity) => {
+                    *entity = mapper.get_mapped(*entity);
+                }
+                PinAnchor::Rest | PinAnchor::World(_) => {}
+            }
+        }
+    }
+}
 
 impl ClothPins {
     /// Pins these vertices at their rest positions (following the cloth entity).

@@ -1,6 +1,7 @@
 //! Skinned clothing: [`ClothSkinning`] holds a cloth cut from a skinned mesh (a skirt, sleeves,
 //! a tabard) near the animated skin.
 
+use bevy::ecs::entity::{EntityMapper, MapEntities};
 use bevy::mesh::VertexAttributeValues;
 use bevy::mesh::skinning::{SkinnedMesh, SkinnedMeshInverseBindposes};
 use bevy::prelude::*;
@@ -79,8 +80,11 @@ pub struct ClothBackstop {
     pub distance: f32,
 }
 
-/// What a [`ClothSkinning`] cloth keeps between steps: the skin per particle.
-#[derive(Component, Debug)]
+/// What a [`ClothSkinning`] cloth keeps between steps: the skin per particle. Cloned with
+/// the entity (its joints mapped as Bevy maps a `SkinnedMesh`'s), so that a clone of a
+/// skinned cloth, whose `SkinnedMesh` this holds, is skinned too.
+#[derive(Component, Clone, Debug)]
+#[component(map_entities)]
 pub(crate) struct ClothSkin {
     /// The entity's `SkinnedMesh`, taken over (`None` until it was).
     skinned: Option<SkinnedMesh>,
@@ -93,6 +97,22 @@ pub(crate) struct ClothSkin {
     /// Whether the next targets start the motion afresh.
     snap: bool,
     error: Option<ClothError>,
+}
+
+/// `joints` mapped one by one (a `SkinnedMesh` maps its own the same way).
+fn map_joints<E: EntityMapper>(joints: &mut [Entity], mapper: &mut E) {
+    for j in joints {
+        *j = mapper.get_mapped(*j);
+    }
+}
+
+impl MapEntities for ClothSkin {
+    fn map_entities<E: EntityMapper>(&mut self, mapper: &mut E) {
+        map_joints(&mut self.joints, mapper);
+        if let Some(s) = &mut self.skinned {
+            map_joints(&mut s.joints, mapper);
+        }
+    }
 }
 
 impl ClothSkin {
@@ -267,8 +287,16 @@ impl ClothSkin {
 /// A plain [`Cloth`](super::Cloth) (no [`ClothSkinning`]) put on a skinned mesh: the entity's
 /// `SkinnedMesh`, taken off so that the renderer draws the simulation and not the simulation
 /// skinned a second time; kept for a `ClothSkinning` added later.
-#[derive(Component, Debug)]
+/// Cloned with the entity, its joints mapped (as [`ClothSkin`]).
+#[derive(Component, Clone, Debug)]
+#[component(map_entities)]
 pub(crate) struct ClothUnskinned(pub(super) SkinnedMesh);
+
+impl MapEntities for ClothUnskinned {
+    fn map_entities<E: EntityMapper>(&mut self, mapper: &mut E) {
+        map_joints(&mut self.0.joints, mapper);
+    }
+}
 
 /// A plain cloth on a skinned mesh runs free from the mesh's bind pose: takes the entity's
 /// `SkinnedMesh` off and the joint attributes off the cloth's own mesh (as [`ClothSkinning`]

@@ -181,7 +181,11 @@ pub struct ClothContactImpulse {
 
 /// Where a collider was at the end of the last step (to sweep it through this one), and its
 /// baked field for mesh shapes.
+///
+/// Not copied when the entity is cloned: a copy starts where it is put, instead of sweeping
+/// from where its original was through whatever cloth lies between.
 #[derive(Component, Clone, Debug, Default)]
+#[component(clone_behavior = Ignore)]
 pub struct ColliderRuntime {
     last: Option<Pose>,
     baked: Option<Arc<SdfGrid>>,

@@ -86,3 +86,74 @@ pub fn gpu_or_skip(test: &str) -> Option<(wgpu::Adapter, wgpu::Device, wgpu::Que
         }
     }
 }
+
+/// A character (a root with a bone child) wearing a cape: a child of the root pinned along
+/// its top edge to the bone (every other vertex `PinAnchor::Entity`, the rest `Attached`),
+/// its inertia relative to the bone. Returns (root, bone, cape, top edge).
+pub fn caped_character(app: &mut App) -> (Entity, Entity, Entity, Vec<u32>) {
+    let grid = Grid::new(8, 8, 0.5, 0.5);
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    let root = app.world_mut().spawn(Transform::default()).id();
+    let bone = app
+        .world_mut()
+        .spawn((Transform::from_xyz(0.0, 1.5, 0.0), ChildOf(root)))
+        .id();
+    let top: Vec<u32> = (0..8).map(|i| grid.index(i, 0)).collect();
+    let rest = grid.positions();
+    let pins = top
+        .iter()
+        .map(|&v| ClothPin {
+            vertex: v,
+            anchor: if v % 2 == 0 {
+                PinAnchor::Entity {
+                    entity: bone,
+                    offset: rest[v as usize],
+                }
+            } else {
+                PinAnchor::Attached(bone)
+            },
+        })
+        .collect();
+    let cape = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(0.0, 1.5, 0.0),
+            Cloth::default(),
+            ClothPins(pins),
+            ClothInertia::new(0.5).relative_to(bone),
+            ChildOf(root),
+        ))
+        .id();
+    (root, bone, cape, top)
+}
+
+/// Mean position of `vertices` of cloth `e`.
+pub fn mean_of(app: &App, e: Entity, vertices: &[u32]) -> Vec3 {
+    let sim = app
+        .world()
+        .get::<ClothSim>(e)
+        .expect("cloth was not created");
+    let s = sim.simulation().state();
+    vertices
+        .iter()
+        .map(|&v| s.position(sim.particle(v) as usize))
+        .sum::<Vec3>()
+        / vertices.len() as f32
+}
+
+/// Moves `root` 2 cm along x a frame for 60 frames (1.18 m in all).
+pub fn walk_away(app: &mut App, root: Entity) {
+    let start = app.world().get::<Transform>(root).unwrap().translation.x;
+    for f in 1..60 {
+        app.world_mut()
+            .get_mut::<Transform>(root)
+            .unwrap()
+            .translation
+            .x = start + 0.02 * f as f32;
+        app.update();
+    }
+}
