@@ -2294,56 +2294,124 @@ fn a_scene_spawned_twice_pins_each_cape_to_its_own_bone() {
     );
 }
 
-#[test]
-fn a_cloned_collider_does_not_sweep_from_where_its_original_is() {
-    // A curtain hanging in the plane x = 0, a sphere 0.9 m to its left; the same scene twice.
-    let scene = || {
-        let mut app = app();
-        let grid = Grid::new(10, 10, 1.0, 1.0);
-        let mesh = add_mesh(&mut app, grid_mesh(&grid));
-        let curtain = app
-            .world_mut()
-            .spawn((
-                Mesh3d(mesh),
-                Transform::from_xyz(0.0, 1.5, 0.0)
-                    .with_rotation(Quat::from_rotation_z(core::f32::consts::FRAC_PI_2)),
-                Cloth::default(),
-                ClothPins::rest((0..10).map(|i| grid.index(i, 0))),
-            ))
-            .id();
-        let sphere = app
-            .world_mut()
-            .spawn((
-                Transform::from_xyz(-0.9, 1.3, 0.0),
-                ClothCollider::sphere(0.2),
-            ))
-            .id();
-        run(&mut app, 120);
-        (app, curtain, sphere)
-    };
-    let positions = |app: &App, curtain: Entity| -> Vec<Vec3> {
+/// A curtain hanging in the plane x = 0 with a sphere 0.9 m to its left, after two seconds.
+fn curtain_and_sphere() -> (App, Entity, Entity) {
+    let mut app = app();
+    let grid = Grid::new(10, 10, 1.0, 1.0);
+    let mesh = add_mesh(&mut app, grid_mesh(&grid));
+    let curtain = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(0.0, 1.5, 0.0)
+                .with_rotation(Quat::from_rotation_z(core::f32::consts::FRAC_PI_2)),
+            Cloth::default(),
+            ClothPins::rest((0..10).map(|i| grid.index(i, 0))),
+        ))
+        .id();
+    let sphere = app
+        .world_mut()
+        .spawn((
+            Transform::from_xyz(-0.9, 1.3, 0.0),
+            ClothCollider::sphere(0.2),
+        ))
+        .id();
+    run(&mut app, 120);
+    (app, curtain, sphere)
+}
+
+/// Runs `frames` frames of `app` and of `alone` (the same scene without what the test did to
+/// `app`'s sphere), asserting after each that the two curtains are the same bit for bit: a
+/// sphere out of reach 0.9 m to the right of the curtain did not travel there through it.
+fn assert_untouched(mut alone: App, mut app: App, curtain: Entity, frames: usize) {
+    let positions = |app: &App| -> Vec<Vec3> {
         let s = sim(app, curtain).simulation().state();
         (0..s.len()).map(|i| s.position(i)).collect()
     };
-    let (mut alone, curtain, _) = scene();
-    let (mut app, same, sphere) = scene();
-    // In one of them, a copy of the sphere is put 0.9 m to the right of the curtain, in one
-    // frame: it is there, it did not travel there through the curtain.
+    for _ in 0..frames {
+        alone.update();
+        app.update();
+        let apart = positions(&alone)
+            .iter()
+            .zip(&positions(&app))
+            .map(|(a, b)| a.distance(*b))
+            .fold(0.0, f32::max);
+        assert!(apart == 0.0, "the sphere moved a vertex {apart} m");
+    }
+}
+
+#[test]
+fn a_cloned_collider_does_not_sweep_from_where_its_original_is() {
+    let (alone, curtain, _) = curtain_and_sphere();
+    let (mut app, _, sphere) = curtain_and_sphere();
+    // A copy of the sphere put 0.9 m to the right of the curtain, in one frame.
     let copy = app.world_mut().entity_mut(sphere).clone_and_spawn();
     app.world_mut()
         .get_mut::<Transform>(copy)
         .unwrap()
         .translation
         .x = 0.9;
-    for _ in 0..5 {
-        alone.update();
-        app.update();
-        let apart = positions(&alone, curtain)
-            .iter()
-            .zip(&positions(&app, same))
-            .map(|(a, b)| a.distance(*b))
-            .fold(0.0, f32::max);
-        // Out of the copy's reach the curtain steps as in the scene without it, bit for bit.
-        assert!(apart == 0.0, "the copy moved a vertex {apart} m");
+    assert_untouched(alone, app, curtain, 5);
+}
+
+#[test]
+fn a_collider_moved_while_disabled_or_scaled_to_nothing_does_not_sweep_back() {
+    use bevy::ecs::entity_disabling::Disabled;
+    for hide in ["zero scale", "disabled"] {
+        let (mut alone, curtain, gone) = curtain_and_sphere();
+        let (mut app, _, sphere) = curtain_and_sphere();
+        // Hidden (as games pool or hide entities) for a few frames, moved 1.8 m to the right
+        // of the curtain (within the 2 m teleport distance), shown again.
+        match hide {
+            "disabled" => {
+                app.world_mut().entity_mut(sphere).insert(Disabled);
+            }
+            _ => app.world_mut().get_mut::<Transform>(sphere).unwrap().scale = Vec3::ZERO,
+        }
+        alone.world_mut().despawn(gone);
+        for _ in 0..3 {
+            alone.update();
+            app.update();
+        }
+        let mut t = app.world_mut().get_mut::<Transform>(sphere).unwrap();
+        t.translation.x = 0.9;
+        t.scale = Vec3::ONE;
+        app.world_mut().entity_mut(sphere).remove::<Disabled>();
+        assert_untouched(alone, app, curtain, 5);
     }
+}
+
+/// A cloth disabled with its character (Bevy's `Disabled`, as games pool entities), moved
+/// while disabled and enabled again goes on from where it stopped, as if it had never paused.
+#[test]
+fn a_disabled_cloth_goes_on_where_it_stopped() {
+    use bevy::ecs::entity_disabling::Disabled;
+    let run_it = |pause: bool| -> Vec<Vec3> {
+        let mut app = app();
+        let (root, bone, cape, _) = common::caped_character(&mut app);
+        run(&mut app, 30);
+        if pause {
+            for e in [root, bone, cape] {
+                app.world_mut().entity_mut(e).insert(Disabled);
+            }
+            run(&mut app, 20);
+        }
+        app.world_mut()
+            .get_mut::<Transform>(root)
+            .unwrap()
+            .translation
+            .x = 10.0;
+        if pause {
+            run(&mut app, 20);
+            for e in [root, bone, cape] {
+                app.world_mut().entity_mut(e).remove::<Disabled>();
+            }
+        }
+        run(&mut app, 40);
+        let s = sim(&app, cape);
+        assert_eq!(s.steps(), 69);
+        let state = s.simulation().state();
+        (0..state.len()).map(|i| state.position(i)).collect()
+    };
+    assert_eq!(run_it(true), run_it(false));
 }

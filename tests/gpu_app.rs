@@ -1750,3 +1750,74 @@ fn a_gpu_character_cloned_with_its_children_wears_its_own_cape() {
         assert!(low < 1.2, "cloth {e} hangs no lower than {low}");
     }
 }
+
+/// A GPU cloth disabled with its character (Bevy's `Disabled`, as games pool entities) stops
+/// and, enabled again, goes on from where it stopped: the same as a run that never paused.
+/// Before, the render world dropped it while it was not extracted and, enabled again, it
+/// started over from its first upload (its rest shape, flat).
+#[test]
+fn a_disabled_gpu_cloth_goes_on_where_it_stopped() {
+    if common::gpu_or_skip("a_disabled_gpu_cloth_goes_on_where_it_stopped").is_none() {
+        return;
+    }
+    use bevy::ecs::entity_disabling::Disabled;
+    // Where the GPU draws the cloth this frame: the slab it wrote (the render world runs in
+    // the app's update) placed by the entity's transform, as the renderer places it.
+    let run = |pause: bool| -> Vec<Vec3> {
+        let mut app = render_app_with(ClothPlugins::default(), false);
+        let (root, bone, cape, _) = common::caped_character(&mut app);
+        app.world_mut().entity_mut(cape).insert(ClothBackend::Gpu);
+        common::run(&mut app, 30);
+        assert!(in_use(&app, cape).gpu);
+        if pause {
+            for e in [root, bone, cape] {
+                app.world_mut().entity_mut(e).insert(Disabled);
+            }
+            common::run(&mut app, 20);
+        }
+        // Moved 10 m (a teleport), disabled or not.
+        app.world_mut()
+            .get_mut::<Transform>(root)
+            .unwrap()
+            .translation
+            .x = 10.0;
+        if pause {
+            common::run(&mut app, 20);
+            for e in [root, bone, cape] {
+                app.world_mut().entity_mut(e).remove::<Disabled>();
+            }
+        }
+        common::run(&mut app, 40);
+        let sim = app.world().get::<ClothSim>(cape).unwrap();
+        assert_eq!(sim.steps(), 69);
+        let mesh = sim.mesh().id();
+        let layout = app
+            .world()
+            .resource::<Assets<Mesh>>()
+            .get(mesh)
+            .unwrap()
+            .clone();
+        let at = *app.world().get::<GlobalTransform>(cape).unwrap();
+        positions_on_the_gpu(&app, mesh, &layout)
+            .expect("the cloth's mesh is on the GPU")
+            .into_iter()
+            .map(|p| at.transform_point(p))
+            .collect()
+    };
+    let (paused, straight) = (run(true), run(false));
+    // The same kernels on the same inputs on one device (no float atomics): the same state.
+    // The slabs themselves may differ: Bevy 0.19 does not propagate a transform changed
+    // while its entity was disabled, so the paused run's cloth entity still has its old
+    // `GlobalTransform` (x = 0) and its slab holds the cloth relative to that. Placed in the
+    // world, the two agree up to the rounding of the mesh kernel's inverse transform and the
+    // placing here: a few f32 steps at 10 m (9.5e-7 m each); 1e-5 m is ten.
+    let apart = paused
+        .iter()
+        .zip(&straight)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0, f32::max);
+    assert!(
+        apart <= 1e-5,
+        "after the pause a vertex is {apart} m from where the run without one has it"
+    );
+}

@@ -188,6 +188,9 @@ pub struct ClothContactImpulse {
 #[component(clone_behavior = Ignore)]
 pub struct ColliderRuntime {
     last: Option<Pose>,
+    /// The step `last` is from ([`gather_colliders`]' count): a collider left out of a step
+    /// (disabled, scaled to nothing, without a pose) starts the next one where it is.
+    last_step: u64,
     baked: Option<Arc<SdfGrid>>,
     failed: bool,
     /// The mesh and resolution the field was baked (or refused) for: a change bakes again.
@@ -415,9 +418,12 @@ fn gather_colliders(
     mut colliders: Query<ColliderQueryData>,
     poses: FixedPoses,
     mut reported: Local<bevy::platform::collections::HashSet<Entity>>,
+    mut step: Local<u64>,
 ) {
     out.colliders.clear();
     out.entities.clear();
+    *step += 1;
+    let step = *step;
     for (entity, collider, runtime, impulse, name) in &mut colliders {
         let Some(gt) = poses.get(entity) else {
             continue;
@@ -439,7 +445,11 @@ fn gather_colliders(
         let Some((pose, shape)) = pose_and_shape(gt, &collider.shape, baked) else {
             continue;
         };
-        let last = runtime.as_ref().and_then(|r| r.last);
+        // Swept from where it was at the end of the last step, if it took part in it.
+        let last = runtime
+            .as_ref()
+            .filter(|r| r.last_step + 1 == step)
+            .and_then(|r| r.last);
         let start = match last {
             Some(l)
                 if !is_teleport(l.translation, pose.translation, collider.teleport_distance) =>
@@ -469,10 +479,14 @@ fn gather_colliders(
         }
         reported.remove(&entity);
         match runtime {
-            Some(mut r) => r.last = Some(pose),
+            Some(mut r) => {
+                r.last = Some(pose);
+                r.last_step = step;
+            }
             None => {
                 commands.entity(entity).insert(ColliderRuntime {
                     last: Some(pose),
+                    last_step: step,
                     ..default()
                 });
             }

@@ -5,7 +5,8 @@
 //! Frame flow:
 //! 1. Extract: the frame's queued steps (colliders per step), each GPU cloth's pin targets,
 //!    teleports and air, transform, and (new cloth, changed settings, an edit) its upload; the
-//!    cloths leaving the GPU, which wait for a last readback.
+//!    cloths leaving the GPU, which wait for a last readback; disabled cloths (Bevy's
+//!    `Disabled`), which keep their place and state in their world without being stepped.
 //! 2. `PrepareResources`: the cloths grouped by [`WorldKey`]; a world whose members changed
 //!    is rebuilt, carrying the GPU state of the cloths that go on; every world is prepared
 //!    for the frame.
@@ -19,6 +20,7 @@ use std::sync::Arc;
 use std::sync::Mutex;
 use std::sync::mpsc::{Receiver, Sender};
 
+use bevy::ecs::entity_disabling::Disabled;
 use bevy::prelude::*;
 use bevy::render::mesh::allocator::MeshAllocator;
 use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue};
@@ -73,12 +75,39 @@ pub(crate) struct ExtractedGpuCloths {
 pub(crate) fn extract_gpu_cloths(
     mut out: ResMut<ExtractedGpuCloths>,
     queue: Extract<Res<GpuStepQueue>>,
-    cloths: Extract<Query<(Entity, &ClothOnGpu, &GlobalTransform, Has<ClothReadback>)>>,
-    leaving: Extract<Query<(Entity, &ClothLeavingGpu, &GlobalTransform)>>,
+    cloths: Extract<
+        Query<(
+            Entity,
+            &ClothOnGpu,
+            &GlobalTransform,
+            Has<ClothReadback>,
+            Has<Disabled>,
+        )>,
+    >,
+    leaving: Extract<Query<(Entity, &ClothLeavingGpu, &GlobalTransform), Allow<Disabled>>>,
 ) {
     out.cloths.clear();
     out.queue = queue.clone();
-    for (entity, g, transform, readback) in &cloths {
+    for (entity, g, transform, readback, disabled) in &cloths {
+        if disabled {
+            // Disabled (a pooled character): it keeps its place and its state in its world,
+            // not stepped, not read back, until it is enabled again. Left out, its world
+            // would be rebuilt without it and it would start again from its upload.
+            out.cloths.push(ExtractedGpuCloth {
+                entity,
+                generation: g.generation,
+                upload: None,
+                pin_targets: Vec::new(),
+                first_step: 0,
+                teleports: Vec::new(),
+                carries: Vec::new(),
+                air: Vec::new(),
+                motion: Vec::new(),
+                transform: transform.affine(),
+                readback: false,
+            });
+            continue;
+        }
         // A tearing cloth is always read back: the CPU tears it.
         let readback = readback || g.upload.sim.features().tear_threshold.is_some();
         out.cloths.push(ExtractedGpuCloth {
