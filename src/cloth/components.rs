@@ -54,7 +54,9 @@ impl_reflect_opaque!((in bevy_cloth::solver) SolverParams(Debug, Clone, PartialE
     // Pins; none by default.
     ClothPins,
     // The simulation writes world positions back through the entity's transform.
-    Transform
+    Transform,
+    // Tells the layers below that this entity is a cloth.
+    crate::foundation::SimulatedCloth
 )]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Cloth {

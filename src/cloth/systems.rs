@@ -17,7 +17,9 @@ use super::{
     ClothTorn, ClothWorkers, PinAnchor, TaskPoolParallel,
 };
 use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
-use crate::foundation::{EntityName, FixedPoses, mesh_fingerprint, modified_meshes};
+use crate::foundation::{
+    EntityName, FixedPoses, SimulatedCloth, mesh_fingerprint, modified_meshes,
+};
 use crate::solver::{Environment, ManyItem, Serial, SolverError, StepReport, step_many};
 use crate::wind::ClothWindField;
 
@@ -271,6 +273,7 @@ pub(super) fn on_cloth_removed(
         ClothInvalid,
         ClothSkin,
         ClothUnskinned,
+        SimulatedCloth,
     )>();
 }
 

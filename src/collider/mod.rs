@@ -33,8 +33,8 @@ use bevy::prelude::*;
 use bevy::reflect::{TypePath, impl_reflect_opaque};
 
 use crate::foundation::{
-    ClothSchedule, ClothSystems, EntityName, FixedPoses, mesh_fingerprint, modified_meshes,
-    read_mesh,
+    ClothSchedule, ClothSystems, EntityName, FixedPoses, SimulatedCloth, mesh_fingerprint,
+    modified_meshes, read_mesh,
 };
 use crate::solver::{
     Collider, ContactImpulse, DEFAULT_TELEPORT_DISTANCE, Pose, SdfGrid, Shape, is_teleport, limits,
@@ -322,6 +322,7 @@ type BakeQueryData = (
     Option<&'static Mesh3d>,
     Option<&'static mut ColliderRuntime>,
     Has<bevy::mesh::skinning::SkinnedMesh>,
+    Has<SimulatedCloth>,
 );
 
 /// Bakes mesh colliders once their mesh is loaded.
@@ -330,11 +331,28 @@ fn bake_mesh_colliders(
     meshes: Option<Res<Assets<Mesh>>>,
     mut colliders: Query<BakeQueryData>,
 ) {
-    for ((entity, name), collider, mesh3d, runtime, skinned) in &mut colliders {
+    for ((entity, name), collider, mesh3d, runtime, skinned, cloth) in &mut colliders {
         let who = EntityName::new(entity, name);
         let ColliderShape::Mesh(ColliderMesh::Asset { mesh, resolution }) = &collider.shape else {
             continue;
         };
+        if cloth && mesh.is_none() {
+            // The entity's mesh is the cloth: baked, it would move with the cloth and be
+            // baked again every frame, pushing the cloth against itself.
+            if !runtime.as_ref().is_some_and(|r| r.failed) {
+                error!(
+                    "cloth collider {who}: a Mesh shape on a cloth's own entity would be the \
+                     cloth itself; it is ignored (ClothSelfCollision keeps a cloth from passing \
+                     through itself; to collide other cloths with this mesh, give the collider \
+                     a mesh handle of its own)"
+                );
+                commands.entity(entity).insert(ColliderRuntime {
+                    failed: true,
+                    ..default()
+                });
+            }
+            continue;
+        }
         let Some(handle) = mesh.as_ref().or(mesh3d.map(|m| &m.0)) else {
             if !runtime.as_ref().is_some_and(|r| r.failed) {
                 error!("cloth collider {who}: a Mesh shape needs a mesh handle or a Mesh3d");

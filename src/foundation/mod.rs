@@ -24,6 +24,13 @@ use bevy::ecs::schedule::{InternedScheduleLabel, ScheduleLabel};
 use bevy::prelude::*;
 use bevy::transform::TransformSystems;
 
+/// Marks an entity whose mesh is simulated as cloth. [`Cloth`](crate::cloth::Cloth) requires
+/// it (and removing `Cloth` removes it), so that the layers below the cloth's own can tell a
+/// cloth's entity apart: a mesh [`ClothCollider`](crate::collider::ClothCollider) taking its
+/// mesh from the entity's `Mesh3d` is refused on a cloth (that mesh is the cloth itself).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SimulatedCloth;
+
 /// The phases of cloth simulation, in order.
 ///
 /// 1. `Prepare` ([`ClothSchedule`], `FixedPostUpdate` by default): create simulations for
