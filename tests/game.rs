@@ -2461,3 +2461,28 @@ fn a_mesh_collider_on_a_cloths_own_entity_is_ignored() {
         1
     );
 }
+
+/// `Cloth` put on an entity without a `Mesh3d` (a glTF node, whose meshes are on its child
+/// entities) waits for one, saying so once after 5 s with the children that have meshes
+/// (the log is not checked here), and is built once it has one.
+#[test]
+fn a_cloth_without_a_mesh_waits_for_one() {
+    let mut app = app();
+    let grid = Grid::new(8, 8, 1.0, 1.0);
+    let mesh = add_mesh(&mut app, grid_mesh(&grid));
+    let node = app
+        .world_mut()
+        .spawn((Name::new("Banner"), Transform::default(), Cloth::default()))
+        .id();
+    app.world_mut().spawn((
+        Name::new("Banner.Primitive0"),
+        Mesh3d(mesh.clone()),
+        ChildOf(node),
+    ));
+    run(&mut app, 400);
+    assert!(app.world().get::<ClothSim>(node).is_none());
+    assert!(app.world().get::<ClothInvalid>(node).is_none());
+    app.world_mut().entity_mut(node).insert(Mesh3d(mesh));
+    run(&mut app, 3);
+    assert!(sim(&app, node).steps() > 0);
+}

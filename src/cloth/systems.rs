@@ -27,7 +27,11 @@ use crate::wind::ClothWindField;
 const MESH_WAIT_WARNING: Duration = Duration::from_secs(5);
 
 /// Creates the simulation of cloths that have none yet (waiting while their mesh loads).
-#[expect(clippy::type_complexity, reason = "a query filter, read once")]
+#[expect(
+    clippy::type_complexity,
+    clippy::too_many_arguments,
+    reason = "a system's inputs: the new cloths, the meshless ones, poses, time"
+)]
 pub(super) fn init_cloths(
     mut commands: Commands,
     mut meshes: Option<ResMut<Assets<Mesh>>>,
@@ -44,6 +48,10 @@ pub(super) fn init_cloths(
         ),
         (Without<ClothSim>, Without<ClothInvalid>),
     >,
+    meshless: Query<(Entity, Option<&Name>), (With<Cloth>, Without<Mesh3d>, Without<ClothSim>)>,
+    // Where meshes are below a cloth that has none (a glTF node's children).
+    descendants: Query<&Children>,
+    with_mesh: Query<Option<&Name>, With<Mesh3d>>,
     poses: FixedPoses,
     time: Res<Time>,
     // Cloths waiting for their mesh: since when, and whether they said so.
@@ -65,6 +73,36 @@ pub(super) fn init_cloths(
         }
         still.insert(entity, (since, said || late));
     };
+    // No `Mesh3d` (a glTF node, whose meshes are on its child entities; a mesh forgotten):
+    // nothing to simulate until one is put on it.
+    for (entity, name) in &meshless {
+        wait(&mut still_waiting, entity, &|| {
+            let who = EntityName::new(entity, name);
+            let meshes: Vec<String> = descendants
+                .iter_descendants(entity)
+                .filter_map(|e| {
+                    with_mesh
+                        .get(e)
+                        .ok()
+                        .map(|n| EntityName::new(e, n).to_string())
+                })
+                .take(4)
+                .collect();
+            let hint = if meshes.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    " (a glTF node's meshes are on its child entities: put Cloth on {})",
+                    meshes.join(" or ")
+                )
+            };
+            format!(
+                "cloth {who}: the entity has no Mesh3d after {} s; it is not simulated until \
+                 it has one{hint}",
+                MESH_WAIT_WARNING.as_secs()
+            )
+        });
+    }
     for ((entity, name), cloth, config, pins, mesh3d, source, (sc, tethers, tearing)) in &new {
         let who = EntityName::new(entity, name);
         // Rebuilding (after a change to `Cloth` or a fix): start from the mesh the user gave,
