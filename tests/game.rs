@@ -2511,3 +2511,44 @@ fn a_cloth_without_a_mesh_waits_for_one() {
     run(&mut app, 3);
     assert!(sim(&app, node).steps() > 0);
 }
+
+/// A scene (`DynamicWorld`) made from a running cloth, as a game saving its world in memory,
+/// spawns a cloth built from the user's mesh: the same rest shape as the original's, and a
+/// mesh of its own. Before, the scene carried only the `Mesh3d` (the cloth's deformed copy),
+/// and the spawned cloth took the shape the original hung in as its rest shape (1.34 m off).
+#[test]
+fn a_scene_of_a_running_cloth_spawns_it_from_the_users_mesh() {
+    use bevy::ecs::entity::EntityHashMap;
+    use bevy::world_serialization::DynamicWorldBuilder;
+    let mut app = app();
+    let grid = Grid::new(12, 12, 1.0, 1.0);
+    let mesh = add_mesh(&mut app, grid_mesh(&grid));
+    let cloth = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(0.0, 2.0, 0.0),
+            Cloth::default(),
+            ClothPins::rest([grid.index(0, 0), grid.index(11, 0)]),
+        ))
+        .id();
+    run(&mut app, 120);
+    let registry = app.world().resource::<AppTypeRegistry>().clone();
+    let scene = DynamicWorldBuilder::from_world(app.world(), &registry.read())
+        .extract_entities([cloth].into_iter())
+        .build();
+    let mut map = EntityHashMap::default();
+    scene.write_to_world(app.world_mut(), &mut map).unwrap();
+    let spawned = map[&cloth];
+    run(&mut app, 2);
+    assert_eq!(
+        sim(&app, spawned).rest_shape(),
+        sim(&app, cloth).rest_shape(),
+        "the scene's cloth was built from another shape than the user's mesh"
+    );
+    assert_ne!(
+        app.world().get::<Mesh3d>(spawned).unwrap().0,
+        app.world().get::<Mesh3d>(cloth).unwrap().0,
+        "the two cloths write one mesh"
+    );
+}

@@ -9,7 +9,7 @@ use super::systems::{
 use super::writeback::write_back;
 use super::{
     Cloth, ClothConfig, ClothFailed, ClothInertia, ClothPin, ClothPins, ClothSelfCollision,
-    ClothSkinning, ClothTearing, ClothTethers, ClothTorn, ClothWorkers, PinAnchor,
+    ClothSkinning, ClothSource, ClothTearing, ClothTethers, ClothTorn, ClothWorkers, PinAnchor,
 };
 use crate::foundation::{ClothSchedule, ClothSystems};
 
@@ -44,6 +44,7 @@ impl Plugin for ClothPlugin {
             .register_type::<ClothTearing>()
             .register_type::<ClothInertia>()
             .register_type::<ClothSkinning>()
+            .register_type::<ClothSource>()
             .init_resource::<ClothWorkers>()
             .add_message::<ClothTorn>()
             .add_message::<ClothFailed>()

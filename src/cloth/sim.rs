@@ -447,7 +447,12 @@ pub struct ClothPick {
 /// and the simulation rewrites). Inserted by the plugin; rebuilding the cloth starts again from
 /// `source` as long as the entity still shows `copy`, and removing [`Cloth`](super::Cloth) puts `source`
 /// back on the entity.
-#[derive(Component, Clone, Debug, PartialEq)]
+///
+/// Reflected, so that a scene (`DynamicWorld`) made from a running cloth carries it beside
+/// the `Mesh3d` it saves (the copy, deformed): the cloth the scene spawns is built from
+/// `source`, its rest shape the user's mesh, not the shape the cloth had when saved.
+#[derive(Component, Reflect, Clone, Debug, PartialEq)]
+#[reflect(Component, Clone, PartialEq)]
 pub struct ClothSource {
     /// The mesh the user gave.
     pub source: Handle<Mesh>,
