@@ -1821,3 +1821,26 @@ fn a_disabled_gpu_cloth_goes_on_where_it_stopped() {
         "after the pause a vertex is {apart} m from where the run without one has it"
     );
 }
+
+/// A GPU cloth cloned into a cloth that runs on the CPU steps there: the copy does not carry
+/// the original's GPU markers (`ClothSteppedElsewhere` kept it from the CPU plugin).
+#[test]
+fn a_gpu_cloth_cloned_onto_the_cpu_steps_there() {
+    if common::gpu_or_skip("a_gpu_cloth_cloned_onto_the_cpu_steps_there").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    let e = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    common::run(&mut app, 10);
+    assert!(in_use(&app, e).gpu);
+    let twin = app.world_mut().entity_mut(e).clone_and_spawn();
+    app.world_mut().entity_mut(twin).insert(ClothBackend::Cpu);
+    common::run(&mut app, 30);
+    let u = in_use(&app, twin);
+    assert!(!u.gpu, "{u:?}");
+    assert!(
+        app.world().get::<ClothSim>(twin).unwrap().steps() >= 25,
+        "the copy did not step on the CPU: {} steps",
+        app.world().get::<ClothSim>(twin).unwrap().steps()
+    );
+}

@@ -299,7 +299,12 @@ impl Component for SolverParams {
 /// mesh. Whoever steps it hands results back through `ClothSim`'s methods
 /// ([`receive_state`](crate::cloth::ClothSim::receive_state),
 /// [`count_external_steps`](crate::cloth::ClothSim::count_external_steps), ...).
+///
+/// Not copied when the entity is cloned: the other backend's state of the cloth is not either,
+/// so a copy is stepped by the CPU plugin until a backend marks it again (the GPU backend does
+/// at the copy's first step when it runs there).
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[component(clone_behavior = Ignore)]
 pub struct ClothSteppedElsewhere;
 
 /// Where a pinned vertex is held.
