@@ -336,32 +336,32 @@ fn bake_mesh_colliders(
         let ColliderShape::Mesh(ColliderMesh::Asset { mesh, resolution }) = &collider.shape else {
             continue;
         };
-        if cloth && mesh.is_none() {
-            // The entity's mesh is the cloth: baked, it would move with the cloth and be
-            // baked again every frame, pushing the cloth against itself.
-            if !runtime.as_ref().is_some_and(|r| r.failed) {
-                error!(
-                    "cloth collider {who}: a Mesh shape on a cloth's own entity would be the \
-                     cloth itself; it is ignored (ClothSelfCollision keeps a cloth from passing \
-                     through itself; to collide other cloths with this mesh, give the collider \
-                     a mesh handle of its own)"
-                );
-                commands.entity(entity).insert(ColliderRuntime {
-                    failed: true,
-                    ..default()
-                });
+        // The mesh to bake: its own handle, or the entity's `Mesh3d` — not on a cloth's
+        // entity, whose mesh is the cloth (baked again every frame as it moves, it would push
+        // the cloth against itself).
+        let handle = match (mesh, mesh3d) {
+            (Some(h), _) => Ok(h),
+            (None, Some(_)) if cloth => Err(
+                "a Mesh shape on a cloth's own entity would be the cloth itself; it is ignored \
+                 (ClothSelfCollision keeps a cloth from passing through itself; to collide other \
+                 cloths with this mesh, give the collider a mesh handle of its own)",
+            ),
+            (None, Some(m)) => Ok(&m.0),
+            (None, None) => Err("a Mesh shape needs a mesh handle or a Mesh3d"),
+        };
+        let handle = match handle {
+            Ok(h) => h,
+            Err(why) => {
+                // Said once (`failed` stays until the collider bakes).
+                if !runtime.as_ref().is_some_and(|r| r.failed) {
+                    error!("cloth collider {who}: {why}");
+                    commands.entity(entity).insert(ColliderRuntime {
+                        failed: true,
+                        ..default()
+                    });
+                }
+                continue;
             }
-            continue;
-        }
-        let Some(handle) = mesh.as_ref().or(mesh3d.map(|m| &m.0)) else {
-            if !runtime.as_ref().is_some_and(|r| r.failed) {
-                error!("cloth collider {who}: a Mesh shape needs a mesh handle or a Mesh3d");
-                commands.entity(entity).insert(ColliderRuntime {
-                    failed: true,
-                    ..default()
-                });
-            }
-            continue;
         };
         let key = (handle.id(), *resolution);
         // Baked (or refused) for this mesh and resolution already: nothing to do. A new mesh

@@ -49,7 +49,7 @@ pub(crate) struct GpuClothPipelines {
 struct ExtractedGpuCloth {
     entity: Entity,
     generation: u64,
-    /// `None` for a cloth leaving the GPU (read back, not stepped).
+    /// `None` for a cloth held in its world but not stepped (leaving the GPU, or disabled).
     upload: Option<Arc<GpuUpload>>,
     pin_targets: Vec<Vec<Vec3>>,
     first_step: u32,
@@ -60,6 +60,25 @@ struct ExtractedGpuCloth {
     transform: bevy::math::Affine3A,
     /// Read positions and velocities back this frame.
     readback: bool,
+}
+
+impl ExtractedGpuCloth {
+    /// A cloth that keeps its place (and upload) in the world holding it, not stepped.
+    fn held(entity: Entity, generation: u64, transform: &GlobalTransform, readback: bool) -> Self {
+        Self {
+            entity,
+            generation,
+            upload: None,
+            pin_targets: Vec::new(),
+            first_step: 0,
+            teleports: Vec::new(),
+            carries: Vec::new(),
+            air: Vec::new(),
+            motion: Vec::new(),
+            transform: transform.affine(),
+            readback,
+        }
+    }
 }
 
 #[derive(Resource, Default)]
@@ -93,19 +112,12 @@ pub(crate) fn extract_gpu_cloths(
             // Disabled (a pooled character): it keeps its place and its state in its world,
             // not stepped, not read back, until it is enabled again. Left out, its world
             // would be rebuilt without it and it would start again from its upload.
-            out.cloths.push(ExtractedGpuCloth {
+            out.cloths.push(ExtractedGpuCloth::held(
                 entity,
-                generation: g.generation,
-                upload: None,
-                pin_targets: Vec::new(),
-                first_step: 0,
-                teleports: Vec::new(),
-                carries: Vec::new(),
-                air: Vec::new(),
-                motion: Vec::new(),
-                transform: transform.affine(),
-                readback: false,
-            });
+                g.generation,
+                transform,
+                false,
+            ));
             continue;
         }
         // A tearing cloth is always read back: the CPU tears it.
@@ -125,19 +137,13 @@ pub(crate) fn extract_gpu_cloths(
         });
     }
     for (entity, l, transform) in &leaving {
-        out.cloths.push(ExtractedGpuCloth {
+        // Leaving: read back once more.
+        out.cloths.push(ExtractedGpuCloth::held(
             entity,
-            generation: l.generation,
-            upload: None,
-            pin_targets: Vec::new(),
-            first_step: 0,
-            teleports: Vec::new(),
-            carries: Vec::new(),
-            air: Vec::new(),
-            motion: Vec::new(),
-            transform: transform.affine(),
-            readback: true,
-        });
+            l.generation,
+            transform,
+            true,
+        ));
     }
 }
 

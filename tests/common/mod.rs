@@ -157,3 +157,23 @@ pub fn walk_away(app: &mut App, root: Entity) {
         app.update();
     }
 }
+
+/// Clones `root` with its children (Bevy's linked cloning, as a game copies a character with
+/// its hierarchy) and runs a frame; returns the copy and its child that is a cloth.
+pub fn clone_with_children(app: &mut App, root: Entity) -> (Entity, Entity) {
+    let twin = app
+        .world_mut()
+        .entity_mut(root)
+        .clone_and_spawn_with_opt_out(|b| {
+            b.linked_cloning(true);
+        });
+    app.update();
+    let cloth = app
+        .world()
+        .get::<Children>(twin)
+        .expect("the children were cloned")
+        .iter()
+        .find(|&c| app.world().get::<Cloth>(c).is_some())
+        .expect("the cloth was cloned with its parent");
+    (twin, cloth)
+}
