@@ -1833,3 +1833,88 @@ fn a_gpu_cloth_cloned_onto_the_cpu_steps_there() {
         app.world().get::<ClothSim>(twin).unwrap().steps()
     );
 }
+
+/// Changing the solver or the substeps of a GPU cloth settles, as on the CPU (`game`'s
+/// `switching_solver_and_substeps_does_not_fling_the_cloth`, the same cloths and bound): its
+/// GPU state goes on at the new settings without the burst of speed that the stretch the old
+/// settings tolerated would give. Before the GPU settled, its fastest vertex reached 16.7 m/s
+/// after lab → XPBD and 17.8 m/s after 2 → 20 substeps (3.4 and 1.5 on the CPU).
+#[test]
+fn switching_solver_and_substeps_on_the_gpu_does_not_fling_the_cloth() {
+    if common::gpu_or_skip("switching_solver_and_substeps_on_the_gpu_does_not_fling_the_cloth")
+        .is_none()
+    {
+        return;
+    }
+    use bevy_cloth::solver::Solver;
+    let max_speed = |app: &App, e: Entity| -> f32 {
+        let s = app.world().get::<ClothSim>(e).unwrap().simulation().state();
+        (0..s.len())
+            .map(|i| s.velocity(i).length())
+            .fold(0.0, f32::max)
+    };
+    let lab = ClothConfig {
+        solver: Solver::LAB,
+        substeps: 1,
+        iterations: 32,
+        ..default()
+    };
+    let fine = ClothConfig {
+        substeps: 20,
+        ..default()
+    };
+    let coarse = ClothConfig {
+        substeps: 2,
+        ..default()
+    };
+    let mut app = render_app();
+    for (from, to) in [
+        (lab, ClothConfig::default()),
+        (ClothConfig::default(), lab),
+        (fine, coarse),
+        (coarse, fine),
+    ] {
+        let grid = Grid::new(24, 24, 1.0, 1.0);
+        let mesh = app
+            .world_mut()
+            .resource_mut::<Assets<Mesh>>()
+            .add(grid_mesh(&grid));
+        let e = app
+            .world_mut()
+            .spawn((
+                Mesh3d(mesh),
+                Transform::from_xyz(0.0, 2.0, 0.0),
+                Cloth::default(),
+                from,
+                ClothBackend::Gpu,
+                ClothReadback,
+                ClothPins::rest([grid.index(0, 0), grid.index(23, 0)]),
+            ))
+            .id();
+        common::run(&mut app, 2);
+        let mut natural: f32 = 0.0;
+        for _ in 0..118 {
+            common::run(&mut app, 1);
+            natural = natural.max(max_speed(&app, e));
+        }
+        *app.world_mut().get_mut::<ClothConfig>(e).unwrap() = to;
+        let mut after: f32 = 0.0;
+        for _ in 0..60 {
+            common::run(&mut app, 1);
+            after = after.max(max_speed(&app, e));
+        }
+        assert!(in_use(&app, e).gpu, "it stays on the GPU");
+        assert!(
+            after < natural.max(3.0),
+            "{} {}×{} → {} {}×{}: {after} m/s after, {natural} m/s falling",
+            from.solver.name(),
+            from.substeps,
+            from.iterations,
+            to.solver.name(),
+            to.substeps,
+            to.iterations
+        );
+        app.world_mut().despawn(e);
+        common::run(&mut app, 2);
+    }
+}

@@ -2193,3 +2193,138 @@ fn torn_triangles_leave_the_drawn_mesh_as_on_the_cpu() {
     let got: Vec<u32> = bytemuck::pod_collect_to_vec(&read(&slab));
     assert_eq!(got, replaced, "a replaced index list must stay as it is");
 }
+
+/// A change of solver or substeps *settles* on the GPU as on the CPU (`settle_*` in
+/// `step_end.wgsl` against `Simulation::step_in`): a 24² cloth hung for a second at the old
+/// settings, changed, then one step a frame from the CPU's state (an upload leaves the GPU's
+/// settle going). After every step both have the same steps left, the same largest strain and
+/// the same velocities, within what rounding allows (the strain: two positions' bound over the
+/// shortest rest edge; a velocity: two positions' bound over the substep). A frame whose CPU
+/// decision lies within that of the threshold (0.01 less strain than the step before) ends
+/// the comparison of the counters. At the sixth frame the cloth moves into a world rebuilt
+/// around the same upload with another cloth (`record_carry` with its settle): the settle goes
+/// on where it was instead of starting again. Without the settle kernels the GPU's steps left
+/// stay at 60 and its vertices are not held back (the first frame fails).
+#[test]
+fn a_settings_change_settles_as_on_the_cpu() {
+    let Some(g) = gpu("a_settings_change_settles_as_on_the_cpu") else {
+        return;
+    };
+    let coarse = SolverParams {
+        substeps: 2,
+        ..Default::default()
+    };
+    let fine = SolverParams {
+        substeps: 20,
+        ..Default::default()
+    };
+    let lab = SolverParams {
+        solver: Solver::LAB,
+        substeps: 1,
+        iterations: 32,
+        ..Default::default()
+    };
+    for (from, to) in [
+        (coarse, fine),
+        (lab, SolverParams::default()),
+        (SolverParams::default(), lab),
+    ] {
+        let what = format!(
+            "{} {}×{} → {} {}×{}",
+            from.solver.name(),
+            from.substeps,
+            from.iterations,
+            to.solver.name(),
+            to.substeps,
+            to.iterations
+        );
+        let n = 24;
+        let mut cpu = sim(n, from, |p| p + Vec3::Y);
+        let targets = corners(&mut cpu, n);
+        for _ in 0..60 {
+            cpu.step(DT, &Serial);
+        }
+        cpu.set_params(to).unwrap();
+        let upload = cpu.clone();
+        let other = sim(6, to, |p| p + 3.0 * Vec3::Y);
+        let mut world = GpuWorld::new(&g.device, &g.queue, &g.kernels, &[&upload]).unwrap();
+        cpu.set_part_count(world.part_count(0));
+        let shortest = cpu
+            .topology()
+            .edges()
+            .iter()
+            .map(|e| e.rest)
+            .fold(f32::INFINITY, f32::min);
+        let h = DT / to.substeps as f32;
+        let (mut frames, mut worst_v) = (0, 0.0f32);
+        let mut counting = true;
+        loop {
+            if frames == 5 {
+                let mut rebuilt =
+                    GpuWorld::new(&g.device, &g.queue, &g.kernels, &[&upload, &other]).unwrap();
+                assert_eq!(rebuilt.part_count(0), world.part_count(0));
+                let mut encoder = g.device.create_command_encoder(&Default::default());
+                rebuilt.record_carry(&mut encoder, &world, 0, 0, true);
+                g.queue.submit([encoder.finish()]);
+                world = rebuilt;
+            }
+            let cloths = world.cloths();
+            world.upload(&g.queue, 0, &cpu.state().positions, &cpu.state().velocities);
+            let before = cpu.state().positions.clone();
+            let last_strain = cpu.settle_state().1;
+            let mut pins = vec![vec![targets.clone()]];
+            pins.resize(cloths, vec![Vec::new()]);
+            let frame = GpuFrame::uniform(DT, 1, &[], &pins);
+            world.prepare(&g.device, &g.queue, &g.kernels, &frame);
+            let mut encoder = g.device.create_command_encoder(&Default::default());
+            world.record(&mut encoder, &g.kernels);
+            g.queue.submit([encoder.finish()]);
+            cpu.step(DT, &Serial);
+            frames += 1;
+            let (pos, vel) = world.read_state(&g.device, &g.queue, 0);
+            let bound = rounding_bound(&upload, 1, &before);
+            let s = cpu.state();
+            for (a, b) in pos.iter().zip(&s.positions) {
+                let e = (a.truncate() - b.truncate()).length();
+                assert!(e <= bound, "{what}, frame {frames}: a position {e} m off");
+            }
+            for (a, b) in vel.iter().zip(&s.velocities) {
+                let e = (*a - *b).length();
+                let allowed = 2.0 * bound / h + 4.0 * f32::EPSILON * b.length();
+                worst_v = worst_v.max(e / allowed);
+                assert!(
+                    e <= allowed,
+                    "{what}, frame {frames}: a velocity {e} m/s off (allowed {allowed}): {a} against {b}"
+                );
+            }
+            let (left, strain) = world.read_settle(&g.device, &g.queue, 0);
+            let (cpu_left, cpu_strain) = cpu.settle_state();
+            let strain_bound = 2.0 * bound / shortest;
+            if counting {
+                if (cpu_strain - (last_strain - 0.01)).abs() <= strain_bound {
+                    eprintln!("{what}, frame {frames}: the decision is within rounding");
+                    counting = false;
+                } else {
+                    assert_eq!(left, cpu_left, "{what}, frame {frames}: steps left");
+                }
+            }
+            if cpu_left > 0 || left > 0 {
+                assert!(
+                    (strain - cpu_strain).abs() <= strain_bound,
+                    "{what}, frame {frames}: strain {strain} against {cpu_strain}"
+                );
+            }
+            if cpu_left == 0 && left == 0 {
+                break;
+            }
+            assert!(
+                frames <= bevy_cloth::solver::MAX_SETTLE_STEPS,
+                "{what}: still settling after {frames} steps ({left} left on the GPU)"
+            );
+        }
+        eprintln!(
+            "{what}: settled in {frames} steps, velocities within {worst_v} of the rounding bound"
+        );
+        assert!(frames >= bevy_cloth::solver::SETTLE_STEPS, "{what}");
+    }
+}

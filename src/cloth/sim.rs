@@ -94,6 +94,13 @@ impl ClothSim {
         &mut self.sim
     }
 
+    /// The GPU backend took over the settle of a settings change with its upload: this
+    /// copy, which the CPU does not step meanwhile, does not start it again with the next
+    /// upload (not an edit of the state).
+    pub(crate) fn settle_handed_over(&mut self) {
+        self.sim.stop_settling();
+    }
+
     /// After a NaN or infinite state (found by the step, or by a backend stepping the cloth
     /// elsewhere): the rest pose, placed where the entity is now (`placement`, when known),
     /// counted and logged as a warning.

@@ -262,7 +262,7 @@ pub(crate) fn choose_backends(
     meshes: Option<Res<Assets<Mesh>>>,
     mut cloths: Query<(
         (Entity, Option<&Name>),
-        Ref<ClothSim>,
+        Mut<ClothSim>,
         Option<&ClothBackend>,
         Option<&mut ClothBackendInUse>,
         Option<&mut ClothOnGpu>,
@@ -276,7 +276,7 @@ pub(crate) fn choose_backends(
 ) {
     let dt = fixed.timestep().as_secs_f32();
     let mut seen = std::collections::HashSet::new();
-    for ((entity, name), cloth, backend, in_use, on_gpu, leaving, readback) in &mut cloths {
+    for ((entity, name), mut cloth, backend, in_use, on_gpu, leaving, readback) in &mut cloths {
         let who = EntityName::new(entity, name);
         seen.insert(entity);
         if leaving {
@@ -326,6 +326,7 @@ pub(crate) fn choose_backends(
                     g.generation = *generation;
                     let pins_before: Vec<u32> = pinned_vertices(&g.upload.sim);
                     g.upload = Arc::new(upload(&cloth, layout, !edited));
+                    hand_over_settle(&mut cloth);
                     g.key = key;
                     g.edits = cloth.edit_count();
                     g.restart = false;
@@ -350,10 +351,12 @@ pub(crate) fn choose_backends(
                          from (add ClothReadback to read the GPU's state back)"
                     );
                 }
+                let first = Arc::new(upload(&cloth, layout, false));
+                hand_over_settle(&mut cloth);
                 commands.entity(entity).insert((
                     ClothOnGpu {
                         generation: *generation,
-                        upload: Arc::new(upload(&cloth, layout, false)),
+                        upload: first,
                         edits: cloth.edit_count(),
                         restart: false,
                         key: settings_key(cloth.simulation()),
@@ -409,6 +412,15 @@ pub(crate) fn choose_backends(
         }
     }
     checked.retain(|e, _| seen.contains(e));
+}
+
+/// After an upload: a settle of a settings change in it is the GPU's now (it runs it from the
+/// upload's simulation); the main world's copy forgets it, so that a later upload (new pins,
+/// another change) does not start it again.
+fn hand_over_settle(cloth: &mut Mut<ClothSim>) {
+    if cloth.simulation().settle_state().0 > 0 {
+        cloth.bypass_change_detection().settle_handed_over();
+    }
 }
 
 fn upload(cloth: &ClothSim, layout: VertexLayout, carry: bool) -> GpuUpload {

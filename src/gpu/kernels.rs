@@ -59,6 +59,9 @@ pub struct GpuKernels {
     pub(crate) tear_check: wgpu::ComputePipeline,
     pub(crate) tear_release: wgpu::ComputePipeline,
     pub(crate) carry: wgpu::ComputePipeline,
+    pub(crate) settle_begin: wgpu::ComputePipeline,
+    pub(crate) settle_end: wgpu::ComputePipeline,
+    pub(crate) settle_update: wgpu::ComputePipeline,
     pub(crate) lab_begin: wgpu::ComputePipeline,
     pub(crate) lab_gather: wgpu::ComputePipeline,
     pub(crate) lab_apply: wgpu::ComputePipeline,
@@ -178,12 +181,34 @@ impl GpuKernels {
             tear_check: pipeline("tear_check"),
             tear_release: pipeline("tear_release"),
             carry: pipeline("carry"),
+            settle_begin: pipeline("settle_begin"),
+            settle_end: pipeline("settle_end"),
+            settle_update: pipeline("settle_update"),
             lab_begin: pipeline("lab_begin"),
             lab_gather: pipeline("lab_gather"),
             lab_apply: pipeline("lab_apply"),
             lab_finish: pipeline("lab_finish"),
             lab_guard: pipeline("lab_guard"),
             layout,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::STEP_WGSL;
+    use crate::solver::{MAX_SETTLE_STEPS, SETTLE_SPEED, SETTLE_STEPS};
+
+    /// The settle kernels' constants are the CPU's.
+    #[test]
+    fn the_settle_constants_are_the_cpus() {
+        for line in [
+            format!("const SETTLE_MAX: f32 = {MAX_SETTLE_STEPS}.0;"),
+            format!("const SETTLE_STEPS: u32 = {SETTLE_STEPS}u;"),
+            format!("const SETTLE_SPEED: f32 = {SETTLE_SPEED:?};"),
+            format!("rest > {:?}", f32::EPSILON),
+        ] {
+            assert!(STEP_WGSL.contains(&line), "{line}");
         }
     }
 }

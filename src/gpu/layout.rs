@@ -120,6 +120,12 @@ pub(crate) struct WorldLayout {
     pub edges: u32,
     /// Per tearing edge the triangles it belongs to (offsets, list; global triangles).
     pub edge_tris_at: u32,
+    /// The edges of the cloths that settle a settings change (a, b: global vertices; rest
+    /// length bits), whose largest strain decides how long the settle goes on.
+    pub settle_edges_at: u32,
+    pub settle_edges: u32,
+    /// Most steps a cloth of the world settles (0: none settles).
+    pub settle_steps: u32,
     /// Triangles of every cloth (the tear's dead-triangle flags have one each).
     pub triangles: u32,
     /// The levels: parts, seams (all of a cloth's, or its even ones), odd seams (where a
@@ -312,6 +318,7 @@ impl WorldLayout {
         let mut lab_edges: Vec<(u32, [u32; 2])> = Vec::new();
         let mut tear_edges: Vec<[u32; 4]> = Vec::new();
         let mut edge_tris: Vec<(u32, [u32; 1])> = Vec::new();
+        let mut settle_edges: Vec<[u32; 3]> = Vec::new();
         let any_sc = sims.iter().any(|s| s.features().self_collision.is_some());
         for (c, sim) in sims.iter().enumerate() {
             let c = c as u32;
@@ -372,6 +379,16 @@ impl WorldLayout {
                         (vbase + e.v[1], [vbase + e.v[0], rest]),
                     ]
                 }));
+            }
+            let (settling, _) = sim.settle_state();
+            if settling > 0 {
+                out.settle_steps = out.settle_steps.max(settling);
+                settle_edges.extend(
+                    sim.topology()
+                        .edges()
+                        .iter()
+                        .map(|e| [vbase + e.v[0], vbase + e.v[1], e.rest.to_bits()]),
+                );
             }
             let tearing = features.tear_threshold.is_some_and(|t| t > 1.0);
             if tearing && !key.lab {
@@ -563,6 +580,9 @@ impl WorldLayout {
         out.edges = tear_edges.len() as u32;
         topo.extend(tear_edges.iter().flatten());
         out.edge_tris_at = append_lists(&mut topo, tear_edges.len(), edge_tris);
+        out.settle_edges_at = topo.len() as u32;
+        out.settle_edges = settle_edges.len() as u32;
+        topo.extend(settle_edges.iter().flatten());
         out.triangles = triangles.len() as u32;
         out.topo = topo;
         out

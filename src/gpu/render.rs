@@ -293,7 +293,9 @@ pub(crate) fn prepare_gpu_worlds(
                             .map(|k| (w, k))
                     });
                     if let Some((w, k)) = from {
-                        world.record_carry(&mut encoder, &w.world, k, i);
+                        // The same upload goes on with its settle; new settings start theirs.
+                        let same = w.members[k].generation == m.generation;
+                        world.record_carry(&mut encoder, &w.world, k, i, same);
                     }
                 }
                 queue.submit([encoder.finish()]);

@@ -8,7 +8,9 @@
 //! world with a cloth whose neighbouring seams overlap) and the boundaries (each only if some
 //! cloth has one); `sc_collide` with self-collision; `finish_substep`
 //! (tethers, the self-collision correction, colliders) when any of those acts; per step
-//! `step_end` (velocities, the NaN guard), and `tear_check` and `tear_release` with tearing
+//! `step_end` (velocities, the NaN guard), `settle_begin` (after `step_begin`), `settle_end`
+//! and `settle_update` in the steps after a cloth's solver, substeps or iterations changed
+//! (up to [`MAX_SETTLE_STEPS`](crate::solver::MAX_SETTLE_STEPS)), and `tear_check` and `tear_release` with tearing
 //! (an edge past the threshold and the edges its tear leaves without a triangle hold nothing
 //! from the next step on, as on the CPU, until the host tears the topology). That is at most 6
 //! dispatches a substep however many colours, parts or cloths there are
@@ -120,6 +122,10 @@ pub(crate) struct WorldUniform {
     torn_at: u32,
     edge_tris_at: u32,
     dead_at: u32,
+    settle_speed_at: u32,
+    settle_strain_at: u32,
+    settle_edges_at: u32,
+    settle_edges: u32,
 }
 
 #[repr(C)]
@@ -386,6 +392,8 @@ struct ScratchRegions {
     tlist: u32,
     torn: u32,
     dead: u32,
+    settle_speed: u32,
+    settle_strain: u32,
     impulse: u32,
 }
 
@@ -518,6 +526,11 @@ pub struct GpuWorld {
     impulse_words: u32,
     /// Carries recorded for this frame: (first vertex, vertices).
     carries: Vec<(u32, u32)>,
+    /// Steps that still record the settle kernels (a cloth of the world settles a settings
+    /// change; the kernels end it when it is over), and whether a frame with steps was
+    /// recorded yet (a cloth built mid-frame sits out that frame's first steps).
+    settle_left: u32,
+    settle_started: bool,
 }
 
 impl GpuWorld {
@@ -608,6 +621,11 @@ impl GpuWorld {
             s.dead = s.torn + layout.distances;
             words = s.dead + layout.triangles;
         }
+        if layout.settle_steps > 0 {
+            s.settle_speed = words;
+            s.settle_strain = words + n;
+            words = s.settle_strain + c;
+        }
         s.impulse = words;
         let limit = device.limits().max_storage_buffer_binding_size;
         let state_bytes = u64::from(r.len) * 16;
@@ -660,6 +678,8 @@ impl GpuWorld {
             collider_slots: 0,
             impulse_words: 0,
             carries: Vec::new(),
+            settle_left: layout.settle_steps,
+            settle_started: false,
             torn_edge_of: torn_edge_tables(&layout),
             tear_after_carry: false,
             layout,
@@ -677,6 +697,14 @@ impl GpuWorld {
         }
         for (i, sim) in sims.iter().enumerate() {
             world.upload_state(queue, i, sim);
+            // A settle in progress: the steps it has left and its last strain (the CPU's
+            // infinity as the largest finite `f32`: the same comparisons).
+            let (left, strain) = sim.settle_state();
+            if left > 0 {
+                let zw = [left as f32, strain.min(f32::MAX)];
+                let at = world.status_offset(i) + 8;
+                queue.write_buffer(&world.state, at, bytemuck::cast_slice(&zw));
+            }
         }
         world.bind(device, kernels);
         Ok(world)
@@ -799,15 +827,16 @@ impl GpuWorld {
     }
 
     /// Replaces cloth `cloth`'s GPU state with `sim`'s positions and velocities, and clears
-    /// its status.
+    /// its status flags.
     pub fn upload_state(&self, queue: &wgpu::Queue, cloth: usize, sim: &Simulation) {
         let s = sim.state();
         self.upload(queue, cloth, &s.positions, &s.velocities);
     }
 
     /// Replaces cloth `cloth`'s GPU state with `positions` (`w`: inverse mass, 0 when pinned)
-    /// and `velocities`, one per vertex, and clears its status. Edges flagged torn stay so:
-    /// they belong to the world's topology, which only a rebuild changes.
+    /// and `velocities`, one per vertex, and clears its status flags (a settle in progress
+    /// goes on, as on the CPU). Edges flagged torn stay so: they belong to the world's
+    /// topology, which only a rebuild changes.
     ///
     /// # Panics
     /// If either has not [`Self::cloth_len`] entries.
@@ -839,7 +868,7 @@ impl GpuWorld {
             at(self.regions.vel),
             bytemuck::cast_slice(velocities),
         );
-        queue.write_buffer(&self.state, self.status_offset(cloth), &[0u8; 16]);
+        queue.write_buffer(&self.state, self.status_offset(cloth), &[0u8; 8]);
     }
 
     /// Writes what the frame's steps need: the step length, per step the colliders (their
@@ -1004,6 +1033,10 @@ impl GpuWorld {
             torn_at: s.torn,
             edge_tris_at: l.edge_tris_at,
             dead_at: s.dead,
+            settle_speed_at: s.settle_speed,
+            settle_strain_at: s.settle_strain,
+            settle_edges_at: l.settle_edges_at,
+            settle_edges: l.settle_edges,
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         // The per-frame words of every cloth's record: gravity·h and the damping factor (the
@@ -1240,12 +1273,16 @@ impl GpuWorld {
     ///
     /// # Panics
     /// If the two cloths differ in size.
+    ///
+    /// With `settle` (the same upload in a world rebuilt around it), a settle of a settings
+    /// change in progress goes on too: its steps left, last strain and the speeds it keeps.
     pub fn record_carry(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
         from: &GpuWorld,
         from_cloth: usize,
         cloth: usize,
+        settle: bool,
     ) {
         let (old, new) = (from.cloth(from_cloth), self.cloth(cloth));
         assert_eq!(old.n, new.n, "a carried cloth keeps its vertices");
@@ -1268,6 +1305,22 @@ impl GpuWorld {
             new_at + u64::from(self.regions.vel) * 16,
             size,
         );
+        if settle && from.layout.settle_steps > 0 && self.layout.settle_steps > 0 {
+            encoder.copy_buffer_to_buffer(
+                &from.state,
+                from.status_offset(from_cloth) + 8,
+                &self.state,
+                self.status_offset(cloth) + 8,
+                8,
+            );
+            encoder.copy_buffer_to_buffer(
+                &from.scratch,
+                u64::from(from.scratch_regions.settle_speed + old.vbase) * 4,
+                &self.scratch,
+                u64::from(self.scratch_regions.settle_speed + new.vbase) * 4,
+                u64::from(new.n) * 4,
+            );
+        }
         self.carries.push((new.vbase, new.n));
         self.tear_after_carry |= self.layout.any_tearing;
     }
@@ -1291,6 +1344,11 @@ impl GpuWorld {
         self.carries.clear();
         if self.steps > 0 {
             self.tear_after_carry = false;
+            // The first frame with steps may have a cloth that joined for its last ones only.
+            if self.settle_started {
+                self.settle_left = self.settle_left.saturating_sub(self.steps);
+            }
+            self.settle_started = true;
         }
     }
 
@@ -1422,6 +1480,22 @@ impl GpuWorld {
                 out.push(Cmd::Run(&kernels.teleport, vertex_groups));
             }
             out.push(Cmd::Run(&kernels.step_begin, vertex_groups));
+            let settle = k < self.settle_left || (!self.settle_started && self.settle_left > 0);
+            if settle {
+                out.push(Cmd::Run(&kernels.settle_begin, vertex_groups));
+            }
+            let settle_end = |out: &mut Vec<Cmd<'k>>| {
+                if settle {
+                    out.push(Cmd::Run(
+                        &kernels.settle_end,
+                        groups(l.n.max(l.settle_edges)),
+                    ));
+                    out.push(Cmd::Run(
+                        &kernels.settle_update,
+                        groups(l.cloths.len() as u32),
+                    ));
+                }
+            };
             if l.lab {
                 for s in 0..substeps {
                     let so = sub_offset(k, s);
@@ -1437,6 +1511,7 @@ impl GpuWorld {
                 let last = sub_offset(k, substeps - 1);
                 enter(&mut out, GpuStage::Finish, [last, 0]);
                 out.push(Cmd::Run(&kernels.lab_guard, vertex_groups));
+                settle_end(&mut out);
                 if l.any_tearing && l.edges > 0 {
                     out.push(Cmd::Run(&kernels.tear_check, groups(l.edges)));
                 }
@@ -1480,6 +1555,7 @@ impl GpuWorld {
             let last = sub_offset(k, substeps - 1);
             enter(&mut out, GpuStage::Finish, [last, 0]);
             out.push(Cmd::Run(&kernels.step_end, vertex_groups));
+            settle_end(&mut out);
             if l.any_tearing && l.edges > 0 {
                 out.push(Cmd::Run(&kernels.tear_check, groups(l.edges)));
                 out.push(Cmd::Run(&kernels.tear_release, groups(l.edges)));
@@ -1521,6 +1597,22 @@ impl GpuWorld {
     ) -> (bool, bool) {
         let s = self.read(device, queue, self.status_offset(cloth), 16)[0];
         (s.x != 0.0, s.y != 0.0)
+    }
+
+    /// Cloth `cloth`'s settle of a settings change: the steps it has left and the largest
+    /// strain after its last settling step, as
+    /// [`Simulation::settle_state`](crate::solver::Simulation::settle_state) gives them on the
+    /// CPU (blocking, as [`Self::read_state`]; the CPU's infinity is the largest finite
+    /// `f32` here).
+    #[must_use]
+    pub fn read_settle(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        cloth: usize,
+    ) -> (u32, f32) {
+        let s = self.read(device, queue, self.status_offset(cloth), 16)[0];
+        (s.z as u32, s.w)
     }
 
     /// Where cloth `cloth`'s torn-edge flags sit in [`Self::scratch_buffer`], and the edge of

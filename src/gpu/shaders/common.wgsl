@@ -10,8 +10,9 @@
 // `state` (vec4): positions (w: inverse mass, 0 when pinned) | substep starts | velocities |
 // area vectors | air velocities | [self-collision: corrections | rest positions] | each pin's
 // position at the step's start | per cloth its status (x: 1 once a position or velocity went
-// NaN or infinite, y: 1 once an edge was stretched past the tear threshold) | [the XPBD
-// multipliers with several iterations: distances, then hinges].
+// NaN or infinite, y: 1 once an edge was stretched past the tear threshold, z: steps left in
+// which a settings change settles, w: the largest strain after its last settling step) |
+// [the XPBD multipliers with several iterations: distances, then hinges].
 //
 // `cons` (vec4<u32>): distance constraints (a, b: vertices local to their group; rest length
 // and material parameter as f32 bits), then hinges, three vec4 each (four local vertices;
@@ -24,7 +25,8 @@
 // vertex the triangles whose first corner it is (offsets, list) | tethers | the lab solver's
 // edges | the tearing cloths' edges (a, b: global vertices; rest length bits; the slot of
 // the edge's distance constraint in `cons`, or `NO_PIN`), then per tearing edge its
-// triangles (offsets, list).
+// triangles (offsets, list) | the edges of the cloths that settle a settings change (a, b:
+// global vertices; rest length bits).
 //
 // `scratch` (atomic u32): per cloth the fastest squared speed of the step's start (bits) |
 // self-collision: hash heads (2 per vertex of the cloth), the next vertex in each bucket, per
@@ -32,7 +34,9 @@
 // `SC_TRI_MAX` triangles (`triangle << 2 | side`) | with tearing, per distance constraint 1
 // once `tear_check` found its edge past the threshold, 2 once `tear_release` found its edge
 // left without a triangle (either way the constraint holds nothing), then per triangle 1
-// once an edge of it tore | the colliders' impulse slots.
+// once an edge of it tore | while a cloth settles a settings change, per vertex its speed
+// when the change was made (bits), then per cloth the step's largest strain (bits) | the
+// colliders' impulse slots.
 //
 // `frame` (vec4): per step every pin's target | per step and cloth a record (xyz: teleport
 // offset; w: 0 not stepped, else 1 + 2 teleporting + 4 carried + 8 held by motion targets;
@@ -83,6 +87,10 @@ struct World {
     torn_at: u32,
     edge_tris_at: u32,
     dead_at: u32,
+    settle_speed_at: u32,
+    settle_strain_at: u32,
+    settle_edges_at: u32,
+    settle_edges: u32,
 }
 
 // One substep of one step (binding 1, a dynamic offset per substep).

@@ -115,3 +115,86 @@ fn carry(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = L.first + id.x;
     state[i] = vec4<f32>(state[P.prev_at + i].xyz, state[i].w);
 }
+
+// A change of solver, substeps or iterations *settles* (CPU twin: `Simulation::step_in` after
+// `Simulation::set_params`): for at least `SETTLE_STEPS` steps, then while the cloth's largest
+// strain still shrinks by more than 0.01 a step, up to `SETTLE_MAX`, no free vertex ends a
+// step faster than it was when the change was made, plus `SETTLE_SPEED` (m/s). The cloth's
+// status counts the steps left (z) and keeps the last strain (w). Dispatched in the steps
+// after a world is built with a settling cloth: `settle_begin` after `step_begin`,
+// `settle_end` and `settle_update` after `step_end` (or `lab_guard`).
+const SETTLE_MAX: f32 = 60.0;
+const SETTLE_STEPS: u32 = 8u;
+const SETTLE_SPEED: f32 = 0.25;
+
+fn settling(c: u32) -> f32 {
+    return state[P.status_at + cloth_of(c).status].z;
+}
+
+// The first settling step keeps each vertex's speed at its start.
+@compute @workgroup_size(64)
+fn settle_begin(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= P.n {
+        return;
+    }
+    let c = vertex_cloth(i);
+    if cloth_active(c) && settling(c) == SETTLE_MAX {
+        atomicStore(&scratch[P.settle_speed_at + i], bitcast<u32>(length(state[P.vel_at + i])));
+    }
+}
+
+// A settling step's end: invocation `k` limits vertex `k`'s speed (free vertices) and takes
+// the strain of settle edge `k` into its cloth's largest (`metrics::edge_strain`).
+@compute @workgroup_size(64)
+fn settle_end(@builtin(global_invocation_id) id: vec3<u32>) {
+    let k = id.x;
+    if k < P.n {
+        let c = vertex_cloth(k);
+        if cloth_active(c) && settling(c) > 0.0 && state[k].w > 0.0 {
+            let v = state[P.vel_at + k];
+            let limit = bitcast<f32>(atomicLoad(&scratch[P.settle_speed_at + k])) + SETTLE_SPEED;
+            let speed = length(v);
+            if speed > limit {
+                state[P.vel_at + k] = v * (limit / speed);
+            }
+        }
+    }
+    if k < P.settle_edges {
+        let at = P.settle_edges_at + 3u * k;
+        let a = topo[at];
+        let c = vertex_cloth(a);
+        let rest = bitcast<f32>(topo[at + 2u]);
+        if cloth_active(c) && settling(c) > 0.0 && rest > 1.1920929e-7 {
+            let len = distance(state[a].xyz, state[topo[at + 1u]].xyz);
+            let strain = abs(len - rest) / rest;
+            if finite(strain) {
+                atomicMax(&scratch[P.settle_strain_at + c], bitcast<u32>(strain));
+            }
+        }
+    }
+}
+
+// After `settle_end`, one invocation per cloth: the steps left and the strain kept.
+@compute @workgroup_size(64)
+fn settle_update(@builtin(global_invocation_id) id: vec3<u32>) {
+    let c = id.x;
+    if c >= P.cloths || !cloth_active(c) {
+        return;
+    }
+    let at = P.status_at + cloth_of(c).status;
+    let left = state[at].z;
+    if left <= 0.0 {
+        return;
+    }
+    let strain = bitcast<f32>(atomicExchange(&scratch[P.settle_strain_at + c], 0u));
+    let s = u32(left);
+    var next = 0u;
+    if s > u32(SETTLE_MAX) - SETTLE_STEPS + 1u {
+        next = s - 1u;
+    } else if strain < state[at].w - 0.01 {
+        next = max(s - 1u, 1u);
+    }
+    state[at].z = f32(next);
+    state[at].w = strain;
+}

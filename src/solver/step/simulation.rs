@@ -605,6 +605,19 @@ impl Simulation {
         Ok(())
     }
 
+    /// Steps left in which the last settings change settles (0: none; [`MAX_SETTLE_STEPS`]
+    /// before its first step) and the largest strain after its last settling step (infinite
+    /// before it): what a GPU world starts the settle from (`gpu::GpuWorld`).
+    #[must_use]
+    pub fn settle_state(&self) -> (u32, f32) {
+        (self.settling, self.settle_strain)
+    }
+
+    /// Ends a settle in progress (the GPU backend took it over with its upload).
+    pub(crate) fn stop_settling(&mut self) {
+        self.settling = 0;
+    }
+
     /// The solver parameters.
     #[must_use]
     pub fn params(&self) -> &SolverParams {
