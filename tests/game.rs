@@ -2464,6 +2464,18 @@ fn a_paused_game_pauses_its_cloths() {
     assert_eq!(run_it(true), run_it(false));
 }
 
+/// A cloth's size follows its entity's scale: one that pops in by growing from scale 0 to 1
+/// (a common spawn effect) and one grown from 1 to 2 while it hangs end up with the rest
+/// shape of their new scale and hang like a cloth spawned at it (`common::check_scaled_cloths`).
+/// Before, the rest shape stayed at the scale the cloth was built at (1/30 for the pop-in,
+/// built at its first scale that is not zero) and the pins pulled it 30 times longer.
+#[test]
+fn a_cloth_grows_with_its_entitys_scale() {
+    let mut app = app();
+    let cloths = common::scaled_cloths(&mut app, None);
+    common::check_scaled_cloths(&app, cloths);
+}
+
 /// A mesh `ClothCollider` on a cloth's own entity (as a game adding a collider to every mesh
 /// of a level would put one there) is ignored: that mesh is the cloth itself. Before, it was
 /// baked again every frame (35 ms a frame for a 16 × 16 cloth) and held the cloth up against

@@ -1918,3 +1918,20 @@ fn switching_solver_and_substeps_on_the_gpu_does_not_fling_the_cloth() {
         common::run(&mut app, 2);
     }
 }
+
+/// On the GPU too, a cloth's size follows its entity's scale (`game`'s
+/// `a_cloth_grows_with_its_entitys_scale`, read back): each change of scale gives the GPU the
+/// rest shape at the new scale, and the cloth's GPU state is stretched with it (the carry of
+/// the `teleport` kernel) instead of starting again.
+#[test]
+fn a_gpu_cloth_grows_with_its_entitys_scale() {
+    if common::gpu_or_skip("a_gpu_cloth_grows_with_its_entitys_scale").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    let cloths = common::scaled_cloths(&mut app, Some(ClothBackend::Gpu));
+    for e in cloths {
+        assert!(in_use(&app, e).gpu, "it stays on the GPU");
+    }
+    common::check_scaled_cloths(&app, cloths);
+}

@@ -25,7 +25,7 @@ mod common;
 
 use std::sync::Arc;
 
-use bevy::math::{Quat, Vec3, Vec4};
+use bevy::math::{Mat3, Quat, Vec3, Vec4};
 use bevy_cloth::gpu::{
     ClothFrame, GpuFrame, GpuKernels, GpuWorld, MotionTargets, StepColliders, gpu_part_count,
 };
@@ -1113,8 +1113,9 @@ fn a_teleport_matches_the_cpu() {
     assert!(out.cpu[0][0].x > 4.0, "the cloth went with its pins");
 }
 
-/// A cloth carried by a turning, moving anchor every step (`ClothInertia`), and teleported
-/// once: the `teleport` kernel's carry against `ClothState::carry`, every frame from the same
+/// A cloth carried by a turning, moving anchor every step (`ClothInertia`), stretched every
+/// fourth step (its entity scaled: `Stretch`), and teleported once: the `teleport` kernel's
+/// carry against `ClothState::carry`, every frame from the same
 /// state, within the rounding bound. Not bit for bit even on llvmpipe (3.5e-7 m after a
 /// frame, 0.2 % of the bound: its shader compiler evaluates the carry's matrix product
 /// differently), so that is not asserted.
@@ -1129,10 +1130,24 @@ fn a_carried_cloth_matches_the_cpu() {
     });
     corners(&mut s, n);
     let mut case = Case::new(s);
-    case.carry = Box::new(|k| Carry {
-        rotation: Quat::from_rotation_y(0.02) * Quat::from_rotation_x(0.01 * (k % 3) as f32),
-        pivot: Vec3::new(0.3, 0.8, -0.1),
-        translation: Vec3::new(0.01, 0.002 * k as f32, -0.005),
+    case.carry = Box::new(|k| {
+        let rigid = Carry {
+            rotation: Quat::from_rotation_y(0.02) * Quat::from_rotation_x(0.01 * (k % 3) as f32),
+            pivot: Vec3::new(0.3, 0.8, -0.1),
+            translation: Vec3::new(0.01, 0.002 * k as f32, -0.005),
+            stretch: None,
+        };
+        // Every fourth step its entity also grows along one turned axis and shrinks along
+        // another (a scaled entity's `Stretch`).
+        if k % 4 == 1 {
+            let turn = Mat3::from_rotation_z(0.4);
+            rigid.then_stretch(bevy_cloth::solver::Stretch {
+                center: Vec3::new(0.1, 0.6, 0.0),
+                linear: turn * Mat3::from_diagonal(Vec3::new(1.03, 0.98, 1.0)) * turn.transpose(),
+            })
+        } else {
+            rigid
+        }
     });
     case.teleport = Some((12, Vec3::new(0.0, 0.0, 3.0)));
     let out = compare(&g, &[case], 24, 2, |_| Vec::new(), true);
@@ -1274,6 +1289,7 @@ fn a_substep_takes_a_few_dispatches_for_every_cloth() {
         rotation: Quat::from_rotation_y(0.1),
         pivot: Vec3::ZERO,
         translation: Vec3::X * 0.05,
+        stretch: None,
     }];
     let mut frame = GpuFrame::uniform(DT, 1, &ball, &targets);
     frame.cloths[3].carries = &carry;

@@ -1,6 +1,7 @@
 //! Building a cloth's simulation from its components and mesh, and the solver features its
 //! opt-in components ask for.
 
+use bevy::math::Affine3A;
 use bevy::prelude::*;
 
 use super::mesh::cloth_mesh;
@@ -12,7 +13,7 @@ use super::{
 use crate::foundation::{EntityName, FixedPoses, read_mesh};
 use crate::solver::{
     EVEN_EDGE_SPREAD, Features, MAX_SELF_COLLISION_EDGES, MeshBinding, SelfCollision, Simulation,
-    SolverError, TetherParams, TopologyError, TopologyOptions, limits,
+    SolverError, Stretch, TetherParams, TopologyError, TopologyOptions, limits,
 };
 
 /// A cloth built from its mesh, before its own mesh asset exists.
@@ -24,6 +25,8 @@ pub(super) struct Built {
     /// The cloth's own copy of the mesh.
     pub(super) mesh: Mesh,
     u16_indices: bool,
+    /// The entity's pose the rest shape was placed by.
+    shaped: Affine3A,
 }
 
 impl Built {
@@ -53,6 +56,9 @@ impl Built {
             inertia_from: None,
             inertia_error: None,
             anchor_error: None,
+            shaped: self.shaped,
+            reshapes: 0,
+            reshape_error: None,
         }
     }
 }
@@ -189,7 +195,67 @@ pub(super) fn build(
         attached,
         mesh: cloth_mesh(mesh, &data),
         u16_indices: data.u16_indices,
+        shaped: own.affine(),
     })
+}
+
+/// Relative change of an entity's scale (along any of its axes) from the one its cloth's rest
+/// shape was placed at past which the rest shape follows it.
+const RESHAPE_TOLERANCE: f32 = 1e-4;
+
+/// When the entity's scale (`own`, its pose at this step) is no longer the one the rest shape
+/// was placed at: the rest shape placed at the new scale (the same vertices and triangles, a
+/// tear kept), and the stretch that takes the cloth's state along with it about the entity's
+/// origin (in its current orientation, so that its motion and turning stay the pins'
+/// business). A zero scale keeps the last shape (the cloth hidden, not squashed).
+///
+/// # Errors
+/// The rest shape at the new scale cannot be built (triangles collapsed); nothing changes.
+pub(super) fn reshape(
+    cs: &mut ClothSim,
+    own: &GlobalTransform,
+) -> Result<Option<Stretch>, ClothError> {
+    let now = own.affine();
+    let det = now.matrix3.determinant();
+    if !(det.is_finite() && det.abs() > f32::MIN_POSITIVE) {
+        return Ok(None);
+    }
+    let shaped = GlobalTransform::from(cs.shaped);
+    let (scale, rotation, origin) = own.to_scale_rotation_translation();
+    let (scale_was, rotation_was, _) = shaped.to_scale_rotation_translation();
+    let changed = (scale - scale_was)
+        .abs()
+        .cmpgt(RESHAPE_TOLERANCE * scale_was.abs())
+        .any();
+    if !changed {
+        return Ok(None);
+    }
+    let weld = cs.binding.weld();
+    let rest: Vec<Vec3> = weld
+        .particles()
+        .iter()
+        .map(|&p| own.transform_point(cs.rest_local[p as usize]))
+        .collect();
+    let options = cs.sim.topology().options();
+    let topology = cs
+        .binding
+        .topology(&rest, options)
+        .map_err(SolverError::from)?;
+    // The old shape's linear map turned into the entity's orientation now, and the map from
+    // it to the new one.
+    let was = Mat3::from_quat(rotation * rotation_was.inverse()) * Mat3::from(cs.shaped.matrix3);
+    let linear = Mat3::from(now.matrix3) * was.inverse();
+    if !linear.is_finite() {
+        return Ok(None);
+    }
+    cs.sim.set_rest_shape(topology)?;
+    cs.shaped = now;
+    cs.reshapes += 1;
+    cs.dirty = true;
+    Ok(Some(Stretch {
+        center: origin,
+        linear,
+    }))
 }
 
 /// The self-collision thickness a cloth uses: its own, or the mean rest edge length; at most

@@ -60,7 +60,7 @@ pub(super) fn carry_unfelt_motion(
         && let Some(carry) =
             Carry::unfelt((from, from_rotation), now, inertia.linear, inertia.angular)
     {
-        cs.sim.state_mut().carry(&carry);
+        // Applied (with a change of size, if any) by `sync_cloths`.
         cs.carry = Some(carry);
         cs.dirty = true;
     }

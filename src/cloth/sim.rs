@@ -1,6 +1,7 @@
 //! [`ClothSim`]: the running simulation of a cloth entity, what it reads back to gameplay,
 //! and what a backend that steps the cloth elsewhere hands back to it.
 
+use bevy::math::Affine3A;
 use bevy::mesh::Indices;
 use bevy::prelude::*;
 
@@ -75,6 +76,14 @@ pub struct ClothSim {
     pub(super) inertia_error: Option<ClothError>,
     /// A pin anchor with no pose (its pins hold still meanwhile).
     pub(super) anchor_error: Option<ClothError>,
+    /// The entity's pose the rest shape is placed by: the cloth's size follows the entity's
+    /// scale from it (see `build::reshape`).
+    pub(super) shaped: Affine3A,
+    /// How many times the rest shape followed the entity's scale (a backend stepping
+    /// elsewhere takes the new shape when this changes).
+    pub(super) reshapes: u64,
+    /// A rest shape at the entity's new scale that could not be built (the last one runs on).
+    pub(super) reshape_error: Option<ClothError>,
 }
 
 impl ClothSim {
@@ -268,12 +277,20 @@ impl ClothSim {
         self.teleport.take()
     }
 
-    /// The rigid motion carried at the start of this fixed step (the part of its
-    /// [`ClothInertia`](super::ClothInertia) anchor's motion the cloth does not feel, applied
-    /// before the pins and the teleport rule), taken: a backend stepping elsewhere applies it
-    /// to its own state.
+    /// The motion carried at the start of this fixed step (the part of its
+    /// [`ClothInertia`](super::ClothInertia) anchor's motion the cloth does not feel, and a
+    /// change of size with its entity's scale, applied before the pins and the teleport rule),
+    /// taken: a backend stepping elsewhere applies it to its own state.
     pub fn take_carry(&mut self) -> Option<Carry> {
         self.carry.take()
+    }
+
+    /// How many times the rest shape followed a change of the entity's scale: a backend
+    /// stepping elsewhere takes the new rest shape (and goes on from its own state) when this
+    /// changes.
+    #[must_use]
+    pub fn reshape_count(&self) -> u64 {
+        self.reshapes
     }
 
     /// How many times [`Self::simulation_mut`] was called: a backend stepping elsewhere

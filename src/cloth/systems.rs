@@ -6,7 +6,7 @@ use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::tasks::ComputeTaskPool;
 
-use super::build::{build, features, warn_self_collision};
+use super::build::{build, features, reshape, warn_self_collision};
 use super::error::report;
 use super::inertia::carry_unfelt_motion;
 use super::pins::{attach, follow_anchors, pin_list, repin};
@@ -20,7 +20,7 @@ use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
 use crate::foundation::{
     EntityName, FixedPoses, SimulatedCloth, mesh_fingerprint, modified_meshes,
 };
-use crate::solver::{Environment, ManyItem, Serial, SolverError, StepReport, step_many};
+use crate::solver::{Carry, Environment, ManyItem, Serial, SolverError, StepReport, step_many};
 use crate::wind::ClothWindField;
 
 /// How long a cloth may wait for its mesh to load before it says so (once).
@@ -376,6 +376,34 @@ pub(super) fn sync_cloths(
         let cs = &mut *sim;
         let own = poses.get(entity).unwrap_or_default();
         carry_unfelt_motion(&mut commands, who, cs, cloth, inertia, &poses);
+        // The entity's scale changed: the rest shape and the state follow it.
+        let reshaped = reshape(cs, &own);
+        if let Ok(Some(stretch)) = &reshaped {
+            cs.carry = Some(cs.carry.unwrap_or(Carry::IDENTITY).then_stretch(*stretch));
+            // The pins' last targets too, so that the size change is no jump of theirs.
+            let s = *stretch;
+            let targets: Vec<Vec3> = cs
+                .sim
+                .state()
+                .pins()
+                .iter()
+                .map(|p| s.center + s.linear * (p.target - s.center))
+                .collect();
+            cs.sim.state_mut().set_pin_targets(targets);
+        }
+        note_rejection(
+            &mut commands,
+            who,
+            &mut cs.reshape_error,
+            reshaped.map(|_| ()),
+            (
+                "scaled rest lengths",
+                "its rest shape stays at the last scale it could be built at",
+            ),
+        );
+        if let Some(carry) = cs.carry {
+            cs.sim.state_mut().carry(&carry);
+        }
         // A changed (or still refused) config is applied with the features; otherwise only
         // changed features are.
         let config_due = config.is_changed() || cs.settings_error.is_some();

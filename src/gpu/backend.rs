@@ -239,14 +239,16 @@ pub(crate) fn vertex_layout(mesh: &Mesh) -> Result<VertexLayout, String> {
 }
 
 /// A short fingerprint of what the GPU buffers were built from: settings, features, pinned
-/// vertices.
-fn settings_key(sim: &Simulation) -> String {
+/// vertices, the rest shape's scale.
+fn settings_key(cloth: &ClothSim) -> String {
+    let sim = cloth.simulation();
     let pins = pinned_vertices(sim);
     format!(
-        "{:?}{:?}{pins:?}{}",
+        "{:?}{:?}{pins:?}{} {}",
         sim.params(),
         sim.features(),
-        sim.topology().edges().len()
+        sim.topology().edges().len(),
+        cloth.reshape_count()
     )
 }
 
@@ -294,7 +296,7 @@ pub(crate) fn choose_backends(
                 .map_or(Ok(()), Err)
                 .and_then(|()| {
                     // The model check (O(n) for stiff bending) once per change of settings.
-                    let key = settings_key(cloth.simulation());
+                    let key = settings_key(&cloth);
                     match checked.get(&entity) {
                         Some((k, verdict)) if *k == key => verdict.clone(),
                         _ => {
@@ -315,7 +317,7 @@ pub(crate) fn choose_backends(
         });
         match (layout, on_gpu) {
             (Ok(layout), Some(mut g)) => {
-                let key = settings_key(cloth.simulation());
+                let key = settings_key(&cloth);
                 // A cloth built again (another mesh, new `Cloth` settings) starts from its new
                 // simulation's state, as on the CPU.
                 let rebuilt = cloth.is_added();
@@ -359,7 +361,7 @@ pub(crate) fn choose_backends(
                         upload: first,
                         edits: cloth.edit_count(),
                         restart: false,
-                        key: settings_key(cloth.simulation()),
+                        key: settings_key(&cloth),
                         pending: Vec::new(),
                         stale_targets: 0,
                         first_step: 0,

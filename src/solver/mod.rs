@@ -86,8 +86,8 @@ pub use scene::HangingCloth;
 pub use step::{
     Carry, ClothState, DEFAULT_TELEPORT_DISTANCE, Environment, Features, LabScratch,
     MAX_SETTLE_STEPS, ManyItem, Pin, SETTLE_SPEED, SETTLE_STEPS, Simulation, Sleep, SolverError,
-    SolverParams, StateError, StepInput, StepReport, StepScratch, WAKE_AIR_SPEED, WAKE_DISTANCE,
-    is_teleport, lab_step, overstretched_edges, step, step_many, teleport_offset,
+    SolverParams, StateError, StepInput, StepReport, StepScratch, Stretch, WAKE_AIR_SPEED,
+    WAKE_DISTANCE, is_teleport, lab_step, overstretched_edges, step, step_many, teleport_offset,
 };
 
 #[cfg(test)]

@@ -177,3 +177,77 @@ pub fn clone_with_children(app: &mut App, root: Entity) -> (Entity, Entity) {
         .expect("the cloth was cloned with its parent");
     (twin, cloth)
 }
+
+/// Three 16² one-metre cloths hanging from two corners, side by side: one at scale 1, one
+/// spawned at scale 0 that grows to 1 over 30 frames (a pop-in), one at scale 1 that grows to
+/// 2 meanwhile; on `backend` (none: the default), read back. Returns them after 150 frames.
+pub fn scaled_cloths(app: &mut App, backend: Option<ClothBackend>) -> [Entity; 3] {
+    let grid = Grid::new(16, 16, 1.0, 1.0);
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    let tweens = [(1.0, 1.0), (0.0, 1.0), (1.0, 2.0)];
+    let cloths = tweens.map(|(from, _)| {
+        let x = 4.0 * app.world().entities().len() as f32;
+        let mut e = app.world_mut().spawn((
+            Mesh3d(mesh.clone()),
+            Transform::from_xyz(x, 2.0, 0.0).with_scale(Vec3::splat(from)),
+            Cloth::default(),
+            ClothPins::rest([grid.index(0, 0), grid.index(15, 0)]),
+            ClothReadback,
+        ));
+        if let Some(b) = backend {
+            e.insert(b);
+        }
+        e.id()
+    });
+    app.update();
+    for f in 1..=30 {
+        let t = f as f32 / 30.0;
+        for (e, (from, to)) in cloths.iter().zip(tweens) {
+            app.world_mut().get_mut::<Transform>(*e).unwrap().scale =
+                Vec3::splat(from + (to - from) * t);
+        }
+        app.update();
+    }
+    run(app, 119);
+    cloths
+}
+
+/// Checks [`scaled_cloths`]: each one's rest shape is the mesh at its entity's scale (mean
+/// rest edge as the unscaled one's times the scale, to f32 rounding), it hangs as wide as its
+/// pins are apart and no more stretched than a cloth falls (the unscaled one's strain, at
+/// most 0.084, against a bound of 0.25; before the rest shape followed the scale, the pop-in
+/// ended at 10 915 % strain and the grown one at 272 %).
+pub fn check_scaled_cloths(app: &App, [plain, popped, grown]: [Entity; 3]) {
+    let sim = |e: Entity| app.world().get::<ClothSim>(e).expect("built");
+    let edge = sim(plain).simulation().topology().mean_rest_edge();
+    assert_eq!(
+        sim(plain).reshape_count(),
+        0,
+        "an unscaled cloth keeps its shape"
+    );
+    for (e, scale) in [(plain, 1.0), (popped, 1.0), (grown, 2.0)] {
+        let s = sim(e);
+        let rest = s.simulation().topology().mean_rest_edge();
+        assert!(
+            (rest - scale * edge).abs() <= 1e-5 * scale * edge,
+            "scale {scale}: mean rest edge {rest} against {}",
+            scale * edge
+        );
+        let state = s.simulation().state();
+        let xs = (0..state.len()).map(|i| state.position(i).x);
+        let (lo, hi) = xs.fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
+        assert!(
+            ((hi - lo) - scale).abs() < 0.03 * scale,
+            "scale {scale}: {} m wide",
+            hi - lo
+        );
+        assert!(
+            s.max_strain() < 0.25,
+            "scale {scale}: {} strain",
+            s.max_strain()
+        );
+    }
+}

@@ -7,12 +7,16 @@
 //! step the part of the anchor's motion the cloth should *not* feel is applied to every
 //! vertex as a rigid motion ([`Carry`]), so that part moves the cloth as if it were glued to
 //! its anchor and only the rest drives its dynamics.
+//!
+//! A carry can also change the cloth's size with its entity ([`Stretch`]): an entity scaled
+//! at runtime (a banner that pops in by growing from nothing) takes its cloth with it.
 
 use glam::{Mat3, Quat, Vec3, Vec4};
 
 use super::state::ClothState;
 
-/// A rigid motion applied to a whole cloth: `x ↦ rotation·(x − pivot) + pivot + translation`.
+/// A motion applied to a whole cloth: `x ↦ rotation·(x − pivot) + pivot + translation`, then
+/// the [`Stretch`] if there is one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Carry {
     /// Rotation about `pivot`.
@@ -21,6 +25,19 @@ pub struct Carry {
     pub pivot: Vec3,
     /// Translation after the rotation.
     pub translation: Vec3,
+    /// A change of size and shape after the rigid motion (its entity scaled); `None` for a
+    /// rigid carry.
+    pub stretch: Option<Stretch>,
+}
+
+/// A change of a cloth's size and shape about a point: `x ↦ center + linear·(x − center)`
+/// (`linear` a scale along the entity's axes, turned into world space).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stretch {
+    /// The point that stays.
+    pub center: Vec3,
+    /// The linear map about it.
+    pub linear: Mat3,
 }
 
 impl Carry {
@@ -29,20 +46,43 @@ impl Carry {
         rotation: Quat::IDENTITY,
         pivot: Vec3::ZERO,
         translation: Vec3::ZERO,
+        stretch: None,
     };
 
-    /// The motion as `x ↦ m·x + b`: the rotation's matrix and the offset, the form both the
-    /// CPU ([`ClothState::carry`]) and the GPU's `teleport` kernel apply, in the same order.
+    /// This motion followed by `stretch`.
+    #[must_use]
+    pub fn then_stretch(self, stretch: Stretch) -> Self {
+        Self {
+            stretch: Some(stretch),
+            ..self
+        }
+    }
+
+    /// The motion as `x ↦ m·x + b`: the rotation's matrix (times the stretch's) and the
+    /// offset, the form both the CPU ([`ClothState::carry`]) and the GPU's `teleport` kernel
+    /// apply, in the same order.
     #[must_use]
     pub fn affine(&self) -> (Mat3, Vec3) {
         let m = Mat3::from_quat(self.rotation);
-        (m, self.pivot + self.translation - m * self.pivot)
+        let b = self.pivot + self.translation - m * self.pivot;
+        match self.stretch {
+            None => (m, b),
+            Some(s) => (
+                s.linear * m,
+                rotate(&s.linear, b) + s.center - rotate(&s.linear, s.center),
+            ),
+        }
     }
 
     /// Whether every part of the motion is finite (a carry that is not is never applied).
     #[must_use]
     pub fn is_finite(&self) -> bool {
-        self.rotation.is_finite() && self.pivot.is_finite() && self.translation.is_finite()
+        self.rotation.is_finite()
+            && self.pivot.is_finite()
+            && self.translation.is_finite()
+            && self
+                .stretch
+                .is_none_or(|s| s.center.is_finite() && s.linear.is_finite())
     }
 
     /// Where `p` goes.
@@ -82,6 +122,7 @@ impl Carry {
             rotation,
             pivot: from,
             translation,
+            stretch: None,
         };
         (carry.rotation != Quat::IDENTITY || carry.translation != Vec3::ZERO).then_some(carry)
     }
@@ -95,9 +136,9 @@ fn rotate(m: &Mat3, p: Vec3) -> Vec3 {
 }
 
 impl ClothState {
-    /// Moves every vertex rigidly by `carry` (positions and substep starts; velocities turn
-    /// with the rotation), leaving pin targets where they are: the motion a cloth does not
-    /// feel. A non-finite carry is ignored.
+    /// Moves every vertex by `carry` (positions and substep starts; velocities turn with the
+    /// rotation and stretch with the stretch), leaving pin targets where they are: the motion
+    /// a cloth does not feel. A non-finite carry is ignored.
     pub fn carry(&mut self, carry: &Carry) {
         if !carry.is_finite() {
             return;
@@ -164,6 +205,7 @@ mod tests {
             rotation: Quat::from_rotation_x(0.5),
             pivot: Vec3::new(0.5, 0.0, 0.0),
             translation: Vec3::new(0.0, 0.0, 3.0),
+            stretch: None,
         };
         let before = s.clone();
         s.carry(&carry);
@@ -185,5 +227,41 @@ mod tests {
             ..carry
         });
         assert_eq!(t.positions, before.positions);
+    }
+
+    #[test]
+    fn a_stretch_follows_the_rigid_motion_and_stretches_velocities() {
+        let carry = Carry {
+            rotation: Quat::from_rotation_y(0.3),
+            pivot: Vec3::new(1.0, 0.0, 0.0),
+            translation: Vec3::new(0.0, 2.0, 0.0),
+            stretch: None,
+        };
+        let stretch = Stretch {
+            center: Vec3::new(0.0, 1.0, 0.0),
+            linear: Mat3::from_diagonal(Vec3::new(2.0, 1.0, 0.5)),
+        };
+        let both = carry.then_stretch(stretch);
+        for p in [Vec3::ZERO, Vec3::new(0.3, -1.0, 2.0), Vec3::splat(5.0)] {
+            let rigid = carry.apply(p);
+            let expected = stretch.center + stretch.linear * (rigid - stretch.center);
+            assert!(both.apply(p).distance(expected) < 1e-5, "{p}");
+        }
+        let mut s = ClothState::new(&[Vec3::ZERO, Vec3::X], &[1.0; 2]).unwrap();
+        s.velocities[1] = Vec4::new(1.0, 0.0, 1.0, 0.0);
+        s.carry(&Carry::IDENTITY.then_stretch(stretch));
+        assert!(
+            s.velocities[1]
+                .truncate()
+                .distance(Vec3::new(2.0, 0.0, 0.5))
+                < 1e-6
+        );
+        // Not finite: nothing moves.
+        let before = s.positions.clone();
+        s.carry(&Carry::IDENTITY.then_stretch(Stretch {
+            linear: Mat3::from_diagonal(Vec3::new(f32::NAN, 1.0, 1.0)),
+            ..stretch
+        }));
+        assert_eq!(s.positions, before);
     }
 }

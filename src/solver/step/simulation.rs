@@ -365,6 +365,32 @@ impl Simulation {
         gone
     }
 
+    /// Takes `topology` as the cloth's rest shape, keeping its state: the same vertices and
+    /// triangles with other rest positions (its entity was scaled, see
+    /// [`Stretch`](crate::solver::Stretch)). The constraints are rebuilt from it (same part
+    /// count), tethers on the next step.
+    ///
+    /// # Errors
+    /// [`SolverError::State`] if `topology` has another vertex count (nothing changes).
+    pub fn set_rest_shape(&mut self, topology: Topology) -> Result<(), SolverError> {
+        if topology.vertex_count() != self.topology.vertex_count() {
+            return Err(SolverError::State(StateError::LengthMismatch {
+                positions: topology.vertex_count(),
+                masses: self.topology.vertex_count(),
+            }));
+        }
+        self.topology = topology;
+        self.scratch.implicit.invalidate();
+        self.batches = ConstraintBatches::new(
+            &self.topology,
+            self.params.solver,
+            self.batches.part_count(),
+        );
+        self.tethers = None;
+        self.sleep.wake();
+        Ok(())
+    }
+
     /// After a step: counts it as quiet or not and puts the cloth to sleep after enough quiet
     /// steps in a row.
     fn count_quiet_step(&mut self, env: &Environment<'_>, wind: Option<&WindField>, dt: f32) {
