@@ -1935,3 +1935,28 @@ fn a_gpu_cloth_grows_with_its_entitys_scale() {
     }
     common::check_scaled_cloths(&app, cloths);
 }
+
+/// Tethers added to a running GPU cloth settle it as on the CPU (`game`'s
+/// `tethers_added_to_a_running_cloth_do_not_fling_it`, the same bound): the new upload
+/// carries the settle. Before, its fastest vertex reached 28.5 m/s (2.7 while it fell; 3.7
+/// settled).
+#[test]
+fn tethers_added_to_a_running_gpu_cloth_do_not_fling_it() {
+    if common::gpu_or_skip("tethers_added_to_a_running_gpu_cloth_do_not_fling_it").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    let (before, after) = common::fastest_before_and_after(
+        &mut app,
+        Some(ClothBackend::Gpu),
+        ClothConfig::default(),
+        |e| {
+            e.insert(ClothTethers::default());
+        },
+    );
+    eprintln!("{after} m/s after, {before} m/s falling");
+    assert!(
+        after < 1.5 * before,
+        "{after} m/s after, {before} m/s falling"
+    );
+}

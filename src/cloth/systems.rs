@@ -419,7 +419,13 @@ pub(super) fn sync_cloths(
             }
             .and_then(|()| {
                 if features_due {
+                    let tightened =
+                        wanted.tethers.is_some() && wanted.tethers != cs.sim.features().tethers;
                     cs.sim.set_features(wanted)?;
+                    if tightened {
+                        // Tethers added (or changed) on a running cloth pull it back at once.
+                        cs.sim.settle();
+                    }
                     warn_self_collision(cs, sc, who);
                 }
                 Ok(())

@@ -251,3 +251,52 @@ pub fn check_scaled_cloths(app: &App, [plain, popped, grown]: [Entity; 3]) {
         );
     }
 }
+
+/// The fastest vertex of a 24² cloth hanging from two corners (with `config`, on `backend`,
+/// read back) while it falls for two seconds, and in the second after `change` was made to
+/// its entity.
+pub fn fastest_before_and_after(
+    app: &mut App,
+    backend: Option<ClothBackend>,
+    config: ClothConfig,
+    change: impl Fn(&mut EntityWorldMut),
+) -> (f32, f32) {
+    let fastest = |app: &App, e: Entity| -> f32 {
+        let s = app.world().get::<ClothSim>(e).unwrap().simulation().state();
+        (0..s.len())
+            .map(|i| s.velocity(i).length())
+            .fold(0.0, f32::max)
+    };
+    let grid = Grid::new(24, 24, 1.0, 1.0);
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    let mut e = app.world_mut().spawn((
+        Mesh3d(mesh),
+        Transform::from_xyz(0.0, 2.0, 0.0),
+        Cloth::default(),
+        config,
+        ClothReadback,
+        ClothPins::rest([grid.index(0, 0), grid.index(23, 0)]),
+    ));
+    if let Some(b) = backend {
+        e.insert(b);
+    }
+    let e = e.id();
+    run(app, 2);
+    let mut before: f32 = 0.0;
+    for _ in 0..118 {
+        run(app, 1);
+        before = before.max(fastest(app, e));
+    }
+    change(&mut app.world_mut().entity_mut(e));
+    let mut after: f32 = 0.0;
+    for _ in 0..60 {
+        run(app, 1);
+        after = after.max(fastest(app, e));
+    }
+    app.world_mut().despawn(e);
+    run(app, 2);
+    (before, after)
+}
