@@ -1324,9 +1324,10 @@ fn pins_changed_between_fixed_steps_hold_on_the_gpu() {
     assert!(off < 1e-4, "the third pin does not hold ({off} m off)");
 }
 
-/// A new `Cloth` (mass, welding: baked into the simulation) builds the cloth again from its
+/// A new welding (`Cloth::weld_tolerance`: other particles) builds the cloth again from its
 /// rest shape on the GPU as on the CPU; before, the GPU carried the old state over whenever
-/// the vertex count stayed the same, so the two backends parted.
+/// the vertex count stayed the same, so the two backends parted. A new mass goes on from
+/// where the cloth is, on both.
 #[test]
 fn a_rebuilt_gpu_cloth_starts_from_its_rest_shape_as_on_the_cpu() {
     if common::gpu_or_skip("a_rebuilt_gpu_cloth_starts_from_its_rest_shape_as_on_the_cpu").is_none()
@@ -1345,6 +1346,21 @@ fn a_rebuilt_gpu_cloth_starts_from_its_rest_shape_as_on_the_cpu() {
         let y = centre_y(&app, e);
         assert!(y < 0.7, "cloth {e} did not swing down ({y})");
         app.world_mut().get_mut::<Cloth>(e).unwrap().mass *= 2.0;
+    }
+    common::run(&mut app, 5);
+    for e in cloths {
+        let y = centre_y(&app, e);
+        assert!(y < 0.7, "cloth {e} started again with its new mass ({y})");
+        let s = app.world().get::<ClothSim>(e).unwrap().simulation().state();
+        let total: f32 = (0..s.len())
+            .map(|i| 1.0 / s.positions[i].w)
+            .filter(|m| m.is_finite())
+            .sum();
+        assert!(
+            total > 0.39,
+            "cloth {e}: {total} kg free, the new mass is 0.4 kg"
+        );
+        app.world_mut().get_mut::<Cloth>(e).unwrap().weld_tolerance *= 2.0;
     }
     // A few frames for the GPU's state to come back; the free edge falls about 2 cm meanwhile.
     common::run(&mut app, 5);

@@ -27,6 +27,7 @@ pub(super) struct Built {
     u16_indices: bool,
     /// The entity's pose the rest shape was placed by.
     shaped: Affine3A,
+    made_from: Cloth,
 }
 
 impl Built {
@@ -59,6 +60,7 @@ impl Built {
             shaped: self.shaped,
             reshapes: 0,
             reshape_error: None,
+            made_from: self.made_from,
         }
     }
 }
@@ -196,6 +198,7 @@ pub(super) fn build(
         mesh: cloth_mesh(mesh, &data),
         u16_indices: data.u16_indices,
         shaped: own.affine(),
+        made_from: *cloth,
     })
 }
 
@@ -256,6 +259,54 @@ pub(super) fn reshape(
         center: origin,
         linear,
     }))
+}
+
+/// Applies a change of [`Cloth`] that keeps the welding (the same particles) to the running
+/// cloth: its topology (bending model, bend rest) and masses (mass, distribution) made again
+/// from its mesh, its state (positions, velocities, pins) kept. Returns `false` for a change of
+/// welding, which needs the cloth built again from its mesh.
+///
+/// # Errors
+/// The topology or masses cannot be made; nothing changes.
+pub(super) fn remake(cs: &mut ClothSim, cloth: &Cloth) -> Result<bool, ClothError> {
+    let was = cs.made_from;
+    if cloth.weld_tolerance != was.weld_tolerance {
+        return Ok(false);
+    }
+    let same_model = (
+        cloth.mass,
+        cloth.mass_distribution,
+        cloth.bend_rest,
+        cloth.bending_model,
+    ) == (
+        was.mass,
+        was.mass_distribution,
+        was.bend_rest,
+        was.bending_model,
+    );
+    if !same_model {
+        let shaped = GlobalTransform::from(cs.shaped);
+        let weld = cs.binding.weld();
+        let rest: Vec<Vec3> = weld
+            .particles()
+            .iter()
+            .map(|&p| shaped.transform_point(cs.rest_local[p as usize]))
+            .collect();
+        let options = TopologyOptions {
+            bend_rest: cloth.bend_rest,
+            bending: cloth.bending_model,
+        };
+        let topology = cs
+            .binding
+            .topology(&rest, options)
+            .map_err(SolverError::from)?;
+        let masses = topology.masses(cloth.mass, cloth.mass_distribution);
+        cs.sim.set_topology_and_masses(topology, &masses)?;
+        cs.reshapes += 1;
+        cs.dirty = true;
+    }
+    cs.made_from = *cloth;
+    Ok(true)
 }
 
 /// The self-collision thickness a cloth uses: its own, or the mean rest edge length; at most

@@ -44,8 +44,11 @@ impl_reflect_opaque!((in bevy_cloth::solver) SolverParams(Debug, Clone, PartialE
 /// # bevy::ecs::system::assert_is_system(spawn);
 /// ```
 ///
-/// Changing a `Cloth` at runtime rebuilds the simulation, which starts again from the rest
-/// shape; [`ClothConfig`] and [`ClothPins`] change without a rebuild.
+/// Changing a `Cloth` at runtime applies to the running cloth: a new mass, mass distribution,
+/// bending model or bend rest remakes its masses and constraints and it goes on from where
+/// it is (a wet flag getting heavier); a new `weld_tolerance` (other particles) builds it again
+/// from its mesh, starting from the rest shape. [`ClothConfig`] and [`ClothPins`] change
+/// without a rebuild.
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component, Default, Clone, PartialEq)]
 #[require(

@@ -84,6 +84,9 @@ pub struct ClothSim {
     pub(super) reshapes: u64,
     /// A rest shape at the entity's new scale that could not be built (the last one runs on).
     pub(super) reshape_error: Option<ClothError>,
+    /// The [`Cloth`](super::Cloth) the simulation was made from (a change that keeps its
+    /// welding is applied in place, see `build::remake`).
+    pub(super) made_from: super::Cloth,
 }
 
 impl ClothSim {
@@ -285,9 +288,9 @@ impl ClothSim {
         self.carry.take()
     }
 
-    /// How many times the rest shape followed a change of the entity's scale: a backend
-    /// stepping elsewhere takes the new rest shape (and goes on from its own state) when this
-    /// changes.
+    /// How many times the rest shape followed a change of the entity's scale or the masses
+    /// and bending a change of [`Cloth`](super::Cloth): a backend stepping elsewhere takes
+    /// the new ones (and goes on from its own state) when this changes.
     #[must_use]
     pub fn reshape_count(&self) -> u64 {
         self.reshapes

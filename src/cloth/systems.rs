@@ -6,7 +6,7 @@ use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::tasks::ComputeTaskPool;
 
-use super::build::{build, features, reshape, warn_self_collision};
+use super::build::{build, features, remake, reshape, warn_self_collision};
 use super::error::report;
 use super::inertia::carry_unfelt_motion;
 use super::pins::{attach, follow_anchors, pin_list, repin};
@@ -217,9 +217,9 @@ pub(super) fn retry_cloths(
     for (entity, name, cloth, mesh, mut sim) in &mut changed {
         // Another mesh put in: build the cloth from it.
         let swapped = mesh.is_some_and(|m| m.is_changed() && m.0 != sim.mesh);
-        // Mass, mass distribution, bend rest and welding are baked into the simulation:
-        // rebuild it (the cloth starts again from its rest shape). A value out of its limits
-        // is refused (once) and the cloth built from the last valid one runs on.
+        // Mass, mass distribution, bend rest and welding are baked into the simulation: made
+        // again (in place where the welding stays, `remake`). A value out of its limits is
+        // refused (once) and the cloth built from the last valid one runs on.
         let rebuild = cloth.is_changed() && {
             let checked = cloth.validate();
             let ok = checked.is_ok();
@@ -232,7 +232,10 @@ pub(super) fn retry_cloths(
             );
             ok
         };
-        if swapped || rebuild {
+        // A change that keeps the welding goes on from the cloth's state; one that does not
+        // (or a remade topology that fails) builds the cloth again from its mesh.
+        let remade = rebuild && !swapped && matches!(remake(&mut sim, &cloth), Ok(true));
+        if swapped || (rebuild && !remade) {
             commands.entity(entity).remove::<ClothSim>();
         }
     }

@@ -228,7 +228,8 @@ pub const CONFIG: &[Knob<ClothConfig>] = &[
     },
 ];
 
-/// The knobs of [`Cloth`]: changing any of them rebuilds the cloth from its rest shape.
+/// The knobs of [`Cloth`]: changing them remakes the cloth where it is (the weld tolerance
+/// builds it again from its rest shape).
 pub const CLOTH: &[Knob<Cloth>] = &[
     Knob {
         label: "mass",

@@ -615,12 +615,15 @@ fn pins_section(ui: &mut egui::Ui, world: &mut World, e: Entity) {
 }
 
 fn rebuild_section(ui: &mut egui::Ui, world: &mut World, e: Entity) {
-    egui::CollapsingHeader::new("material (rebuilds)")
+    egui::CollapsingHeader::new("material")
         .id_salt(("rebuild", e))
         .show(ui, |ui| {
             ui.label(
-                egui::RichText::new("changing these restarts the cloth from its rest shape")
-                    .small(),
+                egui::RichText::new(
+                    "changing these remakes the cloth where it is; the weld tolerance \
+                     restarts it from its rest shape",
+                )
+                .small(),
             );
             knob_card(ui, world, e, knobs::CLOTH, true);
             let Some(mut cloth) = world.get::<Cloth>(e).copied() else {

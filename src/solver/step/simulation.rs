@@ -365,6 +365,28 @@ impl Simulation {
         gone
     }
 
+    /// Takes `topology` and `masses` (one per vertex) as the cloth's, keeping its state
+    /// (positions, velocities, pins): a change of mass, bending model or bend rest made to a
+    /// running cloth. The constraints are rebuilt (same part count), tethers on the next step.
+    ///
+    /// # Errors
+    /// [`SolverError::State`] if `topology` or `masses` have another vertex count or a mass is
+    /// not valid (nothing changes).
+    pub fn set_topology_and_masses(
+        &mut self,
+        topology: Topology,
+        masses: &[f32],
+    ) -> Result<(), SolverError> {
+        if topology.vertex_count() != self.topology.vertex_count() {
+            return Err(SolverError::State(StateError::LengthMismatch {
+                positions: topology.vertex_count(),
+                masses: self.topology.vertex_count(),
+            }));
+        }
+        self.state.set_masses(masses)?;
+        self.set_rest_shape(topology)
+    }
+
     /// Takes `topology` as the cloth's rest shape, keeping its state: the same vertices and
     /// triangles with other rest positions (its entity was scaled, see
     /// [`Stretch`](crate::solver::Stretch)). The constraints are rebuilt from it (same part

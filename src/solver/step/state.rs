@@ -244,6 +244,34 @@ impl ClothState {
         Ok(())
     }
 
+    /// Gives the vertices new masses (one each), keeping positions, velocities and pins (a
+    /// pinned vertex takes its mass when it is let go of).
+    ///
+    /// # Errors
+    /// [`StateError::LengthMismatch`] or [`StateError::BadMass`], as [`Self::new`]; nothing
+    /// changes.
+    pub fn set_masses(&mut self, masses: &[f32]) -> Result<(), StateError> {
+        if masses.len() != self.len() {
+            return Err(StateError::LengthMismatch {
+                positions: self.len(),
+                masses: masses.len(),
+            });
+        }
+        if let Some((vertex, &mass)) = masses.iter().enumerate().find(|(_, m)| {
+            !(m.is_finite() && **m > 0.0 && (1.0 / **m).is_finite() && **m <= MAX_VERTEX_MASS)
+        }) {
+            return Err(StateError::BadMass { vertex, mass });
+        }
+        for (i, &m) in masses.iter().enumerate() {
+            self.inv_mass[i] = 1.0 / m;
+            if self.positions[i].w > 0.0 {
+                self.positions[i].w = 1.0 / m;
+                self.prev[i].w = 1.0 / m;
+            }
+        }
+        Ok(())
+    }
+
     /// Moves the targets of the existing pins, in the order [`Self::pins`] lists them.
     /// Targets that are not finite or beyond [`MAX_COORDINATE`] are ignored (the pin keeps
     /// its previous target).
