@@ -1976,3 +1976,24 @@ fn tethers_added_to_a_running_gpu_cloth_do_not_fling_it() {
         "{after} m/s after, {before} m/s falling"
     );
 }
+
+/// A new fixed timestep settles a GPU cloth as on the CPU (`game`'s
+/// `a_new_fixed_timestep_settles_running_cloths`, the same bound): the step is part of the
+/// GPU cloth's settings, so the change makes an upload that carries the settle.
+#[test]
+fn a_new_fixed_timestep_settles_running_gpu_cloths() {
+    if common::gpu_or_skip("a_new_fixed_timestep_settles_running_gpu_cloths").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    let (before, after) = common::fastest_before_and_after(
+        &mut app,
+        Some(ClothBackend::Gpu),
+        ClothConfig::default(),
+        |e| {
+            e.world_scope(|w| w.resource_mut::<Time<Fixed>>().set_timestep_hz(240.0));
+        },
+    );
+    eprintln!("{after} m/s after, {before} m/s falling");
+    assert!(after < before, "{after} m/s after, {before} m/s falling");
+}

@@ -354,7 +354,9 @@ pub(super) fn note_rejection(
 }
 
 /// Applies changed configs, pins and features, and moves pin targets to their anchors
-/// (moving the whole cloth along when an anchor teleports).
+/// (moving the whole cloth along when an anchor teleports). A change of the fixed timestep
+/// settles every running cloth, as a change of substeps does (its steps get stiffer or
+/// softer at once).
 #[expect(clippy::type_complexity, reason = "a query, read once")]
 pub(super) fn sync_cloths(
     mut commands: Commands,
@@ -371,12 +373,20 @@ pub(super) fn sync_cloths(
         Without<ClothInvalid>,
     >,
     poses: FixedPoses,
+    fixed: Option<Res<Time<Fixed>>>,
+    mut timestep: Local<Option<Duration>>,
 ) {
+    let now = fixed.map(|f| f.timestep());
+    let retimed = timestep.is_some() && now != *timestep;
+    *timestep = now;
     for ((entity, name), cloth, mut sim, config, pins, (sc, tethers, tearing), inertia) in
         &mut cloths
     {
         let who = EntityName::new(entity, name);
         let cs = &mut *sim;
+        if retimed && cs.steps > 0 {
+            cs.sim.settle();
+        }
         let own = poses.get(entity).unwrap_or_default();
         carry_unfelt_motion(&mut commands, who, cs, cloth, inertia, &poses);
         // The entity's scale changed: the rest shape and the state follow it.

@@ -239,12 +239,13 @@ pub(crate) fn vertex_layout(mesh: &Mesh) -> Result<VertexLayout, String> {
 }
 
 /// A short fingerprint of what the GPU buffers were built from: settings, features, pinned
-/// vertices, the rest shape's scale.
-fn settings_key(cloth: &ClothSim) -> String {
+/// vertices, the rest shape's scale and masses, the step (a new one settles the cloth, which
+/// the GPU takes over with an upload).
+fn settings_key(cloth: &ClothSim, dt: f32) -> String {
     let sim = cloth.simulation();
     let pins = pinned_vertices(sim);
     format!(
-        "{:?}{:?}{pins:?}{} {}",
+        "{:?}{:?}{pins:?}{} {} {dt}",
         sim.params(),
         sim.features(),
         sim.topology().edges().len(),
@@ -296,7 +297,7 @@ pub(crate) fn choose_backends(
                 .map_or(Ok(()), Err)
                 .and_then(|()| {
                     // The model check (O(n) for stiff bending) once per change of settings.
-                    let key = settings_key(&cloth);
+                    let key = settings_key(&cloth, dt);
                     match checked.get(&entity) {
                         Some((k, verdict)) if *k == key => verdict.clone(),
                         _ => {
@@ -317,7 +318,7 @@ pub(crate) fn choose_backends(
         });
         match (layout, on_gpu) {
             (Ok(layout), Some(mut g)) => {
-                let key = settings_key(&cloth);
+                let key = settings_key(&cloth, dt);
                 // A cloth built again (another mesh, new `Cloth` settings) starts from its new
                 // simulation's state, as on the CPU.
                 let rebuilt = cloth.is_added();
@@ -361,7 +362,7 @@ pub(crate) fn choose_backends(
                         upload: first,
                         edits: cloth.edit_count(),
                         restart: false,
-                        key: settings_key(&cloth),
+                        key: settings_key(&cloth, dt),
                         pending: Vec::new(),
                         stale_targets: 0,
                         first_step: 0,
