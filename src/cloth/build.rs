@@ -202,6 +202,17 @@ pub(super) fn build(
     })
 }
 
+/// The rest position of each of the cloth's mesh vertices placed by `at` (as `build` places
+/// them).
+fn rest_placed(cs: &ClothSim, at: &GlobalTransform) -> Vec<Vec3> {
+    cs.binding
+        .weld()
+        .particles()
+        .iter()
+        .map(|&p| at.transform_point(cs.rest_local[p as usize]))
+        .collect()
+}
+
 /// Relative change of an entity's scale (along any of its axes) from the one its cloth's rest
 /// shape was placed at past which the rest shape follows it.
 const RESHAPE_TOLERANCE: f32 = 1e-4;
@@ -233,12 +244,7 @@ pub(super) fn reshape(
     if !changed {
         return Ok(None);
     }
-    let weld = cs.binding.weld();
-    let rest: Vec<Vec3> = weld
-        .particles()
-        .iter()
-        .map(|&p| own.transform_point(cs.rest_local[p as usize]))
-        .collect();
+    let rest = rest_placed(cs, own);
     let options = cs.sim.topology().options();
     let topology = cs
         .binding
@@ -285,13 +291,7 @@ pub(super) fn remake(cs: &mut ClothSim, cloth: &Cloth) -> Result<bool, ClothErro
         was.bending_model,
     );
     if !same_model {
-        let shaped = GlobalTransform::from(cs.shaped);
-        let weld = cs.binding.weld();
-        let rest: Vec<Vec3> = weld
-            .particles()
-            .iter()
-            .map(|&p| shaped.transform_point(cs.rest_local[p as usize]))
-            .collect();
+        let rest = rest_placed(cs, &GlobalTransform::from(cs.shaped));
         let options = TopologyOptions {
             bend_rest: cloth.bend_rest,
             bending: cloth.bending_model,
