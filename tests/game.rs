@@ -2538,6 +2538,57 @@ fn a_cloth_grows_with_its_entitys_scale() {
     common::check_scaled_cloths(&app, cloths);
 }
 
+/// A torn cloth keeps its tears through a change of mass, of its entity's scale and of its
+/// bending model (each remakes its constraints where it is): its edges and triangles stay
+/// the torn ones. Before, the remade topology was the whole mesh's, on a state torn apart,
+/// and the next step tore it to shreds (302 edges to 23).
+#[test]
+fn a_torn_cloth_keeps_its_tears_through_a_change_of_mass_scale_and_bending() {
+    let mut app = app();
+    let mesh = add_mesh(&mut app, grid_mesh(&GRID));
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Cloth::default(),
+            ClothTearing { threshold: 1.4 },
+            ClothPins::rest((0..16).map(|i| GRID.index(i, 0)))
+                .with(
+                    GRID.index(0, 15),
+                    PinAnchor::World(Vec3::new(-1.3, -0.5, -0.5)),
+                )
+                .with(
+                    GRID.index(15, 15),
+                    PinAnchor::World(Vec3::new(1.3, -0.5, -0.5)),
+                ),
+        ))
+        .id();
+    run(&mut app, 90);
+    let shape = |app: &App| {
+        let t = sim(app, e).simulation().topology();
+        (t.edges().len(), t.triangles().len())
+    };
+    let torn = shape(&app);
+    let whole = GRID
+        .topology(bevy_cloth::solver::TopologyOptions::default())
+        .unwrap();
+    assert!(torn.0 < whole.edges().len(), "it did not tear");
+    let changes: [fn(&mut EntityWorldMut); 3] = [
+        |e| e.get_mut::<Cloth>().unwrap().mass = 0.5,
+        |e| e.get_mut::<Transform>().unwrap().scale = Vec3::splat(1.2),
+        |e| {
+            e.get_mut::<Cloth>().unwrap().bending_model =
+                bevy_cloth::solver::BendingModel::Dihedral;
+        },
+    ];
+    for change in changes {
+        change(&mut app.world_mut().entity_mut(e));
+        run(&mut app, 1);
+        assert_eq!(shape(&app), torn);
+    }
+    assert!(sim(&app, e).simulation().state().is_finite());
+}
+
 /// A mesh `ClothCollider` on a cloth's own entity (as a game adding a collider to every mesh
 /// of a level would put one there) is ignored: that mesh is the cloth itself. Before, it was
 /// baked again every frame (35 ms a frame for a 16 × 16 cloth) and held the cloth up against

@@ -347,7 +347,9 @@ impl MeshBinding {
     }
 
     /// The particles' topology, with the rest shape given per *mesh vertex* (e.g. the mesh
-    /// placed in the world): each particle takes its first copy's position.
+    /// placed in the world): each particle takes its first copy's position. Made of the
+    /// triangles drawn now: after a tear ([`Self::retain`]), the torn topology at this rest
+    /// shape.
     ///
     /// # Errors
     /// [`TopologyError`] as [`Topology::from_triangles`].
@@ -364,13 +366,14 @@ impl MeshBinding {
             self.weld.vertex_count(),
             "one rest position per mesh vertex"
         );
-        let flat: Vec<u32> = self.triangles.iter().flatten().copied().collect();
+        let triangle = |k: u32| self.triangles[self.drawn[k as usize] as usize];
+        let flat: Vec<u32> = (0..self.drawn.len() as u32).flat_map(triangle).collect();
         let (indices, source) = self.weld.particle_triangles(&flat);
         let particle_uvs = self.uvs.as_ref().map(|uv| self.weld.gather(uv));
         let corner_uvs: Option<Vec<[Vec2; 3]>> = self.uvs.as_ref().map(|uv| {
             source
                 .iter()
-                .map(|&t| self.triangles[t as usize].map(|v| uv[v as usize]))
+                .map(|&t| triangle(t).map(|v| uv[v as usize]))
                 .collect()
         });
         Topology::from_triangles_with_corner_uvs(
