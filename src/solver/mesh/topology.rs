@@ -231,6 +231,8 @@ pub struct Topology {
     mean_edge: f32,
     /// The 90th over the 10th percentile of the edges' rest lengths.
     edge_spread: f32,
+    /// The 10th percentile of the edges' rest lengths.
+    short_edge: f32,
     /// Per vertex, its self-collision thickness over the cloth's; empty on even edges.
     self_collision_scales: Vec<f32>,
     skipped_triangles: usize,
@@ -432,7 +434,7 @@ impl Topology {
         }
 
         let mean_edge = edges.iter().map(|e| e.rest).sum::<f32>() / edges.len().max(1) as f32;
-        let edge_spread = edge_spread(&edges);
+        let (edge_spread, short_edge) = edge_spread(&edges);
         let self_collision_scales = if edge_spread > EVEN_EDGE_SPREAD {
             edge_scales(&positions, &triangles)
         } else {
@@ -447,6 +449,7 @@ impl Topology {
             bends,
             mean_edge,
             edge_spread,
+            short_edge,
             self_collision_scales,
             skipped_triangles: 0,
             options,
@@ -539,6 +542,13 @@ impl Topology {
     #[must_use]
     pub fn rest_edge_spread(&self) -> f32 {
         self.edge_spread
+    }
+
+    /// The 10th percentile of the edges' rest lengths (0 without edges): the mesh's short
+    /// spacing.
+    #[must_use]
+    pub fn short_rest_edge(&self) -> f32 {
+        self.short_edge
     }
 
     /// Each vertex's self-collision thickness over the cloth's, on a mesh whose edges are more
@@ -652,11 +662,12 @@ fn edge_scales(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<f32> {
         .collect()
 }
 
-/// The 90th over the 10th percentile of `edges`' rest lengths; 1 without edges or with a
-/// zero 10th percentile's edge (degenerate edges are the solver's concern, not this ratio's).
-fn edge_spread(edges: &[Edge]) -> f32 {
+/// The 90th over the 10th percentile of `edges`' rest lengths (1 without edges or with a
+/// zero 10th percentile's edge: degenerate edges are the solver's concern, not this ratio's),
+/// and the 10th percentile (0 without edges).
+fn edge_spread(edges: &[Edge]) -> (f32, f32) {
     if edges.is_empty() {
-        return 1.0;
+        return (1.0, 0.0);
     }
     let mut lengths: Vec<f32> = edges.iter().map(|e| e.rest).collect();
     let last = lengths.len() - 1;
@@ -665,9 +676,9 @@ fn edge_spread(edges: &[Edge]) -> f32 {
     let p90 = *lengths.select_nth_unstable_by(hi, f32::total_cmp).1;
     let spread = p90 / p10;
     if spread.is_finite() && spread >= 1.0 {
-        spread
+        (spread, p10)
     } else {
-        1.0
+        (1.0, p10)
     }
 }
 
