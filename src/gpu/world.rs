@@ -9,8 +9,10 @@
 //! cloth has one); `sc_collide` with self-collision; `finish_substep`
 //! (tethers, the self-collision correction, colliders) when any of those acts; per step
 //! `step_end` (velocities, the NaN guard), `settle_begin` (after `step_begin`), `settle_end`
-//! and `settle_update` in the steps after a cloth's solver, substeps or iterations changed
-//! (up to [`MAX_SETTLE_STEPS`](crate::solver::MAX_SETTLE_STEPS)), and `tear_check` and `tear_release` with tearing
+//! and `settle_update` in the steps after a world is built with a settling cloth (its solver,
+//! substeps, iterations, tethers or the fixed timestep changed; up to
+//! [`MAX_SETTLE_STEPS`](crate::solver::MAX_SETTLE_STEPS)), and `tear_check` and
+//! `tear_release` with tearing
 //! (an edge past the threshold and the edges its tear leaves without a triangle hold nothing
 //! from the next step on, as on the CPU, until the host tears the topology). That is at most 6
 //! dispatches a substep however many colours, parts or cloths there are
@@ -1271,11 +1273,11 @@ impl GpuWorld {
     /// where the GPU cloth is. Call it before [`Self::prepare`]; the carry runs first in
     /// [`Self::record`].
     ///
-    /// # Panics
-    /// If the two cloths differ in size.
-    ///
     /// With `settle` (the same upload in a world rebuilt around it), a settle of a settings
     /// change in progress goes on too: its steps left, last strain and the speeds it keeps.
+    ///
+    /// # Panics
+    /// If the two cloths differ in size.
     pub fn record_carry(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
