@@ -1105,61 +1105,14 @@ fn a_new_fixed_timestep_settles_running_cloths() {
 
 #[test]
 fn switching_solver_and_substeps_does_not_fling_the_cloth() {
-    let lab = ClothConfig {
-        solver: Solver::LAB,
-        substeps: 1,
-        iterations: 32,
-        ..default()
-    };
-    let fine = ClothConfig {
-        substeps: 20,
-        ..default()
-    };
-    let coarse = ClothConfig {
-        substeps: 2,
-        ..default()
-    };
-    for (from, to) in [
-        (lab, ClothConfig::default()),
-        (ClothConfig::default(), lab),
-        (fine, coarse),
-        (coarse, fine),
-    ] {
-        let mut app = app();
-        let grid = Grid::new(24, 24, 1.0, 1.0);
-        let mesh = add_mesh(&mut app, grid_mesh(&grid));
-        let e = app
-            .world_mut()
-            .spawn((
-                Mesh3d(mesh),
-                Transform::from_xyz(0.0, 2.0, 0.0),
-                Cloth::default(),
-                from,
-                ClothPins::rest([grid.index(0, 0), grid.index(23, 0)]),
-            ))
-            .id();
-        run(&mut app, 2);
-        // What this cloth does anyway: its fastest vertex while falling from flat.
-        let mut natural: f32 = 0.0;
-        for _ in 0..118 {
-            run(&mut app, 1);
-            natural = natural.max(max_speed(&app, e));
-        }
-        *app.world_mut().get_mut::<ClothConfig>(e).unwrap() = to;
-        let mut after: f32 = 0.0;
-        for _ in 0..60 {
-            run(&mut app, 1);
-            after = after.max(max_speed(&app, e));
-        }
+    let mut app = app();
+    for (from, to, what) in common::solver_switches() {
+        let (natural, after) = common::fastest_before_and_after(&mut app, None, from, |e| {
+            e.insert(to);
+        });
         assert!(
             after < natural.max(3.0),
-            "{} {}×{} → {} {}×{}: {after} m/s after, {natural} m/s falling",
-            from.solver.name(),
-            from.substeps,
-            from.iterations,
-            to.solver.name(),
-            to.substeps,
-            to.iterations
+            "{what}: {after} m/s after, {natural} m/s falling"
         );
     }
 }
@@ -2302,16 +2255,7 @@ fn a_character_cloned_with_its_children_wears_its_own_cape() {
     assert!(anchors_of(&app, cape).iter().all(|&a| a == bone));
     // The twin walks away; its cape goes with it, the original's stays.
     common::walk_away(&mut app, twin);
-    let (a, b) = (
-        common::mean_of(&app, cape, &top),
-        common::mean_of(&app, twin_cape, &top),
-    );
-    // The top edges are pinned: on their anchors up to the rounding of a pin target and of
-    // the mean of 8 positions near 1 m (f32 steps of 1.2e-7 m; 1e-5 m is about eighty).
-    assert!(
-        a.x.abs() < 1e-5 && (b.x - 1.18).abs() < 1e-5,
-        "original's top edge at {a}, the twin's at {b} (its bone at x = 1.18)"
-    );
+    common::assert_capes_apart(&app, cape, twin_cape, &top);
 }
 
 #[test]
@@ -2354,16 +2298,7 @@ fn a_scene_spawned_twice_pins_each_cape_to_its_own_bone() {
         );
     }
     common::walk_away(&mut app, instances[1][&root]);
-    let (a, b) = (
-        common::mean_of(&app, instances[0][&cape], &top),
-        common::mean_of(&app, instances[1][&cape], &top),
-    );
-    // The top edges are pinned: on their anchors up to the rounding of a pin target and of
-    // the mean of 8 positions near 1 m (f32 steps of 1.2e-7 m; 1e-5 m is about eighty).
-    assert!(
-        a.x.abs() < 1e-5 && (b.x - 1.18).abs() < 1e-5,
-        "first instance's top edge at {a}, the second's at {b} (its bone at x = 1.18)"
-    );
+    common::assert_capes_apart(&app, instances[0][&cape], instances[1][&cape], &top);
 }
 
 /// A curtain hanging in the plane x = 0 with a sphere 0.9 m to its left, after two seconds.

@@ -1736,16 +1736,7 @@ fn a_gpu_character_cloned_with_its_children_wears_its_own_cape() {
     // Read back a few frames late: let the last positions arrive.
     common::run(&mut app, 10);
     assert!(in_use(&app, twin_cape).gpu, "{:?}", in_use(&app, twin_cape));
-    let (a, b) = (
-        common::mean_of(&app, cape, &top),
-        common::mean_of(&app, twin_cape, &top),
-    );
-    // The top edges are pinned: on their anchors up to the rounding of a pin target and of
-    // the mean of 8 positions near 1 m (f32 steps of 1.2e-7 m; 1e-5 m is about eighty).
-    assert!(
-        a.x.abs() < 1e-5 && (b.x - 1.18).abs() < 1e-5,
-        "original's top edge at {a}, the twin's at {b} (its bone at x = 1.18)"
-    );
+    common::assert_capes_apart(&app, cape, twin_cape, &top);
     // Both cloths hang below their edges: the twin runs its own GPU cloth.
     for e in [cape, twin_cape] {
         let s = app.world().get::<ClothSim>(e).unwrap().simulation().state();
@@ -1862,76 +1853,16 @@ fn switching_solver_and_substeps_on_the_gpu_does_not_fling_the_cloth() {
     {
         return;
     }
-    use bevy_cloth::solver::Solver;
-    let max_speed = |app: &App, e: Entity| -> f32 {
-        let s = app.world().get::<ClothSim>(e).unwrap().simulation().state();
-        (0..s.len())
-            .map(|i| s.velocity(i).length())
-            .fold(0.0, f32::max)
-    };
-    let lab = ClothConfig {
-        solver: Solver::LAB,
-        substeps: 1,
-        iterations: 32,
-        ..default()
-    };
-    let fine = ClothConfig {
-        substeps: 20,
-        ..default()
-    };
-    let coarse = ClothConfig {
-        substeps: 2,
-        ..default()
-    };
     let mut app = render_app();
-    for (from, to) in [
-        (lab, ClothConfig::default()),
-        (ClothConfig::default(), lab),
-        (fine, coarse),
-        (coarse, fine),
-    ] {
-        let grid = Grid::new(24, 24, 1.0, 1.0);
-        let mesh = app
-            .world_mut()
-            .resource_mut::<Assets<Mesh>>()
-            .add(grid_mesh(&grid));
-        let e = app
-            .world_mut()
-            .spawn((
-                Mesh3d(mesh),
-                Transform::from_xyz(0.0, 2.0, 0.0),
-                Cloth::default(),
-                from,
-                ClothBackend::Gpu,
-                ClothReadback,
-                ClothPins::rest([grid.index(0, 0), grid.index(23, 0)]),
-            ))
-            .id();
-        common::run(&mut app, 2);
-        let mut natural: f32 = 0.0;
-        for _ in 0..118 {
-            common::run(&mut app, 1);
-            natural = natural.max(max_speed(&app, e));
-        }
-        *app.world_mut().get_mut::<ClothConfig>(e).unwrap() = to;
-        let mut after: f32 = 0.0;
-        for _ in 0..60 {
-            common::run(&mut app, 1);
-            after = after.max(max_speed(&app, e));
-        }
-        assert!(in_use(&app, e).gpu, "it stays on the GPU");
+    for (from, to, what) in common::solver_switches() {
+        let (natural, after) =
+            common::fastest_before_and_after(&mut app, Some(ClothBackend::Gpu), from, |e| {
+                e.insert(to);
+            });
         assert!(
             after < natural.max(3.0),
-            "{} {}×{} → {} {}×{}: {after} m/s after, {natural} m/s falling",
-            from.solver.name(),
-            from.substeps,
-            from.iterations,
-            to.solver.name(),
-            to.substeps,
-            to.iterations
+            "{what}: {after} m/s after, {natural} m/s falling"
         );
-        app.world_mut().despawn(e);
-        common::run(&mut app, 2);
     }
 }
 

@@ -300,3 +300,43 @@ pub fn fastest_before_and_after(
     run(app, 2);
     (before, after)
 }
+
+/// The four switches of solver and substeps the settle tests make — lab → XPBD and back,
+/// 20 → 2 substeps and back: (from, to, in words).
+pub fn solver_switches() -> [(ClothConfig, ClothConfig, String); 4] {
+    use bevy_cloth::solver::Solver;
+    let lab = ClothConfig {
+        solver: Solver::LAB,
+        substeps: 1,
+        iterations: 32,
+        ..default()
+    };
+    let fine = ClothConfig {
+        substeps: 20,
+        ..default()
+    };
+    let coarse = ClothConfig {
+        substeps: 2,
+        ..default()
+    };
+    let name = |c: &ClothConfig| format!("{} {}×{}", c.solver.name(), c.substeps, c.iterations);
+    [
+        (lab, ClothConfig::default()),
+        (ClothConfig::default(), lab),
+        (fine, coarse),
+        (coarse, fine),
+    ]
+    .map(|(from, to)| (from, to, format!("{} → {}", name(&from), name(&to))))
+}
+
+/// Checks two caped characters after [`walk_away`] moved the second: the first cape's top
+/// edge still at x = 0, the second's at its bone's 1.18 m. The top edges are pinned: on
+/// their anchors up to the rounding of a pin target and of the mean of 8 positions near 1 m
+/// (f32 steps of 1.2e-7 m; 1e-5 m is about eighty).
+pub fn assert_capes_apart(app: &App, stayed: Entity, walked: Entity, top: &[u32]) {
+    let (a, b) = (mean_of(app, stayed, top), mean_of(app, walked, top));
+    assert!(
+        a.x.abs() < 1e-5 && (b.x - 1.18).abs() < 1e-5,
+        "the first cape's top edge at {a}, the second's at {b} (its bone at x = 1.18)"
+    );
+}

@@ -354,7 +354,14 @@ impl Simulation {
             return Vec::new();
         }
         let gone = vanished_edges(self.topology.edges(), torn.edges());
-        self.topology = torn;
+        self.take_topology(torn);
+        gone
+    }
+
+    /// Makes `topology` (the same vertices) the cloth's: its constraints rebuilt with the same
+    /// part count, its implicit bending's factorisation and its tethers made again.
+    fn take_topology(&mut self, topology: Topology) {
+        self.topology = topology;
         self.scratch.implicit.invalidate();
         self.batches = ConstraintBatches::new(
             &self.topology,
@@ -362,7 +369,18 @@ impl Simulation {
             self.batches.part_count(),
         );
         self.tethers = None;
-        gone
+    }
+
+    /// `Ok` when `topology` has this cloth's vertex count.
+    fn same_vertices(&self, topology: &Topology) -> Result<(), SolverError> {
+        if topology.vertex_count() == self.topology.vertex_count() {
+            Ok(())
+        } else {
+            Err(SolverError::State(StateError::LengthMismatch {
+                positions: topology.vertex_count(),
+                masses: self.topology.vertex_count(),
+            }))
+        }
     }
 
     /// Takes `topology` and `masses` (one per vertex) as the cloth's, keeping its state
@@ -377,12 +395,7 @@ impl Simulation {
         topology: Topology,
         masses: &[f32],
     ) -> Result<(), SolverError> {
-        if topology.vertex_count() != self.topology.vertex_count() {
-            return Err(SolverError::State(StateError::LengthMismatch {
-                positions: topology.vertex_count(),
-                masses: self.topology.vertex_count(),
-            }));
-        }
+        self.same_vertices(&topology)?;
         self.state.set_masses(masses)?;
         self.set_rest_shape(topology)
     }
@@ -395,20 +408,8 @@ impl Simulation {
     /// # Errors
     /// [`SolverError::State`] if `topology` has another vertex count (nothing changes).
     pub fn set_rest_shape(&mut self, topology: Topology) -> Result<(), SolverError> {
-        if topology.vertex_count() != self.topology.vertex_count() {
-            return Err(SolverError::State(StateError::LengthMismatch {
-                positions: topology.vertex_count(),
-                masses: self.topology.vertex_count(),
-            }));
-        }
-        self.topology = topology;
-        self.scratch.implicit.invalidate();
-        self.batches = ConstraintBatches::new(
-            &self.topology,
-            self.params.solver,
-            self.batches.part_count(),
-        );
-        self.tethers = None;
+        self.same_vertices(&topology)?;
+        self.take_topology(topology);
         self.sleep.wake();
         Ok(())
     }
