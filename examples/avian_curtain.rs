@@ -7,6 +7,11 @@
 //! cargo run --release --features avian --example avian_curtain
 //! cargo run --release --features avian --example avian_curtain -- --headless --frames 300
 //! ```
+//! Avian draws the balls interpolated between its fixed steps
+//! (`PhysicsInterpolationPlugin::interpolate_all`) and the curtain is drawn the same way
+//! (`ClothSmoothing::Interpolate`), so at a frame rate above the 60 Hz step a ball and the
+//! bulge it makes are drawn at the same moment.
+//!
 //! The JSON line adds `speed_loss` (mean fraction of speed the balls lost passing the curtain,
 //! gravity off for the balls so only the cloth slows them) and `bulge` (largest distance a
 //! curtain vertex was pushed from its rest plane).
@@ -41,6 +46,13 @@ fn throw(
     }
 }
 
+/// Draws every cloth between fixed steps as avian draws the balls.
+fn smooth_cloths(mut commands: Commands, cloths: Query<Entity, With<Cloth>>) {
+    for e in &cloths {
+        commands.entity(e).insert(ClothSmoothing::Interpolate);
+    }
+}
+
 fn measure(
     mut commands: Commands,
     time: Res<Time>,
@@ -57,7 +69,11 @@ fn main() {
     let mut app = curtain::app(&args, "bevy_cloth: avian curtain");
     // Avian steps in FixedPostUpdate (its default), one step per fixed step, like the cloth,
     // which the bridge runs right after it.
-    app.add_plugins((PhysicsPlugins::default(), ClothAvianPlugin::default()))
-        .add_systems(FixedUpdate, (throw, measure));
+    app.add_plugins((
+        PhysicsPlugins::default().set(PhysicsInterpolationPlugin::interpolate_all()),
+        ClothAvianPlugin::default(),
+    ))
+    .add_systems(PostStartup, smooth_cloths)
+    .add_systems(FixedUpdate, (throw, measure));
     support::run(app, &args, |world| curtain::report(world, "avian_curtain"));
 }

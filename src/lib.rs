@@ -121,7 +121,7 @@ pub mod prelude {
     pub use crate::cloth::{
         Cloth, ClothBackstop, ClothConfig, ClothError, ClothFailed, ClothInertia, ClothInvalid,
         ClothPick, ClothPin, ClothPins, ClothPlugin, ClothSelfCollision, ClothSim, ClothSkinning,
-        ClothTearing, ClothTethers, ClothTorn, MaxDistance, PinAnchor,
+        ClothSmoothing, ClothTearing, ClothTethers, ClothTorn, MaxDistance, PinAnchor,
     };
     #[cfg(feature = "avian")]
     pub use crate::collider::avian::ClothAvianPlugin;

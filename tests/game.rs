@@ -2635,3 +2635,41 @@ fn a_scene_of_a_running_cloth_spawns_it_from_the_users_mesh() {
         "the two cloths write one mesh"
     );
 }
+
+/// A cape drawn with `ClothSmoothing` hangs where its character is drawn between fixed steps:
+/// at 144 frames a second over a 60 Hz step, a character walking at 3 m/s in `FixedUpdate`,
+/// drawn interpolated (or extrapolated) as interpolation plugins draw it. The pinned corner is
+/// drawn where the character's pose puts it to within f32 rounding (the pin's velocity is a
+/// difference of positions over the substep, 2 ε |x| / h, times a shift of at most a step);
+/// drawn as of the last step (the default) it is up to a step's walk (5 cm) off.
+#[test]
+fn a_smoothed_cape_is_drawn_where_its_character_is_drawn() {
+    let drawn = |app: &App, e: Entity| attr3(mesh_of(app, e), Mesh::ATTRIBUTE_POSITION);
+    let substeps = ClothConfig::default().substeps as f32;
+    // Positions up to about 5 m from the origin.
+    let rounding = 8.0 * substeps * f32::EPSILON * 5.0;
+    let mut app = app();
+    let cape = common::smoothed_cape(&mut app, None, None);
+    let (interpolated, extrapolated) = common::smoothing_errors(&mut app, cape, drawn);
+    eprintln!(
+        "as stepped: {interpolated} m from the interpolated character, {extrapolated} m from the extrapolated one"
+    );
+    assert!(
+        interpolated > 0.03 && extrapolated > 0.02,
+        "the last step is a frame's walk off: {interpolated}, {extrapolated}"
+    );
+    for (smoothing, want) in [
+        (ClothSmoothing::Interpolate, 0),
+        (ClothSmoothing::Extrapolate, 1),
+    ] {
+        let mut app = common::app();
+        let cape = common::smoothed_cape(&mut app, Some(smoothing), None);
+        let errors = common::smoothing_errors(&mut app, cape, drawn);
+        let error = [errors.0, errors.1][want];
+        eprintln!("{smoothing:?}: {error} m off (rounding bound {rounding})");
+        assert!(
+            error < rounding,
+            "{smoothing:?}: the corner is drawn {error} m off"
+        );
+    }
+}

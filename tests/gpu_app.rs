@@ -2036,3 +2036,46 @@ fn runtime_changes_move_a_gpu_cloth_as_they_move_its_cpu_twin() {
         common::run(&mut app, 2);
     }
 }
+
+/// `ClothSmoothing` on the GPU: the mesh kernel draws each vertex along its velocity as the
+/// CPU's write-back does, so a cape on a character walking at 3 m/s in `FixedUpdate`, frames
+/// of 1/144 s over a 60 Hz step, is drawn where the character is drawn interpolated (or
+/// extrapolated), within f32 rounding (as `game`'s CPU test: the pin's velocity, 2 ε |x| / h,
+/// times a shift of at most a step); as of the last step, up to a step's walk off.
+#[test]
+fn a_smoothed_gpu_cape_is_drawn_where_its_character_is_drawn() {
+    if common::gpu_or_skip("a_smoothed_gpu_cape_is_drawn_where_its_character_is_drawn").is_none() {
+        return;
+    }
+    let drawn = |app: &App, e: Entity| {
+        let handle = app.world().get::<Mesh3d>(e).unwrap().0.clone();
+        let layout = app.world().resource::<Assets<Mesh>>().get(&handle).unwrap();
+        positions_on_the_gpu(app, handle.id(), layout).expect("the cape is on the GPU")
+    };
+    let substeps = ClothConfig::default().substeps as f32;
+    let rounding = 8.0 * substeps * f32::EPSILON * 5.0;
+    for (smoothing, want) in [
+        (None, None),
+        (Some(ClothSmoothing::Interpolate), Some(0)),
+        (Some(ClothSmoothing::Extrapolate), Some(1)),
+    ] {
+        let mut app = render_app_with(ClothPlugins::default(), false);
+        let cape = common::smoothed_cape(&mut app, smoothing, Some(ClothBackend::Gpu));
+        let errors = common::smoothing_errors(&mut app, cape, drawn);
+        assert!(in_use(&app, cape.0).gpu, "the cape runs on the GPU");
+        eprintln!("{smoothing:?}: {errors:?} m from the interpolated, extrapolated character");
+        match want {
+            None => assert!(
+                errors.0 > 0.03 && errors.1 > 0.02,
+                "as stepped, the corner is a frame's walk off: {errors:?}"
+            ),
+            Some(k) => {
+                let error = [errors.0, errors.1][k];
+                assert!(
+                    error < rounding,
+                    "{smoothing:?}: the corner is drawn {error} m off"
+                );
+            }
+        }
+    }
+}

@@ -1560,11 +1560,13 @@ fn whole_runs_agree_in_what_does_not_diverge() {
 /// and `cloth::writeback`'s world → local): a folded sheet with a hard crease (copies with
 /// different normals: two normal groups) and a UV seam (copies with the same normal: one
 /// group), read from behind another cloth's particles and written from vertex 5 of a slab, through a rotated, scaled, moved transform and a
-/// mirrored one.
+/// mirrored one; and drawn along its velocities (`ClothSmoothing`: `ClothSmoothing::place`
+/// with a shift back and one ahead).
 #[test]
 fn the_mesh_kernel_matches_the_cpu_write_back() {
     use bevy::math::{Affine3A, Vec2};
-    use bevy_cloth::gpu::mesh::{MeshKernel, MeshWriter, TangentSource, VertexLayout};
+    use bevy_cloth::cloth::ClothSmoothing;
+    use bevy_cloth::gpu::mesh::{DrawShift, MeshKernel, MeshWriter, TangentSource, VertexLayout};
     use bevy_cloth::solver::{MeshAttributes, MeshBinding};
     use wgpu::util::DeviceExt;
     let Some(Gpu { device, queue, .. }) = gpu("the_mesh_kernel_matches_the_cpu_write_back") else {
@@ -1637,9 +1639,16 @@ fn the_mesh_kernel_matches_the_cpu_write_back() {
         .iter()
         .map(|p| (*p + Vec3::Y * (0.03 * (9.0 * p.x + 5.0 * p.z).sin())).extend(1.0))
         .collect();
+    // Velocities after the particles (a velocity region), swirling at up to 2 m/s.
+    let velocities: Vec<Vec4> = particles
+        .iter()
+        .map(|p| Vec3::new(2.0 * (7.0 * p.z).cos(), -1.5, 1.0 * (4.0 * p.x).sin()).extend(0.0))
+        .collect();
     let drawn: Vec<u32> = binding.drawn_indices().collect();
     let mut buffer = vec![Vec4::splat(f32::NAN); base as usize];
     buffer.extend_from_slice(&particles);
+    let velocity_base = buffer.len() as u32;
+    buffer.extend_from_slice(&velocities);
     let state = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: None,
         contents: bytemuck::cast_slice(&buffer),
@@ -1666,19 +1675,34 @@ fn the_mesh_kernel_matches_the_cpu_write_back() {
     let first = 5u32;
     let m = positions.len();
     let bytes = u64::from(layout.stride) * (u64::from(first) + m as u64);
-    binding.update_shading(&particles);
-    for transform in [
-        Affine3A::from_scale_rotation_translation(
-            Vec3::new(1.5, 0.7, 1.1),
-            Quat::from_euler(bevy::math::EulerRot::XYZ, 0.3, -0.8, 0.2),
-            Vec3::new(2.0, -1.0, 0.5),
-        ),
-        Affine3A::from_scale_rotation_translation(
-            Vec3::new(-1.0, 1.0, 1.0),
-            Quat::from_rotation_y(0.4),
-            Vec3::new(-3.0, 0.0, 1.0),
-        ),
+    let turned = Affine3A::from_scale_rotation_translation(
+        Vec3::new(1.5, 0.7, 1.1),
+        Quat::from_euler(bevy::math::EulerRot::XYZ, 0.3, -0.8, 0.2),
+        Vec3::new(2.0, -1.0, 0.5),
+    );
+    let mirrored = Affine3A::from_scale_rotation_translation(
+        Vec3::new(-1.0, 1.0, 1.0),
+        Quat::from_rotation_y(0.4),
+        Vec3::new(-3.0, 0.0, 1.0),
+    );
+    // Shifts as `ClothSmoothing` gives them at a 60 Hz step: interpolated 0.3 of the way
+    // (0.7 of a step back), extrapolated 0.6 of a step ahead.
+    let step = 1.0 / 60.0;
+    let back = ClothSmoothing::Interpolate.shift(step, 0.3);
+    let ahead = ClothSmoothing::Extrapolate.shift(step, 0.6);
+    assert!(back < 0.0 && ahead > 0.0);
+    for (transform, shift) in [
+        (turned, 0.0),
+        (mirrored, 0.0),
+        (turned, back),
+        (mirrored, ahead),
     ] {
+        let drawn_particles: Vec<Vec4> = particles
+            .iter()
+            .zip(&velocities)
+            .map(|(p, v)| ClothSmoothing::place(*p, *v, shift))
+            .collect();
+        binding.update_shading(&drawn_particles);
         let slab = device.create_buffer(&wgpu::BufferDescriptor {
             label: None,
             size: bytes,
@@ -1702,6 +1726,10 @@ fn the_mesh_kernel_matches_the_cpu_write_back() {
             &slab,
             first,
             transform,
+            (shift != 0.0).then_some(DrawShift {
+                velocity_base,
+                seconds: shift,
+            }),
             None,
         );
         encoder.copy_buffer_to_buffer(&slab, 0, &staging, 0, bytes);
@@ -1724,7 +1752,7 @@ fn the_mesh_kernel_matches_the_cpu_write_back() {
             let p = Vec3::from_slice(&out[o..o + 3]);
             let n = Vec3::from_slice(&out[o + 3..o + 6]);
             let want_p =
-                to_local.transform_point3(particles[weld.particles()[v] as usize].truncate());
+                to_local.transform_point3(drawn_particles[weld.particles()[v] as usize].truncate());
             let want_n = (linear.transpose() * (binding.shading().normals()[v] * flip))
                 .normalize_or(Vec3::Y);
             worst_p = worst_p.max((p - want_p).length());
@@ -1740,7 +1768,8 @@ fn the_mesh_kernel_matches_the_cpu_write_back() {
             "wrote before `first`"
         );
         eprintln!(
-            "mesh kernel: worst position {worst_p} m, worst normal {worst_n}, worst tangent {worst_t}"
+            "mesh kernel, shift {shift} s: worst position {worst_p} m, worst normal {worst_n}, \
+             worst tangent {worst_t}"
         );
         // f32 rounding of a 4×4 product against glam's affine (a few ulp of ~3 m) and of a
         // normalised sum of face normals.
@@ -2127,6 +2156,7 @@ fn torn_triangles_leave_the_drawn_mesh_as_on_the_cpu() {
             &vertex_slab,
             0,
             bevy::math::Affine3A::IDENTITY,
+            None,
             Some((world.scratch_buffer(), dead_at)),
         );
         g.queue.submit([encoder.finish()]);

@@ -41,6 +41,8 @@ impl Built {
             u16_indices: self.u16_indices,
             steps: 0,
             dirty: true,
+            drawn_shift: 0.0,
+            drawn: Vec::new(),
             indices_dirty: false,
             torn_edges: 0,
             recoveries: 0,

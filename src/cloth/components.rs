@@ -263,6 +263,63 @@ impl Default for ClothTearing {
     }
 }
 
+/// When between fixed steps a cloth is drawn (opt-in; without it, as of the frame's last
+/// step: [`ClothSmoothing::LastStep`]). The cloth steps on the fixed clock; a frame drawn
+/// between two steps (a 144 Hz display, a 64 Hz fixed step) shows it where it was at the last
+/// one, so a cape jumps every second or third frame while the camera glides, and a character
+/// drawn interpolated between its fixed poses (avian's `PhysicsInterpolationPlugin`,
+/// `bevy_transform_interpolation`) is drawn up to a step behind where its cape hangs.
+///
+/// `Interpolate` draws the cloth as far behind its last step as interpolated entities are
+/// (`1 − overstep fraction` of the fixed step); `Extrapolate` as far ahead of it as
+/// extrapolated ones (the overstep). Each vertex is placed along its velocity at the end of
+/// the step, `x + s·v`: a pinned vertex moving with its anchor lands where the anchor is
+/// drawn, to within the anchor's change of velocity over the shift; normals and tangents come
+/// from the shifted shape. Only the drawn mesh moves (`ClothSim` reads the stepped state) and
+/// nothing is stepped again. Extrapolated cloth falling onto a collider may be drawn up to a
+/// step's travel into it for a frame. Both backends; no effect when the cloth plugins run
+/// outside the fixed schedules ([`ClothSchedule`](crate::foundation::ClothSchedule)).
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[reflect(Component, Default, Clone, PartialEq)]
+pub enum ClothSmoothing {
+    /// As the last fixed step left it (the default).
+    #[default]
+    LastStep,
+    /// Between the last two fixed steps, as interpolated entities are drawn.
+    Interpolate,
+    /// Past the last fixed step by the time not yet stepped, as extrapolated entities are.
+    Extrapolate,
+}
+
+impl ClothSmoothing {
+    /// How far along its velocity a vertex is drawn, in seconds: `step × (fraction − 1)`
+    /// interpolated, `step × fraction` extrapolated, where `fraction` is the fixed clock's
+    /// overstep over its step (in `0..1`). Zero for `LastStep` and for a step or fraction that
+    /// is not finite and positive.
+    #[must_use]
+    pub fn shift(self, step: f32, fraction: f32) -> f32 {
+        if !(step.is_finite() && step > 0.0 && fraction.is_finite()) {
+            return 0.0;
+        }
+        let fraction = fraction.clamp(0.0, 1.0);
+        match self {
+            Self::LastStep => 0.0,
+            Self::Interpolate => step * (fraction - 1.0),
+            Self::Extrapolate => step * fraction,
+        }
+    }
+
+    /// Where a vertex at `position` moving at `velocity` is drawn `shift` seconds from its
+    /// step: `position + shift·velocity`, `w` (the inverse mass) kept. The GPU's `mesh.wgsl`
+    /// computes the same (it may fuse the multiply–add: within a rounding of it).
+    #[must_use]
+    #[inline]
+    pub fn place(position: Vec4, velocity: Vec4, shift: f32) -> Vec4 {
+        (position.truncate() + velocity.truncate() * shift).extend(position.w)
+    }
+}
+
 /// Sent when edges of a cloth tear.
 #[derive(Message, Clone, Debug, PartialEq)]
 pub struct ClothTorn {

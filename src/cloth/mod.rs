@@ -26,7 +26,7 @@ mod writeback;
 
 pub use build::{ClothParts, check_cloth};
 pub use components::{
-    Cloth, ClothConfig, ClothInertia, ClothPin, ClothPins, ClothSelfCollision,
+    Cloth, ClothConfig, ClothInertia, ClothPin, ClothPins, ClothSelfCollision, ClothSmoothing,
     ClothSteppedElsewhere, ClothTearing, ClothTethers, ClothTorn, PinAnchor,
 };
 pub use error::{ClothError, ClothFailed, ClothInvalid};

@@ -9,7 +9,8 @@ use super::systems::{
 use super::writeback::write_back;
 use super::{
     Cloth, ClothConfig, ClothFailed, ClothInertia, ClothPin, ClothPins, ClothSelfCollision,
-    ClothSkinning, ClothSource, ClothTearing, ClothTethers, ClothTorn, ClothWorkers, PinAnchor,
+    ClothSkinning, ClothSmoothing, ClothSource, ClothTearing, ClothTethers, ClothTorn,
+    ClothWorkers, PinAnchor,
 };
 use crate::foundation::{ClothSchedule, ClothSystems};
 
@@ -45,6 +46,7 @@ impl Plugin for ClothPlugin {
             .register_type::<ClothInertia>()
             .register_type::<ClothSkinning>()
             .register_type::<ClothSource>()
+            .register_type::<ClothSmoothing>()
             .init_resource::<ClothWorkers>()
             .add_message::<ClothTorn>()
             .add_message::<ClothFailed>()

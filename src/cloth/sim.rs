@@ -37,6 +37,11 @@ pub struct ClothSim {
     pub(super) steps: u64,
     /// Moved since the last write-back.
     pub(super) dirty: bool,
+    /// How far along their velocities the mesh shows the vertices, in seconds
+    /// ([`ClothSmoothing`](super::ClothSmoothing)), as of the last write-back.
+    pub(super) drawn_shift: f32,
+    /// The shifted positions drawn (working space of the write-back).
+    pub(super) drawn: Vec<bevy::math::Vec4>,
     /// The triangles changed (tearing): the index buffer must be rewritten.
     pub(super) indices_dirty: bool,
     pub(super) torn_edges: usize,
@@ -389,14 +394,15 @@ impl ClothSim {
         self.sim.state().position(self.particle(vertex) as usize)
     }
 
-    /// World-space unit normal of every mesh vertex, as of the last write-back.
+    /// World-space unit normal of every mesh vertex, as of the last write-back (as drawn: with
+    /// [`ClothSmoothing`](super::ClothSmoothing), of the shifted shape).
     #[must_use]
     pub fn normals(&self) -> &[Vec3] {
         self.binding.shading().normals()
     }
 
-    /// World-space tangents of every mesh vertex as of the last write-back (empty when the
-    /// mesh has neither UVs nor tangents).
+    /// World-space tangents of every mesh vertex as of the last write-back, as drawn (empty
+    /// when the mesh has neither UVs nor tangents).
     #[must_use]
     pub fn tangents(&self) -> &[Vec4] {
         self.binding.shading().tangents()

@@ -9,33 +9,68 @@
 //!
 //! A mirrored entity (negative determinant) turns the triangles' winding around in world
 //! space, so normals computed there point out of the back face: they are flipped back.
+//!
+//! With [`ClothSmoothing`], each vertex is drawn `x + s·v` (see [`ClothSmoothing::shift`]),
+//! written every frame the shift changes; the GPU's `mesh.wgsl` draws the same.
 
 use bevy::mesh::VertexAttributeValues;
 use bevy::prelude::*;
 
-use super::{ClothSim, ClothSteppedElsewhere};
+use super::{ClothSim, ClothSmoothing, ClothSteppedElsewhere};
+use crate::foundation::ClothSchedule;
 
 /// Copies the moved cloths' state into their meshes (torn triangles leave the index buffer,
 /// kept in the mesh's own index format; the vertex buffer keeps its size). Cloths stepped
 /// elsewhere write their own mesh.
 pub(super) fn write_back(
     mut meshes: Option<ResMut<Assets<Mesh>>>,
-    mut cloths: Query<(&mut ClothSim, &GlobalTransform), Without<ClothSteppedElsewhere>>,
+    mut cloths: Query<
+        (&mut ClothSim, &GlobalTransform, Option<&ClothSmoothing>),
+        Without<ClothSteppedElsewhere>,
+    >,
+    schedule: Option<Res<ClothSchedule>>,
+    fixed: Option<Res<Time<Fixed>>>,
 ) {
     let Some(meshes) = meshes.as_deref_mut() else {
         return;
     };
-    for (cloth, gt) in &mut cloths {
-        if !cloth.dirty {
+    let overstep = ClothSchedule::overstep(schedule.as_deref(), fixed.as_deref());
+    for (cloth, gt, smoothing) in &mut cloths {
+        // A sleeping cloth's velocities are zero: no shift to draw.
+        let shift = match (smoothing, overstep) {
+            (Some(s), Some((step, fraction))) if !cloth.sim.is_sleeping() => {
+                s.shift(step, fraction)
+            }
+            _ => 0.0,
+        };
+        if !cloth.dirty && shift == cloth.drawn_shift {
             continue;
         }
         let cloth = cloth.into_inner();
         cloth.dirty = false;
-        cloth.binding.update_shading(&cloth.sim.state().positions);
+        cloth.drawn_shift = shift;
+        let state = cloth.sim.state();
+        if shift != 0.0 {
+            cloth.drawn.clear();
+            cloth.drawn.extend(
+                state
+                    .positions
+                    .iter()
+                    .zip(&state.velocities)
+                    .map(|(p, v)| ClothSmoothing::place(*p, *v, shift)),
+            );
+        }
+        let particles = if shift == 0.0 {
+            &cloth.sim.state().positions
+        } else {
+            &cloth.drawn
+        };
+        cloth.binding.update_shading(particles);
         let Some(mut mesh) = meshes.get_mut(&cloth.mesh) else {
             continue;
         };
         cloth.write_indices(&mut mesh);
+        let particles = drawn(cloth, shift);
         let binding = &cloth.binding;
         let affine = gt.affine();
         let to_local = affine.inverse();
@@ -52,7 +87,6 @@ pub(super) fn write_back(
         };
         let normal_to_local = linear.transpose();
         let tangent_to_local = to_local.matrix3;
-        let particles = &cloth.sim.state().positions;
         let weld = binding.weld();
 
         if let Ok(VertexAttributeValues::Float32x3(out)) =
@@ -83,5 +117,15 @@ pub(super) fn write_back(
                 *o = local.extend(t.w).to_array();
             }
         }
+    }
+}
+
+/// The particles a cloth is drawn from: its state's positions, or with a shift the shifted
+/// ones the write-back made.
+fn drawn(cloth: &ClothSim, shift: f32) -> &[Vec4] {
+    if shift == 0.0 {
+        &cloth.sim.state().positions
+    } else {
+        &cloth.drawn
     }
 }

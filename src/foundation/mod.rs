@@ -70,6 +70,32 @@ impl ClothSchedule {
     }
 }
 
+impl ClothSchedule {
+    /// Whether the schedule runs on the fixed clock (one of Bevy's `Fixed…` schedules).
+    #[must_use]
+    pub fn is_fixed(&self) -> bool {
+        [
+            bevy::app::FixedMain.intern(),
+            FixedFirst.intern(),
+            FixedPreUpdate.intern(),
+            FixedUpdate.intern(),
+            FixedPostUpdate.intern(),
+            FixedLast.intern(),
+        ]
+        .contains(&self.0)
+    }
+
+    /// The fixed step's length and the frame's overstep over it (`0..1`: how far the frame
+    /// is past the last fixed step), for drawing cloth between fixed steps; `None` when the
+    /// schedule is not a fixed one, or without a fixed clock.
+    #[must_use]
+    pub fn overstep(schedule: Option<&Self>, fixed: Option<&Time<Fixed>>) -> Option<(f32, f32)> {
+        let fixed = fixed?;
+        let on_fixed = schedule.is_none_or(Self::is_fixed);
+        on_fixed.then(|| (fixed.timestep().as_secs_f32(), fixed.overstep_fraction()))
+    }
+}
+
 /// Sets up what every cloth plugin shares: the [`ClothSchedule`] resource and the order of the
 /// [`ClothSystems`] phases. The first plugin of `ClothPlugins`.
 #[derive(Clone, Copy, Debug)]

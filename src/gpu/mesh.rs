@@ -50,7 +50,19 @@ struct MeshParams {
     particle_base: u32,
     cloth_tri_at: u32,
     dead_at: u32,
-    _pad: u32,
+    velocity_base: u32,
+    shift: f32,
+    _pad: [u32; 3],
+}
+
+/// A cloth drawn along its velocities ([`ClothSmoothing`](crate::cloth::ClothSmoothing)):
+/// each vertex at `x + seconds·v`, `v` read from the state buffer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DrawShift {
+    /// The cloth's first velocity in the state buffer, in `vec4`s from its start.
+    pub velocity_base: u32,
+    /// How far along its velocity each vertex is drawn, in seconds.
+    pub seconds: f32,
 }
 
 /// Where a mesh keeps positions and normals in its interleaved vertex buffer.
@@ -393,7 +405,8 @@ impl MeshWriter {
 
     /// Records the write of the cloth whose particles start at `particle_base` in `state`
     /// (a [`GpuWorld`](super::GpuWorld)'s state buffer) into `slab` from vertex `first` on,
-    /// placed by `transform` (the entity's world transform). For a writer made with cloth
+    /// placed by `transform` (the entity's world transform), each vertex `shift` along its
+    /// velocity (`None`: as stepped). For a writer made with cloth
     /// triangles, `dead` (the world's scratch buffer and the cloth's first dead-triangle flag
     /// in it, as for [`Self::record_hide_torn`]) leaves the torn triangles out of the normals
     /// and tangents, as the CPU's shading leaves out the triangles its tear removed.
@@ -412,6 +425,7 @@ impl MeshWriter {
         slab: &wgpu::Buffer,
         first: u32,
         transform: Affine3A,
+        shift: Option<DrawShift>,
         dead: Option<(&wgpu::Buffer, u32)>,
     ) {
         if self.vertices == 0 {
@@ -456,7 +470,9 @@ impl MeshWriter {
                 (Some(_), Some((_, at))) => at,
                 _ => u32::MAX,
             },
-            _pad: 0,
+            velocity_base: shift.map_or(0, |s| s.velocity_base),
+            shift: shift.map_or(0.0, |s| s.seconds),
+            _pad: [0; 3],
         };
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&p));
         dispatch(

@@ -45,7 +45,13 @@ struct MeshParams {
     cloth_tri_at: u32,
     // its first dead-triangle flag in `dead_flags` (the world's scratch); 0xffffffff: none
     dead_at: u32,
+    // the cloth's first velocity in `particles` (the state buffer's velocity region)
+    velocity_base: u32,
+    // seconds along its velocity each vertex is drawn (`ClothSmoothing`); 0: as stepped
+    shift: f32,
     _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> M: MeshParams;
@@ -60,8 +66,13 @@ fn torn(d: u32) -> bool {
     return M.dead_at != 0xffffffffu && dead_flags[M.dead_at + topo[M.cloth_tri_at + d]] != 0u;
 }
 
+// Where particle `topo[v]` is drawn: its position, or `x + shift·v` (`ClothSmoothing::place`).
 fn at(v: u32) -> vec3<f32> {
-    return particles[M.particle_base + topo[v]].xyz;
+    let p = particles[M.particle_base + topo[v]].xyz;
+    if M.shift == 0.0 {
+        return p;
+    }
+    return p + particles[M.velocity_base + topo[v]].xyz * M.shift;
 }
 
 fn uv(t: u32, corner: u32) -> vec2<f32> {

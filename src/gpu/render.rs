@@ -32,10 +32,12 @@ use super::backend::{
 };
 use super::kernels::GpuKernels;
 use super::layout::WorldKey;
-use super::mesh::{MeshKernel, MeshWriter};
+use super::mesh::{DrawShift, MeshKernel, MeshWriter};
 use super::world::{
     ClothFrame, GpuFrame, GpuWorld, MotionTargets, StepColliders, TornFlags, sum_impulses,
 };
+use crate::cloth::ClothSmoothing;
+use crate::foundation::ClothSchedule;
 use crate::solver::Carry;
 
 /// The compiled kernels (render world).
@@ -58,6 +60,8 @@ struct ExtractedGpuCloth {
     air: Vec<Vec4>,
     motion: Vec<MotionTargets>,
     transform: bevy::math::Affine3A,
+    /// Seconds along their velocities the vertices are drawn ([`ClothSmoothing`]).
+    shift: f32,
     /// Read positions and velocities back this frame.
     readback: bool,
 }
@@ -76,6 +80,7 @@ impl ExtractedGpuCloth {
             air: Vec::new(),
             motion: Vec::new(),
             transform: transform.affine(),
+            shift: 0.0,
             readback,
         }
     }
@@ -101,13 +106,19 @@ pub(crate) fn extract_gpu_cloths(
             &GlobalTransform,
             Has<ClothReadback>,
             Has<Disabled>,
+            Option<&ClothSmoothing>,
         )>,
     >,
     leaving: Extract<Query<(Entity, &ClothLeavingGpu, &GlobalTransform), Allow<Disabled>>>,
+    (schedule, fixed): (
+        Extract<Option<Res<ClothSchedule>>>,
+        Extract<Option<Res<Time<Fixed>>>>,
+    ),
 ) {
     out.cloths.clear();
     out.queue = queue.clone();
-    for (entity, g, transform, readback, disabled) in &cloths {
+    let overstep = ClothSchedule::overstep(schedule.as_deref(), fixed.as_deref());
+    for (entity, g, transform, readback, disabled, smoothing) in &cloths {
         if disabled {
             // Disabled (a pooled character): it keeps its place and its state in its world,
             // not stepped, not read back, until it is enabled again. Left out, its world
@@ -133,6 +144,10 @@ pub(crate) fn extract_gpu_cloths(
             air: g.air.clone(),
             motion: g.motion.clone(),
             transform: transform.affine(),
+            shift: match (smoothing, overstep) {
+                (Some(s), Some((step, fraction))) => s.shift(step, fraction),
+                _ => 0.0,
+            },
             readback,
         });
     }
@@ -177,6 +192,8 @@ struct WriterEntry {
     writer: MeshWriter,
     mesh: AssetId<Mesh>,
     transform: bevy::math::Affine3A,
+    /// Seconds along their velocities the vertices are drawn.
+    shift: f32,
     /// Whether the mesh's indices are 16-bit.
     u16_indices: bool,
 }
@@ -386,12 +403,14 @@ pub(crate) fn prepare_gpu_worlds(
                     writer,
                     mesh: upload.mesh,
                     transform: x.transform,
+                    shift: x.shift,
                     u16_indices: upload.u16_indices,
                 },
             );
         }
         if let Some(w) = worlds.writers.get_mut(&x.entity) {
             w.transform = x.transform;
+            w.shift = x.shift;
         }
     }
 }
@@ -434,6 +453,10 @@ pub(crate) fn run_gpu_worlds(
                     slice.buffer,
                     slice.range.start,
                     writer.transform,
+                    (writer.shift != 0.0).then(|| DrawShift {
+                        velocity_base: (w.world.velocities_range(i).0 / 16) as u32,
+                        seconds: writer.shift,
+                    }),
                     dead_at.map(|at| (w.world.scratch_buffer(), at)),
                 );
                 // A tearing cloth's torn triangles, hidden until the host's tear removes

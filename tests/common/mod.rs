@@ -340,3 +340,102 @@ pub fn assert_capes_apart(app: &App, stayed: Entity, walked: Entity, top: &[u32]
         "the first cape's top edge at {a}, the second's at {b} (its bone at x = 1.18)"
     );
 }
+
+/// How fast the character of [`smoothed_cape`] walks along x, in m/s.
+pub const WALK_SPEED: f32 = 3.0;
+
+/// The walking character of [`smoothed_cape`] and where it stood at its last two fixed steps
+/// (what an interpolation plugin keeps to draw it between them).
+#[derive(Resource)]
+pub struct Walker {
+    pub entity: Entity,
+    pub before: f32,
+    pub now: f32,
+}
+
+/// Walks the [`Walker`] at [`WALK_SPEED`] in `FixedUpdate`, as a game moves a character.
+fn walk(mut walker: ResMut<Walker>, mut transforms: Query<&mut Transform>, time: Res<Time>) {
+    if let Ok(mut t) = transforms.get_mut(walker.entity) {
+        t.translation.x += WALK_SPEED * time.delta_secs();
+        walker.before = walker.now;
+        walker.now = t.translation.x;
+    }
+}
+
+/// A 0.5 m cape hung from a character walking at [`WALK_SPEED`] along x (moved in
+/// `FixedUpdate`), its top row pinned to the character; frames of 1/144 s over the 60 Hz
+/// fixed step. Returns the cape, its pinned vertex 0 and that vertex's offset in the
+/// character's frame.
+pub fn smoothed_cape(
+    app: &mut App,
+    smoothing: Option<ClothSmoothing>,
+    backend: Option<bevy_cloth::gpu::ClothBackend>,
+) -> (Entity, u32, Vec3) {
+    app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+        1.0 / 144.0,
+    )));
+    let grid = Grid::new(8, 8, 0.5, 0.5);
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    let at = Transform::from_xyz(0.0, 1.5, 0.0)
+        .with_rotation(Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2));
+    let character = app.world_mut().spawn(at).id();
+    app.insert_resource(Walker {
+        entity: character,
+        before: 0.0,
+        now: 0.0,
+    })
+    .add_systems(FixedUpdate, walk);
+    let rest = grid.positions();
+    let pins = (0..8)
+        .map(|i| ClothPin {
+            vertex: grid.index(i, 0),
+            anchor: PinAnchor::Entity {
+                entity: character,
+                offset: rest[grid.index(i, 0) as usize],
+            },
+        })
+        .collect();
+    let mut cape = app
+        .world_mut()
+        .spawn((Mesh3d(mesh), at, Cloth::default(), ClothPins(pins)));
+    if let Some(s) = smoothing {
+        cape.insert(s);
+    }
+    if let Some(b) = backend {
+        cape.insert(b);
+    }
+    (cape.id(), grid.index(0, 0), rest[grid.index(0, 0) as usize])
+}
+
+/// Runs the [`smoothed_cape`] app 1.5 s and returns how far its pinned `vertex` is drawn
+/// (`drawn`: the mesh's local positions) over the last half second from where its character
+/// is drawn interpolated between its last two fixed steps, and extrapolated past the last
+/// one (the character's pose eased by the fixed clock's overstep, as interpolation plugins
+/// draw it), at worst.
+pub fn smoothing_errors(
+    app: &mut App,
+    (cape, vertex, offset): (Entity, u32, Vec3),
+    drawn: impl Fn(&App, Entity) -> Vec<Vec3>,
+) -> (f32, f32) {
+    let (mut interpolated, mut extrapolated) = (0.0f32, 0.0f32);
+    for frame in 0..216 {
+        app.update();
+        if frame < 144 {
+            continue;
+        }
+        let fraction = app.world().resource::<Time<Fixed>>().overstep_fraction();
+        let walker = app.world().resource::<Walker>();
+        let (before, now) = (walker.before, walker.now);
+        let turn = Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2);
+        let at = |x: f32| Vec3::new(x, 1.5, 0.0) + turn * offset;
+        let gt = *app.world().get::<GlobalTransform>(cape).unwrap();
+        let local = drawn(app, cape)[vertex as usize];
+        let p = gt.transform_point(local);
+        interpolated = interpolated.max(p.distance(at(before + (now - before) * fraction)));
+        extrapolated = extrapolated.max(p.distance(at(now + (now - before) * fraction)));
+    }
+    (interpolated, extrapolated)
+}
