@@ -482,6 +482,7 @@ fn scene_files_round_trip_exactly() {
             },
             ClothBackend::Cpu,
             ClothInertia::new(0.4).relative_to(ball),
+            ClothSmoothing::Extrapolate,
         ))
         .id();
     actions::add_wind_zone(app.world_mut());
@@ -523,6 +524,10 @@ fn scene_files_round_trip_exactly() {
     assert!(
         text.contains("Inline("),
         "the user's mesh, vertex by vertex"
+    );
+    assert!(
+        text.contains("smoothing: Some(Extrapolate)"),
+        "the smoothing: {text}"
     );
 
     // Through a file, and back.
@@ -721,6 +726,7 @@ fn a_scene_file_naming_a_gltf_mesh_loads_it_before_replacing_the_scene() {
         tearing: None,
         backend: None,
         inertia: None,
+        smoothing: None,
     };
     let file = scene::ClothScene {
         cloths: vec![cloth],

@@ -9,7 +9,9 @@ use super::knobs::{self, Knob};
 use super::scene;
 use super::state::{ClothEditor, NewCloth, NewShape, PinPreset};
 use super::stats::ClothStats;
-use crate::cloth::{Cloth, ClothConfig, ClothSelfCollision, ClothSim, ClothTearing, ClothTethers};
+use crate::cloth::{
+    Cloth, ClothConfig, ClothSelfCollision, ClothSim, ClothSmoothing, ClothTearing, ClothTethers,
+};
 use crate::collider::{ClothCollider, ColliderMesh, ColliderShape};
 use crate::gpu::{ClothBackend, ClothBackendInUse};
 use crate::solver::limits::Spread;
@@ -492,6 +494,23 @@ fn solver_section(ui: &mut egui::Ui, world: &mut World, e: Entity) {
                 && let Some(b) = backend
             {
                 world.entity_mut(e).insert(b);
+            }
+            // When between fixed steps it is drawn (applies at once).
+            let shown = world.get::<ClothSmoothing>(e).copied().unwrap_or_default();
+            let mut pick = shown;
+            combo(
+                ui,
+                ("smoothing", e),
+                "drawn",
+                &mut pick,
+                &[
+                    (ClothSmoothing::LastStep, "as stepped"),
+                    (ClothSmoothing::Interpolate, "interpolated"),
+                    (ClothSmoothing::Extrapolate, "extrapolated"),
+                ],
+            );
+            if pick != shown {
+                world.entity_mut(e).insert(pick);
             }
             if let Some(used) = world.get::<ClothBackendInUse>(e) {
                 let text = match (&used.reason, used.gpu) {

@@ -22,7 +22,7 @@ use super::actions::{dress_cloth, say, spawn_collider};
 use super::state::{ClothEditor, EditorGrid};
 use crate::cloth::{
     Cloth, ClothConfig, ClothInertia, ClothParts, ClothPin, ClothPins, ClothSelfCollision,
-    ClothSim, ClothSource, ClothTearing, ClothTethers, PinAnchor, check_cloth,
+    ClothSim, ClothSmoothing, ClothSource, ClothTearing, ClothTethers, PinAnchor, check_cloth,
 };
 use crate::collider::{ClothCollider, ColliderMesh, ColliderShape};
 use crate::foundation::{EntityName, grid_mesh, read_mesh};
@@ -154,6 +154,9 @@ pub struct SavedCloth {
     /// Its [`ClothInertia`], if it has one (absent in files from before it existed).
     #[serde(default)]
     pub inertia: Option<SavedInertia>,
+    /// Its [`ClothSmoothing`], if it has one (absent in files from before it existed).
+    #[serde(default)]
+    pub smoothing: Option<ClothSmoothing>,
 }
 
 /// A cloth's [`ClothInertia`] in a file.
@@ -426,6 +429,7 @@ pub fn save_scene(world: &mut World) -> ClothScene {
             tethers: world.get::<ClothTethers>(e).copied(),
             tearing: world.get::<ClothTearing>(e).copied(),
             backend: world.get::<ClothBackend>(e).copied(),
+            smoothing: world.get::<ClothSmoothing>(e).copied(),
             inertia: world.get::<ClothInertia>(e).map(|i| SavedInertia {
                 linear: i.linear,
                 angular: i.angular,
@@ -589,6 +593,9 @@ pub fn load_scene(world: &mut World, scene: &ClothScene) -> Result<(), String> {
         }
         if let Some(b) = c.backend {
             e.insert(b);
+        }
+        if let Some(s) = c.smoothing {
+            e.insert(s);
         }
         let id = e.id();
         if let Some([r, g, b, a]) = c.color {
