@@ -17,8 +17,8 @@ pub use batches::{ConstraintBatches, default_part_count};
 pub(crate) use batches::{Mode, Part};
 pub(crate) use implicit::ImplicitBending;
 pub use implicit::{
-    IMPLICIT_BENDING_AUTO_WORK, IMPLICIT_BENDING_MAX_SATURATION, IMPLICIT_BENDING_MAX_WORK,
-    IMPLICIT_BENDING_SATURATION,
+    IMPLICIT_BENDING_AUTO_WORK, IMPLICIT_BENDING_GRAVITY_NUMBER, IMPLICIT_BENDING_MAX_SATURATION,
+    IMPLICIT_BENDING_MAX_WORK, IMPLICIT_BENDING_SATURATION,
 };
 pub use motion::MotionConstraints;
 pub use solver::{BendingSolve, DEFAULT_BENDING_COMPLIANCE, LAB_WEIGHT, Solver};

@@ -97,11 +97,17 @@ impl Default for Solver {
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum BendingSolve {
-    /// Projected while a substep can carry the stiffness, implicit where it cannot (the
-    /// cloth's saturation above [`IMPLICIT_BENDING_SATURATION`]) and the solve is affordable
-    /// (up to [`IMPLICIT_BENDING_AUTO_WORK`], a 64 × 64 grid).
+    /// Projected while a substep can carry the stiffness or the cloth's weight shapes it
+    /// more than its bending does; implicit where a substep cannot (the cloth's saturation
+    /// above [`IMPLICIT_BENDING_SATURATION`]), its bending matters against its weight (its
+    /// gravity number `ρ g L³ / B` under [`IMPLICIT_BENDING_GRAVITY_NUMBER`]: stiff
+    /// materials, small pieces, no gravity) and the solve is affordable (up to
+    /// [`IMPLICIT_BENDING_AUTO_WORK`], a 64 × 64 grid). At the default `B` (1e-4 N·m) and
+    /// 0.2 kg/m², a cloth longer than about 25 cm is projected at any resolution: the implicit
+    /// solve costs 2.5–9 times the projected step and changes its drape by under 1.3 %.
     ///
     /// [`IMPLICIT_BENDING_SATURATION`]: super::IMPLICIT_BENDING_SATURATION
+    /// [`IMPLICIT_BENDING_GRAVITY_NUMBER`]: super::IMPLICIT_BENDING_GRAVITY_NUMBER
     /// [`IMPLICIT_BENDING_AUTO_WORK`]: super::IMPLICIT_BENDING_AUTO_WORK
     #[default]
     Auto,

@@ -710,7 +710,7 @@ impl Simulation {
                 &self.state.positions,
                 1.0 / bending,
                 h,
-                self.params.bending_solve,
+                (self.params.bending_solve, self.params.gravity.length()),
             )
     }
 

@@ -351,7 +351,7 @@ pub fn step(
             &state.positions,
             rigidity,
             h,
-            params.bending_solve,
+            (params.bending_solve, params.gravity.length()),
         );
     let c = Consts {
         h,
