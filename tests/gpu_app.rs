@@ -2041,7 +2041,8 @@ fn runtime_changes_move_a_gpu_cloth_as_they_move_its_cpu_twin() {
 /// CPU's write-back does, so a cape on a character walking at 3 m/s in `FixedUpdate`, frames
 /// of 1/144 s over a 60 Hz step, is drawn where the character is drawn interpolated (or
 /// extrapolated), within f32 rounding (as `game`'s CPU test: the pin's velocity, 2 ε |x| / h,
-/// times a shift of at most a step); as of the last step, up to a step's walk off.
+/// times a shift of at most a step), glued to the character by `ClothInertia` too (drawn
+/// along the carried motion's velocity); as of the last step, up to a step's walk off.
 #[test]
 fn a_smoothed_gpu_cape_is_drawn_where_its_character_is_drawn() {
     if common::gpu_or_skip("a_smoothed_gpu_cape_is_drawn_where_its_character_is_drawn").is_none() {
@@ -2054,16 +2055,17 @@ fn a_smoothed_gpu_cape_is_drawn_where_its_character_is_drawn() {
     };
     let substeps = ClothConfig::default().substeps as f32;
     let rounding = 8.0 * substeps * f32::EPSILON * 5.0;
-    for (smoothing, want) in [
-        (None, None),
-        (Some(ClothSmoothing::Interpolate), Some(0)),
-        (Some(ClothSmoothing::Extrapolate), Some(1)),
+    for (smoothing, want, glued) in [
+        (None, None, false),
+        (Some(ClothSmoothing::Interpolate), Some(0), false),
+        (Some(ClothSmoothing::Extrapolate), Some(1), false),
+        (Some(ClothSmoothing::Interpolate), Some(0), true),
     ] {
         let mut app = render_app_with(ClothPlugins::default(), false);
-        let cape = common::smoothed_cape(&mut app, smoothing, Some(ClothBackend::Gpu));
+        let cape = common::smoothed_cape(&mut app, smoothing, Some(ClothBackend::Gpu), glued);
         let errors = common::smoothing_errors(&mut app, cape, drawn);
         assert!(in_use(&app, cape.0).gpu, "the cape runs on the GPU");
-        eprintln!("{smoothing:?}: {errors:?} m from the interpolated, extrapolated character");
+        eprintln!("{smoothing:?}, glued {glued}: {errors:?} m from the drawn character");
         match want {
             None => assert!(
                 errors.0 > 0.03 && errors.1 > 0.02,
@@ -2078,4 +2080,29 @@ fn a_smoothed_gpu_cape_is_drawn_where_its_character_is_drawn() {
             }
         }
     }
+}
+
+/// A GPU flag glued to a car by `ClothInertia` meets the car's airflow as on the CPU: its air
+/// (uploaded per step) is the wind less the carried motion's velocity. At 20 m/s in still air
+/// it streams behind its hoist as the CPU flag does; before, it hung limp.
+#[test]
+fn a_gpu_flag_glued_to_a_car_by_its_inertia_streams_in_the_cars_airflow() {
+    if common::gpu_or_skip("a_gpu_flag_glued_to_a_car_by_its_inertia_streams_in_the_cars_airflow")
+        .is_none()
+    {
+        return;
+    }
+    let mut app = render_app();
+    let gpu = common::flag_on_a_car(&mut app, Some(0.0), Some(ClothBackend::Gpu));
+    let mut app = common::app();
+    let cpu = common::flag_on_a_car(&mut app, Some(0.0), None);
+    eprintln!("fly edge from the hoist: GPU {gpu}, CPU {cpu}");
+    assert!(
+        gpu.x < -0.5 && gpu.y > -0.15,
+        "the GPU flag does not stream: {gpu}"
+    );
+    assert!(
+        gpu.distance(cpu) < 0.1,
+        "the GPU flag streams unlike the CPU's: {gpu} against {cpu}"
+    );
 }

@@ -1561,7 +1561,7 @@ fn whole_runs_agree_in_what_does_not_diverge() {
 /// different normals: two normal groups) and a UV seam (copies with the same normal: one
 /// group), read from behind another cloth's particles and written from vertex 5 of a slab, through a rotated, scaled, moved transform and a
 /// mirrored one; and drawn along its velocities (`ClothSmoothing`: `ClothSmoothing::place`
-/// with a shift back and one ahead).
+/// with a shift back and one ahead, and with a carried motion's velocity added).
 #[test]
 fn the_mesh_kernel_matches_the_cpu_write_back() {
     use bevy::math::{Affine3A, Vec2};
@@ -1691,16 +1691,32 @@ fn the_mesh_kernel_matches_the_cpu_write_back() {
     let back = ClothSmoothing::Interpolate.shift(step, 0.3);
     let ahead = ClothSmoothing::Extrapolate.shift(step, 0.6);
     assert!(back < 0.0 && ahead > 0.0);
-    for (transform, shift) in [
-        (turned, 0.0),
-        (mirrored, 0.0),
-        (turned, back),
-        (mirrored, ahead),
+    // A motion carried into the step (`ClothInertia`): a turn about a point and a move.
+    let carried = bevy_cloth::solver::Carry::unfelt(
+        (Vec3::new(0.3, 0.0, 0.3), Quat::IDENTITY),
+        (Vec3::new(0.35, 0.02, 0.28), Quat::from_rotation_y(0.05)),
+        0.0,
+        0.0,
+    )
+    .and_then(|c| c.velocity(step));
+    assert!(carried.is_some());
+    for (transform, shift, carried) in [
+        (turned, 0.0, None),
+        (mirrored, 0.0, None),
+        (turned, back, None),
+        (mirrored, ahead, None),
+        (turned, back, carried),
     ] {
         let drawn_particles: Vec<Vec4> = particles
             .iter()
             .zip(&velocities)
-            .map(|(p, v)| ClothSmoothing::place(*p, *v, shift))
+            .map(|(p, v)| {
+                let v = *v
+                    + carried
+                        .map_or(Vec3::ZERO, |c| c.at(p.truncate()))
+                        .extend(0.0);
+                ClothSmoothing::place(*p, v, shift)
+            })
             .collect();
         binding.update_shading(&drawn_particles);
         let slab = device.create_buffer(&wgpu::BufferDescriptor {
@@ -1729,6 +1745,7 @@ fn the_mesh_kernel_matches_the_cpu_write_back() {
             (shift != 0.0).then_some(DrawShift {
                 velocity_base,
                 seconds: shift,
+                carried,
             }),
             None,
         );

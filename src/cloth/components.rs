@@ -173,6 +173,10 @@ impl Default for ClothTethers {
 /// and swings the cloth less. As Unity's world velocity scale and NvCloth's inertia
 /// multipliers.
 ///
+/// The motion not felt still moves the cloth through the air: its aerodynamics meet the air
+/// less the carried motion's velocity, so a flag glued to a car (inertia 0) streams in the
+/// car's airflow. [`ClothSmoothing`] draws it along that velocity too.
+///
 /// The anchor is `anchor`, or the cloth's own entity when `None` (a cloth parented to a
 /// character). Its pose is read at each fixed step (as pins read theirs); a jump farther
 /// than [`Cloth::teleport_distance`] is a teleport, not a motion, and is not carried.

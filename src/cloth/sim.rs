@@ -308,10 +308,12 @@ impl ClothSim {
         self.edits
     }
 
-    /// The air's velocity at each particle at time `t` (seconds), sampled from `field`
-    /// around the cloth's current positions, as a CPU step samples it.
-    pub fn sample_air(&mut self, field: &WindField, t: f64, out: &mut Vec<Vec4>) {
-        self.sim.sample_air(field, t, out);
+    /// The air each particle meets over the coming step of `dt` seconds (empty: none), as a
+    /// CPU step computes it: the wind of `field` at time `t` (seconds) around the cloth's
+    /// current positions, less the velocity of the motion carried into the step (see
+    /// `Simulation::carried_velocity`).
+    pub fn step_air(&mut self, field: Option<&WindField>, t: f64, dt: f32, out: &mut Vec<Vec4>) {
+        self.sim.step_air(field, t, dt, out);
     }
 
     /// How the mesh's vertices map onto particles, the drawn triangles and the shading.

@@ -415,7 +415,7 @@ pub(super) fn sync_cloths(
             ),
         );
         if let Some(carry) = cs.carry {
-            cs.sim.state_mut().carry(&carry);
+            cs.sim.carry(&carry);
         }
         // A changed (or still refused) config is applied with the features; otherwise only
         // changed features are.

@@ -51,14 +51,19 @@ pub(super) fn write_back(
         cloth.drawn_shift = shift;
         let state = cloth.sim.state();
         if shift != 0.0 {
+            // Each vertex's velocity with the motion carried into the step (`ClothInertia`),
+            // which moved it too.
+            let carried = cloth.sim.carried_velocity();
             cloth.drawn.clear();
-            cloth.drawn.extend(
-                state
-                    .positions
-                    .iter()
-                    .zip(&state.velocities)
-                    .map(|(p, v)| ClothSmoothing::place(*p, *v, shift)),
-            );
+            cloth
+                .drawn
+                .extend(state.positions.iter().zip(&state.velocities).map(|(p, v)| {
+                    let v = match carried {
+                        Some(c) => *v + c.at(p.truncate()).extend(0.0),
+                        None => *v,
+                    };
+                    ClothSmoothing::place(*p, v, shift)
+                }));
         }
         let particles = if shift == 0.0 {
             &cloth.sim.state().positions

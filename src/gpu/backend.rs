@@ -652,12 +652,10 @@ pub(crate) fn queue_gpu_steps(
                 .map_or_else(MotionTargets::default, |m| MotionTargets::of(&m)),
         );
         cloth.motion_step_taken();
-        match wind.as_deref() {
-            Some(w) if !w.field.is_empty() && !cloth.simulation().params().air.is_none() => {
-                cloth.sample_air(&w.field, w.time + 0.5 * f64::from(dt), &mut g.air);
-            }
-            _ => g.air.clear(),
-        }
+        let (field, t) = wind
+            .as_deref()
+            .map_or((None, 0.0), |w| (Some(&w.field), w.time));
+        cloth.step_air(field, t + 0.5 * f64::from(dt), dt, &mut g.air);
     }
 }
 

@@ -3,12 +3,12 @@
 //! buffer, with no copy through the CPU.
 
 use bytemuck::{Pod, Zeroable};
-use glam::{Affine3A, Mat4, Vec2};
+use glam::{Affine3A, Mat3, Mat4, Vec2, Vec3};
 use wgpu::util::DeviceExt;
 
 use super::append_lists;
 use super::kernels::{storage_entry, uniform_entry};
-use crate::solver::Weld;
+use crate::solver::{CarriedVelocity, Weld};
 
 /// The WGSL of the mesh-writing kernel.
 pub const MESH_WGSL: &str = include_str!("mesh.wgsl");
@@ -35,6 +35,11 @@ struct MeshParams {
     normal_x: [f32; 4],
     normal_y: [f32; 4],
     normal_z: [f32; 4],
+    carry_x: [f32; 4],
+    carry_y: [f32; 4],
+    carry_z: [f32; 4],
+    carry_pivot: [f32; 4],
+    carry_along: [f32; 4],
     base: u32,
     stride: u32,
     normal_offset: u32,
@@ -56,13 +61,16 @@ struct MeshParams {
 }
 
 /// A cloth drawn along its velocities ([`ClothSmoothing`](crate::cloth::ClothSmoothing)):
-/// each vertex at `x + seconds·v`, `v` read from the state buffer.
+/// each vertex at `x + seconds·v`, `v` read from the state buffer plus the velocity of the
+/// motion carried into the step at `x`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DrawShift {
     /// The cloth's first velocity in the state buffer, in `vec4`s from its start.
     pub velocity_base: u32,
     /// How far along its velocity each vertex is drawn, in seconds.
     pub seconds: f32,
+    /// The motion carried into the last step (`Simulation::carried_velocity`), if any.
+    pub carried: Option<CarriedVelocity>,
 }
 
 /// Where a mesh keeps positions and normals in its interleaved vertex buffer.
@@ -444,11 +452,21 @@ impl MeshWriter {
         };
         let normal = linear.transpose();
         let floats = self.layout.stride / 4;
+        let carried = shift.and_then(|s| s.carried).unwrap_or(CarriedVelocity {
+            turn: Mat3::ZERO,
+            pivot: Vec3::ZERO,
+            along: Vec3::ZERO,
+        });
         let p = MeshParams {
             to_local: to_local.to_cols_array(),
             normal_x: normal.x_axis.extend(0.0).to_array(),
             normal_y: normal.y_axis.extend(0.0).to_array(),
             normal_z: normal.z_axis.extend(0.0).to_array(),
+            carry_x: carried.turn.x_axis.extend(0.0).to_array(),
+            carry_y: carried.turn.y_axis.extend(0.0).to_array(),
+            carry_z: carried.turn.z_axis.extend(0.0).to_array(),
+            carry_pivot: carried.pivot.extend(0.0).to_array(),
+            carry_along: carried.along.extend(0.0).to_array(),
             base: first * floats + self.layout.position / 4,
             stride: floats,
             normal_offset: (self.layout.normal as i64 - self.layout.position as i64) as u32 / 4,

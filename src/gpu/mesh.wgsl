@@ -23,6 +23,14 @@ struct MeshParams {
     normal_x: vec4<f32>,
     normal_y: vec4<f32>,
     normal_z: vec4<f32>,
+    // the velocity of the motion carried into the step (`CarriedVelocity`: columns of
+    // `turn`, the carried pivot, `along`), added to each vertex's own when it is drawn along
+    // its velocity; all zero for none
+    carry_x: vec4<f32>,
+    carry_y: vec4<f32>,
+    carry_z: vec4<f32>,
+    carry_pivot: vec4<f32>,
+    carry_along: vec4<f32>,
     // first float of this mesh in the slab, floats per vertex, float offset of the normal
     base: u32,
     stride: u32,
@@ -66,13 +74,16 @@ fn torn(d: u32) -> bool {
     return M.dead_at != 0xffffffffu && dead_flags[M.dead_at + topo[M.cloth_tri_at + d]] != 0u;
 }
 
-// Where particle `topo[v]` is drawn: its position, or `x + shift·v` (`ClothSmoothing::place`).
+// Where particle `topo[v]` is drawn: its position, or `x + shift·v` (`ClothSmoothing::place`),
+// `v` its velocity plus the carried motion's at `x` (`CarriedVelocity::at`).
 fn at(v: u32) -> vec3<f32> {
     let p = particles[M.particle_base + topo[v]].xyz;
     if M.shift == 0.0 {
         return p;
     }
-    return p + particles[M.velocity_base + topo[v]].xyz * M.shift;
+    let d = p - M.carry_pivot.xyz;
+    let carried = M.carry_x.xyz * d.x + M.carry_y.xyz * d.y + M.carry_z.xyz * d.z + M.carry_along.xyz;
+    return p + (particles[M.velocity_base + topo[v]].xyz + carried) * M.shift;
 }
 
 fn uv(t: u32, corner: u32) -> vec2<f32> {

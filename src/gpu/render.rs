@@ -36,9 +36,10 @@ use super::mesh::{DrawShift, MeshKernel, MeshWriter};
 use super::world::{
     ClothFrame, GpuFrame, GpuWorld, MotionTargets, StepColliders, TornFlags, sum_impulses,
 };
+use crate::cloth::ClothSim;
 use crate::cloth::ClothSmoothing;
 use crate::foundation::ClothSchedule;
-use crate::solver::Carry;
+use crate::solver::{CarriedVelocity, Carry};
 
 /// The compiled kernels (render world).
 #[derive(Resource)]
@@ -62,6 +63,8 @@ struct ExtractedGpuCloth {
     transform: bevy::math::Affine3A,
     /// Seconds along their velocities the vertices are drawn ([`ClothSmoothing`]).
     shift: f32,
+    /// The velocity of the motion carried into its last step.
+    carried: Option<CarriedVelocity>,
     /// Read positions and velocities back this frame.
     readback: bool,
 }
@@ -81,6 +84,7 @@ impl ExtractedGpuCloth {
             motion: Vec::new(),
             transform: transform.affine(),
             shift: 0.0,
+            carried: None,
             readback,
         }
     }
@@ -107,6 +111,7 @@ pub(crate) fn extract_gpu_cloths(
             Has<ClothReadback>,
             Has<Disabled>,
             Option<&ClothSmoothing>,
+            &ClothSim,
         )>,
     >,
     leaving: Extract<Query<(Entity, &ClothLeavingGpu, &GlobalTransform), Allow<Disabled>>>,
@@ -118,7 +123,7 @@ pub(crate) fn extract_gpu_cloths(
     out.cloths.clear();
     out.queue = queue.clone();
     let overstep = ClothSchedule::overstep(schedule.as_deref(), fixed.as_deref());
-    for (entity, g, transform, readback, disabled, smoothing) in &cloths {
+    for (entity, g, transform, readback, disabled, smoothing, sim) in &cloths {
         if disabled {
             // Disabled (a pooled character): it keeps its place and its state in its world,
             // not stepped, not read back, until it is enabled again. Left out, its world
@@ -148,6 +153,7 @@ pub(crate) fn extract_gpu_cloths(
                 (Some(s), Some((step, fraction))) => s.shift(step, fraction),
                 _ => 0.0,
             },
+            carried: sim.simulation().carried_velocity(),
             readback,
         });
     }
@@ -194,6 +200,8 @@ struct WriterEntry {
     transform: bevy::math::Affine3A,
     /// Seconds along their velocities the vertices are drawn.
     shift: f32,
+    /// The velocity of the motion carried into the last step.
+    carried: Option<CarriedVelocity>,
     /// Whether the mesh's indices are 16-bit.
     u16_indices: bool,
 }
@@ -404,6 +412,7 @@ pub(crate) fn prepare_gpu_worlds(
                     mesh: upload.mesh,
                     transform: x.transform,
                     shift: x.shift,
+                    carried: x.carried,
                     u16_indices: upload.u16_indices,
                 },
             );
@@ -411,6 +420,7 @@ pub(crate) fn prepare_gpu_worlds(
         if let Some(w) = worlds.writers.get_mut(&x.entity) {
             w.transform = x.transform;
             w.shift = x.shift;
+            w.carried = x.carried;
         }
     }
 }
@@ -456,6 +466,7 @@ pub(crate) fn run_gpu_worlds(
                     (writer.shift != 0.0).then(|| DrawShift {
                         velocity_base: (w.world.velocities_range(i).0 / 16) as u32,
                         seconds: writer.shift,
+                        carried: writer.carried,
                     }),
                     dead_at.map(|at| (w.world.scratch_buffer(), at)),
                 );

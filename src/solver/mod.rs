@@ -85,10 +85,11 @@ pub use metrics::{StrainStats, edge_strain, position_distance};
 pub use parallel::{Parallel, Serial, Workers};
 pub use scene::HangingCloth;
 pub use step::{
-    Carry, ClothState, DEFAULT_TELEPORT_DISTANCE, Environment, Features, LabScratch,
-    MAX_SETTLE_STEPS, ManyItem, Pin, SETTLE_SPEED, SETTLE_STEPS, Simulation, Sleep, SolverError,
-    SolverParams, StateError, StepInput, StepReport, StepScratch, Stretch, WAKE_AIR_SPEED,
-    WAKE_DISTANCE, is_teleport, lab_step, overstretched_edges, step, step_many, teleport_offset,
+    CarriedVelocity, Carry, ClothState, DEFAULT_TELEPORT_DISTANCE, Environment, Features,
+    LabScratch, MAX_SETTLE_STEPS, ManyItem, Pin, SETTLE_SPEED, SETTLE_STEPS, Simulation, Sleep,
+    SolverError, SolverParams, StateError, StepInput, StepReport, StepScratch, Stretch,
+    WAKE_AIR_SPEED, WAKE_DISTANCE, is_teleport, lab_step, overstretched_edges, step, step_many,
+    teleport_offset,
 };
 
 #[cfg(test)]

@@ -363,13 +363,14 @@ fn walk(mut walker: ResMut<Walker>, mut transforms: Query<&mut Transform>, time:
 }
 
 /// A 0.5 m cape hung from a character walking at [`WALK_SPEED`] along x (moved in
-/// `FixedUpdate`), its top row pinned to the character; frames of 1/144 s over the 60 Hz
-/// fixed step. Returns the cape, its pinned vertex 0 and that vertex's offset in the
-/// character's frame.
+/// `FixedUpdate`), its top row pinned to the character, `glued` to it (`ClothInertia` 0: the
+/// walk carried, not felt) or not; frames of 1/144 s over the 60 Hz fixed step. Returns the
+/// cape, its pinned vertex 0 and that vertex's offset in the character's frame.
 pub fn smoothed_cape(
     app: &mut App,
     smoothing: Option<ClothSmoothing>,
     backend: Option<bevy_cloth::gpu::ClothBackend>,
+    glued: bool,
 ) -> (Entity, u32, Vec3) {
     app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
         1.0 / 144.0,
@@ -407,6 +408,9 @@ pub fn smoothed_cape(
     if let Some(b) = backend {
         cape.insert(b);
     }
+    if glued {
+        cape.insert(ClothInertia::new(0.0).relative_to(character));
+    }
     (cape.id(), grid.index(0, 0), rest[grid.index(0, 0) as usize])
 }
 
@@ -438,4 +442,62 @@ pub fn smoothing_errors(
         extrapolated = extrapolated.max(p.distance(at(now + (now - before) * fraction)));
     }
     (interpolated, extrapolated)
+}
+
+/// The car of [`flag_on_a_car`].
+#[derive(Resource)]
+struct Car(Entity);
+
+/// Drives the [`Car`] at 20 m/s along x in `FixedUpdate`.
+fn drive(car: Res<Car>, mut transforms: Query<&mut Transform>, time: Res<Time>) {
+    if let Ok(mut t) = transforms.get_mut(car.0) {
+        t.translation.x += 20.0 * time.delta_secs();
+    }
+}
+
+/// A 0.6 × 0.4 m flag (default cloth, no wind) pinned along its hoist to a car driving at
+/// 20 m/s along x, with `ClothInertia::new(inertia)` relative to the car if given, on
+/// `backend` (read back) if given; after 3 s, where its fly edge is from its hoist (means).
+/// Streaming in the airflow the fly edge is about 0.6 m behind (−x); hanging limp it is
+/// about 0.4 m below.
+pub fn flag_on_a_car(
+    app: &mut App,
+    inertia: Option<f32>,
+    backend: Option<bevy_cloth::gpu::ClothBackend>,
+) -> Vec3 {
+    let grid = Grid::new(16, 11, 0.6, 0.4);
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    let at = Transform::from_xyz(0.0, 2.0, 0.0)
+        .with_rotation(Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2));
+    let car = app.world_mut().spawn(at).id();
+    app.insert_resource(Car(car))
+        .add_systems(FixedUpdate, drive);
+    let rest = grid.positions();
+    let hoist: Vec<u32> = (0..11).map(|j| grid.index(0, j)).collect();
+    let fly: Vec<u32> = (0..11).map(|j| grid.index(15, j)).collect();
+    let pins = hoist
+        .iter()
+        .map(|&v| ClothPin {
+            vertex: v,
+            anchor: PinAnchor::Entity {
+                entity: car,
+                offset: rest[v as usize],
+            },
+        })
+        .collect();
+    let mut flag = app
+        .world_mut()
+        .spawn((Mesh3d(mesh), at, Cloth::default(), ClothPins(pins)));
+    if let Some(i) = inertia {
+        flag.insert(ClothInertia::new(i).relative_to(car));
+    }
+    if let Some(b) = backend {
+        flag.insert((b, bevy_cloth::gpu::ClothReadback));
+    }
+    let flag = flag.id();
+    run(app, 180);
+    mean_of(app, flag, &fly) - mean_of(app, flag, &hoist)
 }

@@ -85,6 +85,27 @@ impl Carry {
                 .is_none_or(|s| s.center.is_finite() && s.linear.is_finite())
     }
 
+    /// The velocity the rigid part of this motion (its rotation and translation; a stretch
+    /// is a change of the cloth's size, not a motion through the air) gives the points it
+    /// moves, spread over a step of `dt` seconds; `None` for no motion, a non-finite one or
+    /// a step that is not positive.
+    #[must_use]
+    pub fn velocity(&self, dt: f32) -> Option<CarriedVelocity> {
+        if !(self.is_finite() && dt.is_finite() && dt > 0.0) {
+            return None;
+        }
+        let back = Mat3::from_quat(self.rotation).transpose();
+        let v = CarriedVelocity {
+            turn: (Mat3::IDENTITY - back) * (1.0 / dt),
+            pivot: self.pivot + self.translation,
+            along: self.translation / dt,
+        };
+        (v.turn.is_finite()
+            && v.along.is_finite()
+            && (v.turn != Mat3::ZERO || v.along != Vec3::ZERO))
+            .then_some(v)
+    }
+
     /// Where `p` goes.
     #[must_use]
     pub fn apply(&self, p: Vec3) -> Vec3 {
@@ -133,6 +154,30 @@ impl Carry {
 #[inline]
 fn rotate(m: &Mat3, p: Vec3) -> Vec3 {
     m.x_axis * p.x + m.y_axis * p.y + m.z_axis * p.z
+}
+
+/// The velocity a carried motion gives the points it moves over a step ([`Carry::velocity`]):
+/// at a point's carried position `y`, `(y − C⁻¹(y)) / dt`, which for a rotation `R` about
+/// `p` then a translation `t` is `turn·(y − p − t) + along` with `turn = (I − Rᵀ)/dt` and
+/// `along = t / dt` (differences from the carried pivot `p + t`, small near the cloth even
+/// far from the origin).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CarriedVelocity {
+    /// `(I − Rᵀ) / dt`.
+    pub turn: Mat3,
+    /// Where the rotation's pivot was carried to.
+    pub pivot: Vec3,
+    /// The velocity at the carried pivot, `t / dt`.
+    pub along: Vec3,
+}
+
+impl CarriedVelocity {
+    /// The velocity at the carried position `y`.
+    #[must_use]
+    #[inline]
+    pub fn at(&self, y: Vec3) -> Vec3 {
+        rotate(&self.turn, y - self.pivot) + self.along
+    }
 }
 
 impl ClothState {
@@ -189,6 +234,51 @@ mod tests {
             Carry::unfelt((Vec3::NAN, Quat::IDENTITY), to, 0.0, 0.0),
             None
         );
+    }
+
+    /// The carried velocity at a carried point is how far the carry moved it over the step:
+    /// `(C(x) − x) / dt` at `y = C(x)`, for a turn, a move and both (within the f32 rounding
+    /// of the positions' difference over `dt`); a stretch alone moves nothing through the air.
+    #[test]
+    fn the_carried_velocity_is_the_carried_points_travel_over_the_step() {
+        let dt = 1.0 / 60.0;
+        let turn = Carry::unfelt(
+            (Vec3::new(1.0, 2.0, 3.0), Quat::IDENTITY),
+            (Vec3::new(1.3, 2.0, 2.6), Quat::from_rotation_y(0.4)),
+            0.0,
+            0.0,
+        )
+        .unwrap();
+        let cases = [
+            turn,
+            Carry {
+                translation: Vec3::ZERO,
+                ..turn
+            },
+            Carry {
+                rotation: Quat::IDENTITY,
+                ..turn
+            },
+        ];
+        for carry in cases {
+            let v = carry.velocity(dt).unwrap();
+            for x in [Vec3::new(1.5, 1.0, 3.2), Vec3::new(0.2, 2.5, 2.0)] {
+                let y = carry.apply(x);
+                let want = (y - x) / dt;
+                let bound = 8.0 * f32::EPSILON * (x.abs().max_element() + 1.0) / dt;
+                assert!(
+                    (v.at(y) - want).length() < bound,
+                    "{carry:?} at {x}: {} against {want}",
+                    v.at(y)
+                );
+            }
+        }
+        let stretch = Carry::IDENTITY.then_stretch(Stretch {
+            center: Vec3::ONE,
+            linear: Mat3::from_diagonal(Vec3::splat(2.0)),
+        });
+        assert_eq!(stretch.velocity(dt), None);
+        assert_eq!(turn.velocity(0.0), None);
     }
 
     #[test]

@@ -18,7 +18,7 @@ pub(crate) mod substeps;
 mod tear;
 mod teleport;
 
-pub use inertia::{Carry, Stretch};
+pub use inertia::{CarriedVelocity, Carry, Stretch};
 pub use lab::{LabScratch, lab_step};
 pub use many::{ManyItem, step_many};
 pub use params::{Features, SolverParams};

@@ -3,6 +3,7 @@
 
 use glam::{Vec3, Vec4};
 
+use super::inertia::{CarriedVelocity, Carry};
 use super::params::{Features, SolverParams};
 use super::sleep::SleepState;
 use super::state::{ClothState, StateError};
@@ -79,6 +80,10 @@ pub struct Simulation {
     air_velocities: Vec<Vec4>,
     sleep: SleepState,
     motion: Option<Motion>,
+    /// The motion carried into the coming step ([`Simulation::carry`]), not yet stepped.
+    carried: Option<Carry>,
+    /// The velocity of the motion carried into the last step.
+    carried_velocity: Option<CarriedVelocity>,
 }
 
 /// A cloth's motion targets (see [`Simulation::set_motion_targets`]).
@@ -191,6 +196,8 @@ impl Simulation {
             air_velocities: Vec::new(),
             sleep: SleepState::default(),
             motion: None,
+            carried: None,
+            carried_velocity: None,
         })
     }
 
@@ -212,7 +219,9 @@ impl Simulation {
             .wind
             .filter(|w| !w.is_empty() && !self.params.air.is_none());
         let held = self.motion.is_some();
-        if held {
+        // Carried through the air, a cloth with aerodynamics feels the air move past it.
+        let carried_through_air = self.carried.is_some() && !self.params.air.is_none();
+        if held || carried_through_air {
             self.sleep.wake();
         }
         if self.sleep.asleep {
@@ -245,16 +254,9 @@ impl Simulation {
             self.settle_speed
                 .extend(self.state.velocities.iter().map(|v| v.length()));
         }
-        let wind = env.wind.filter(|w| !w.is_empty());
-        if let Some(field) = wind {
-            // The air around the cloth at the middle of the step, on a coarse grid.
-            self.air_grid.air_velocities(
-                field,
-                &self.state.positions,
-                env.time + 0.5 * f64::from(dt),
-                &mut self.air_velocities,
-            );
-        }
+        let mut air = core::mem::take(&mut self.air_velocities);
+        self.step_air(env.wind, env.time + 0.5 * f64::from(dt), dt, &mut air);
+        self.air_velocities = air;
         step(
             &mut self.state,
             &self.topology,
@@ -263,11 +265,7 @@ impl Simulation {
             dt,
             StepInput {
                 colliders: env.colliders,
-                air_velocities: if wind.is_some() {
-                    &self.air_velocities
-                } else {
-                    &[]
-                },
+                air_velocities: &self.air_velocities,
                 self_collision: self.features.self_collision,
                 tethers: self.tethers.as_ref().map(|(_, t)| t),
                 motion: self
@@ -446,11 +444,56 @@ impl Simulation {
         }
     }
 
-    /// The air's velocity at each vertex at time `t` (seconds), sampled from `field` around
-    /// the positions the cloth has now (the GPU backend's air input).
-    pub(crate) fn sample_air(&mut self, field: &WindField, t: f64, out: &mut Vec<Vec4>) {
-        self.air_grid
-            .air_velocities(field, &self.state.positions, t, out);
+    /// The air each vertex meets over the coming step of `dt` seconds, into `out` (the GPU
+    /// backend's air input; empty for still air met by nothing carried, or a cloth without
+    /// aerodynamics): the wind sampled at time `t` (seconds) from `field` around the
+    /// positions the cloth has now, less the velocity of the motion carried into the step
+    /// ([`Self::carry`]), which the cloth does not feel as inertia but is moved through the
+    /// air by (a flag on a car, glued to it by `ClothInertia`, still streams in the car's
+    /// airflow). Takes the carried motion; its velocity stays readable
+    /// ([`Self::carried_velocity`]).
+    pub(crate) fn step_air(
+        &mut self,
+        field: Option<&WindField>,
+        t: f64,
+        dt: f32,
+        out: &mut Vec<Vec4>,
+    ) {
+        let carried = self.carried.take().and_then(|c| c.velocity(dt));
+        self.carried_velocity = carried;
+        out.clear();
+        if self.params.air.is_none() {
+            return;
+        }
+        let positions = &self.state.positions;
+        if let Some(field) = field.filter(|w| !w.is_empty()) {
+            // The air around the cloth at the middle of the step, on a coarse grid.
+            self.air_grid.air_velocities(field, positions, t, out);
+        }
+        if let Some(v) = carried {
+            if out.is_empty() {
+                out.resize(positions.len(), Vec4::ZERO);
+            }
+            for (a, p) in out.iter_mut().zip(positions) {
+                *a -= v.at(p.truncate()).extend(0.0);
+            }
+        }
+    }
+
+    /// Moves the whole cloth by `carry` (see [`ClothState::carry`]): motion it does not feel
+    /// as inertia. Its air in the coming step moves against that motion (see
+    /// [`Self::carried_velocity`]).
+    pub fn carry(&mut self, carry: &Carry) {
+        self.state.carry(carry);
+        self.carried = carry.is_finite().then_some(*carry);
+    }
+
+    /// The velocity of the motion carried into the last step ([`Self::carry`]): each vertex
+    /// moved that fast besides its own velocity (what a cloth drawn along its velocities adds
+    /// to them). `None` when nothing was carried.
+    #[must_use]
+    pub fn carried_velocity(&self) -> Option<CarriedVelocity> {
+        self.carried_velocity
     }
 
     /// Whether the cloth is asleep: at rest, and skipped by [`Self::step_in`] until something
