@@ -18,6 +18,7 @@ use bevy::prelude::*;
 
 use super::{ClothSim, ClothSmoothing, ClothSteppedElsewhere};
 use crate::foundation::ClothSchedule;
+use crate::solver::ClothState;
 
 /// Copies the moved cloths' state into their meshes (torn triangles leave the index buffer,
 /// kept in the mesh's own index format; the vertex buffer keeps its size). Cloths stepped
@@ -65,17 +66,14 @@ pub(super) fn write_back(
                     ClothSmoothing::place(*p, v, shift)
                 }));
         }
-        let particles = if shift == 0.0 {
-            &cloth.sim.state().positions
-        } else {
-            &cloth.drawn
-        };
-        cloth.binding.update_shading(particles);
+        cloth
+            .binding
+            .update_shading(drawn(cloth.sim.state(), &cloth.drawn, shift));
         let Some(mut mesh) = meshes.get_mut(&cloth.mesh) else {
             continue;
         };
         cloth.write_indices(&mut mesh);
-        let particles = drawn(cloth, shift);
+        let particles = drawn(cloth.sim.state(), &cloth.drawn, shift);
         let binding = &cloth.binding;
         let affine = gt.affine();
         let to_local = affine.inverse();
@@ -126,11 +124,11 @@ pub(super) fn write_back(
 }
 
 /// The particles a cloth is drawn from: its state's positions, or with a shift the shifted
-/// ones the write-back made.
-fn drawn(cloth: &ClothSim, shift: f32) -> &[Vec4] {
+/// ones the write-back made (`shifted`).
+fn drawn<'a>(state: &'a ClothState, shifted: &'a [Vec4], shift: f32) -> &'a [Vec4] {
     if shift == 0.0 {
-        &cloth.sim.state().positions
+        &state.positions
     } else {
-        &cloth.drawn
+        shifted
     }
 }

@@ -230,6 +230,10 @@ impl Simulation {
                 .sleep
                 .should_wake(&self.state.pins, env.colliders, felt_wind, t)
             {
+                // Asleep, it met no air (a carry with aerodynamics wakes it): nothing carried
+                // is kept for the air or the drawing.
+                self.carried = None;
+                self.carried_velocity = None;
                 return StepReport {
                     asleep: true,
                     ..Default::default()
