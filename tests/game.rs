@@ -2701,3 +2701,64 @@ fn a_flag_glued_to_a_car_by_its_inertia_streams_in_the_cars_airflow() {
         assert!(edge.y > -0.15, "{name}: the flag hangs ({edge})");
     }
 }
+
+/// A mesh of triangle strips (a 9 × 7 grid, one strip per row of quads, restarted with
+/// `u16::MAX`) hangs exactly as the same triangles given as a list (written out by hand
+/// here: Vulkan's strip order, every other triangle turned): the cloth reads a strip as its
+/// triangles and draws its own copy as that list. Before, a strip was refused.
+#[test]
+fn a_triangle_strip_mesh_hangs_as_its_triangle_list() {
+    let (cols, rows) = (9u32, 7u32);
+    let grid = Grid::new(cols, rows, 0.8, 0.6);
+    let positions: Vec<[f32; 3]> = grid.positions().iter().map(|p| p.to_array()).collect();
+    let (mut strip, mut list) = (Vec::new(), Vec::new());
+    for j in 0..rows - 1 {
+        let (t, b) = (|i: u32| j * cols + i, |i: u32| (j + 1) * cols + i);
+        for i in 0..cols {
+            strip.extend([t(i) as u16, b(i) as u16]);
+        }
+        strip.push(u16::MAX);
+        for i in 0..cols - 1 {
+            list.extend([t(i), b(i), t(i + 1)]);
+            list.extend([t(i + 1), b(i), b(i + 1)]);
+        }
+    }
+    let mesh = |topology, indices| {
+        Mesh::new(topology, RenderAssetUsages::default())
+            .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions.clone())
+            .with_inserted_indices(indices)
+    };
+    let mut app = app();
+    let mut spawn = |m: Mesh| {
+        let m = add_mesh(&mut app, m);
+        app.world_mut()
+            .spawn((
+                Mesh3d(m),
+                Transform::from_xyz(0.0, 2.0, 0.0),
+                Cloth::default(),
+                ClothPins::rest([grid.index(0, 0), grid.index(cols - 1, 0)]),
+            ))
+            .id()
+    };
+    let strip_cloth = spawn(mesh(PrimitiveTopology::TriangleStrip, Indices::U16(strip)));
+    let list_cloth = spawn(mesh(
+        PrimitiveTopology::TriangleList,
+        Indices::U32(list.clone()),
+    ));
+    run(&mut app, 90);
+    assert!(app.world().get::<ClothInvalid>(strip_cloth).is_none());
+    let drawn = mesh_of(&app, strip_cloth);
+    assert_eq!(drawn.primitive_topology(), PrimitiveTopology::TriangleList);
+    let indices: Vec<u32> = drawn.indices().unwrap().iter().map(|i| i as u32).collect();
+    assert_eq!(indices, list, "drawn as the list of its triangles");
+    let (a, b) = (sim(&app, strip_cloth), sim(&app, list_cloth));
+    assert_eq!(
+        a.simulation().state().positions,
+        b.simulation().state().positions,
+        "the strip hangs as the list does"
+    );
+    assert!(
+        a.simulation().state().positions[grid.index(4, 6) as usize].y < 1.7,
+        "and it hangs"
+    );
+}

@@ -2106,3 +2106,62 @@ fn a_gpu_flag_glued_to_a_car_by_its_inertia_streams_in_the_cars_airflow() {
         "the GPU flag streams unlike the CPU's: {gpu} against {cpu}"
     );
 }
+
+/// A triangle-strip mesh on the GPU: read as the list of its triangles, its own copy drawn as
+/// that list (16-bit indices kept), it runs on the GPU and hangs exactly as the same
+/// triangles given as a list beside it in the same world (their vertex slabs equal).
+#[test]
+fn a_triangle_strip_mesh_runs_on_the_gpu_as_its_list() {
+    use bevy::asset::RenderAssetUsages;
+    use bevy::mesh::{Indices, PrimitiveTopology};
+    if common::gpu_or_skip("a_triangle_strip_mesh_runs_on_the_gpu_as_its_list").is_none() {
+        return;
+    }
+    let (cols, rows) = (9u32, 7u32);
+    let grid = Grid::new(cols, rows, 0.8, 0.6);
+    let positions: Vec<[f32; 3]> = grid.positions().iter().map(|p| p.to_array()).collect();
+    let (mut strip, mut list) = (Vec::new(), Vec::new());
+    for j in 0..rows - 1 {
+        let (t, b) = (|i: u32| j * cols + i, |i: u32| (j + 1) * cols + i);
+        for i in 0..cols {
+            strip.extend([t(i) as u16, b(i) as u16]);
+        }
+        strip.push(u16::MAX);
+        for i in 0..cols - 1 {
+            list.extend([t(i), b(i), t(i + 1)].map(|v| v as u16));
+            list.extend([t(i + 1), b(i), b(i + 1)].map(|v| v as u16));
+        }
+    }
+    let mut app = render_app_with(ClothPlugins::default(), false);
+    let mut spawn = |topology, indices: Vec<u16>| {
+        let mesh = Mesh::new(topology, RenderAssetUsages::default())
+            .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions.clone())
+            .with_inserted_indices(Indices::U16(indices));
+        let mesh = app.world_mut().resource_mut::<Assets<Mesh>>().add(mesh);
+        app.world_mut()
+            .spawn((
+                Mesh3d(mesh),
+                Transform::from_xyz(0.0, 2.0, 0.0),
+                Cloth::default(),
+                ClothPins::rest([grid.index(0, 0), grid.index(cols - 1, 0)]),
+                ClothBackend::Gpu,
+            ))
+            .id()
+    };
+    let strip_cloth = spawn(PrimitiveTopology::TriangleStrip, strip);
+    let list_cloth = spawn(PrimitiveTopology::TriangleList, list);
+    common::run(&mut app, 60);
+    assert!(in_use(&app, strip_cloth).gpu, "the strip runs on the GPU");
+    let drawn = |e: Entity| {
+        let handle = app.world().get::<Mesh3d>(e).unwrap().0.clone();
+        let layout = app.world().resource::<Assets<Mesh>>().get(&handle).unwrap();
+        assert_eq!(layout.primitive_topology(), PrimitiveTopology::TriangleList);
+        positions_on_the_gpu(&app, handle.id(), layout).expect("on the GPU")
+    };
+    let (a, b) = (drawn(strip_cloth), drawn(list_cloth));
+    assert_eq!(a, b, "the strip hangs as the list does");
+    assert!(
+        a[grid.index(4, 6) as usize].y < -0.3,
+        "and it hangs (local y)"
+    );
+}

@@ -10,7 +10,7 @@ use crate::solver::{Grid, MeshAttributes, TopologyError};
 /// Why a mesh cannot be read.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum MeshError {
-    /// The mesh is not a triangle list (the topology found is given).
+    /// The mesh is neither a triangle list nor a triangle strip (the topology found is given).
     NotTriangleList(String),
     /// The mesh has no `POSITION` attribute.
     NoPositions,
@@ -27,7 +27,9 @@ pub enum MeshError {
 impl core::fmt::Display for MeshError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            MeshError::NotTriangleList(t) => write!(f, "mesh topology is {t}, not a triangle list"),
+            MeshError::NotTriangleList(t) => {
+                write!(f, "mesh topology is {t}, not a triangle list or strip")
+            }
             MeshError::NoPositions => write!(f, "mesh has no POSITION attribute"),
             MeshError::PositionFormat(t) => write!(f, "mesh positions are {t}, not Float32x3"),
             MeshError::PartialTriangle(n) => write!(
@@ -74,19 +76,19 @@ impl MeshData {
     }
 }
 
-/// Reads what the solver needs from `mesh`.
+/// Reads what the solver needs from `mesh`. A triangle strip is read as the list of its
+/// triangles ([`strip_triangles`]).
 ///
 /// # Errors
-/// [`MeshError`] if the mesh is not a triangle list, its data has been moved to the render
-/// world, it lacks `Float32x3` positions, or it has no indices and a vertex count that is not
-/// a multiple of three.
+/// [`MeshError`] if the mesh is neither a triangle list nor a triangle strip, its data has
+/// been moved to the render world, it lacks `Float32x3` positions, or it is a list with no
+/// indices and a vertex count that is not a multiple of three.
 pub fn read_mesh(mesh: &Mesh) -> Result<MeshData, MeshError> {
-    if mesh.primitive_topology() != PrimitiveTopology::TriangleList {
-        return Err(MeshError::NotTriangleList(format!(
-            "{:?}",
-            mesh.primitive_topology()
-        )));
-    }
+    let strip = match mesh.primitive_topology() {
+        PrimitiveTopology::TriangleList => false,
+        PrimitiveTopology::TriangleStrip => true,
+        other => return Err(MeshError::NotTriangleList(format!("{other:?}"))),
+    };
     let positions: Vec<Vec3> = match mesh.try_attribute_option(Mesh::ATTRIBUTE_POSITION) {
         Err(_) => return Err(MeshError::NotInMainWorld),
         Ok(None) => return Err(MeshError::NoPositions),
@@ -118,7 +120,7 @@ pub fn read_mesh(mesh: &Mesh) -> Result<MeshData, MeshError> {
         Err(_) => return Err(MeshError::NotInMainWorld),
         // No index buffer (glTF allows it; Bevy's Fox has none): every three vertices are a
         // triangle. Welding then joins the copies each triangle has of its corners.
-        Ok(None) if !positions.len().is_multiple_of(3) => {
+        Ok(None) if !strip && !positions.len().is_multiple_of(3) => {
             return Err(MeshError::PartialTriangle(positions.len()));
         }
         Ok(None) => (
@@ -128,6 +130,17 @@ pub fn read_mesh(mesh: &Mesh) -> Result<MeshData, MeshError> {
         Ok(Some(Indices::U16(i))) => (i.iter().map(|&v| u32::from(v)).collect(), true),
         Ok(Some(Indices::U32(i))) => (i.clone(), false),
     };
+    let indices = if strip {
+        // The restart index of the buffer's format (all ones) begins a new strip.
+        let restart = match mesh.indices() {
+            Some(Indices::U16(_)) => u32::from(u16::MAX),
+            Some(Indices::U32(_)) => u32::MAX,
+            None => u32::MAX,
+        };
+        strip_triangles(&indices, restart)
+    } else {
+        indices
+    };
     Ok(MeshData {
         positions,
         uvs,
@@ -136,6 +149,28 @@ pub fn read_mesh(mesh: &Mesh) -> Result<MeshData, MeshError> {
         indices,
         u16_indices,
     })
+}
+
+/// The triangles of a triangle strip as a list, three indices a triangle, facing the way the
+/// GPU draws the strip: triangle `k` of a run is `(s[k], s[k+1], s[k+2])` for even `k` and
+/// `(s[k+1], s[k], s[k+2])` for odd `k`. `restart` (the index format's all-ones value) begins
+/// a new run; triangles with a repeated index (how strips are joined) are left out.
+#[must_use]
+pub fn strip_triangles(strip: &[u32], restart: u32) -> Vec<u32> {
+    let mut out = Vec::with_capacity(3 * strip.len().saturating_sub(2));
+    for run in strip.split(|&i| i == restart) {
+        for (k, w) in run.windows(3).enumerate() {
+            let t = if k % 2 == 0 {
+                [w[0], w[1], w[2]]
+            } else {
+                [w[1], w[0], w[2]]
+            };
+            if t[0] != t[1] && t[1] != t[2] && t[0] != t[2] {
+                out.extend(t);
+            }
+        }
+    }
+    out
 }
 
 /// A hash of everything in `mesh` (topology, every attribute, indices): an asset event that
@@ -228,6 +263,44 @@ mod tests {
             RenderAssetUsages::default(),
         )
         .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+    }
+
+    /// A strip's triangles alternate their corner order so that all face one way (as
+    /// Vulkan draws a strip); a restart index begins a new strip; the degenerate triangles
+    /// that join strips are left out. Expected lists written by hand.
+    #[test]
+    fn a_strip_is_read_as_its_triangles() {
+        assert_eq!(
+            strip_triangles(&[0, 1, 2, 3, 4], u32::MAX),
+            [0, 1, 2, 2, 1, 3, 2, 3, 4]
+        );
+        assert_eq!(
+            strip_triangles(&[0, 1, 2, 0xFFFF, 3, 4, 5, 6], 0xFFFF),
+            [0, 1, 2, 3, 4, 5, 5, 4, 6]
+        );
+        // Two strips joined by repeating 3 and 4: the four triangles with a repeat go.
+        assert_eq!(
+            strip_triangles(&[0, 1, 2, 3, 3, 4, 4, 5, 6], u32::MAX),
+            [0, 1, 2, 2, 1, 3, 4, 5, 6]
+        );
+        assert!(strip_triangles(&[0, 1], u32::MAX).is_empty());
+        // A mesh with a strip topology (no index buffer: 0, 1, 2, …) reads as that list;
+        // lines are still refused.
+        let with = |topology, n: usize| {
+            let positions: Vec<[f32; 3]> = (0..n).map(|i| [i as f32, 0.0, 0.0]).collect();
+            Mesh::new(topology, RenderAssetUsages::default())
+                .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+        };
+        let strip = with(PrimitiveTopology::TriangleStrip, 5);
+        assert_eq!(
+            read_mesh(&strip).unwrap().indices,
+            [0, 1, 2, 2, 1, 3, 2, 3, 4]
+        );
+        let lines = with(PrimitiveTopology::LineList, 4);
+        assert!(matches!(
+            read_mesh(&lines),
+            Err(MeshError::NotTriangleList(_))
+        ));
     }
 
     #[test]

@@ -15,7 +15,7 @@ mod pose;
 #[cfg(feature = "animation")]
 pub use animation::ClothAnimationPlugin;
 
-pub use mesh::{MeshData, MeshError, grid_mesh, read_mesh, try_grid_mesh};
+pub use mesh::{MeshData, MeshError, grid_mesh, read_mesh, strip_triangles, try_grid_mesh};
 pub(crate) use mesh::{mesh_fingerprint, modified_meshes};
 pub use pose::FixedPoses;
 
