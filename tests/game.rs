@@ -2645,10 +2645,8 @@ fn a_scene_of_a_running_cloth_spawns_it_from_the_users_mesh() {
 /// drawn as of the last step (the default) it is up to a step's walk (5 cm) off.
 #[test]
 fn a_smoothed_cape_is_drawn_where_its_character_is_drawn() {
-    let drawn = |app: &App, e: Entity| attr3(mesh_of(app, e), Mesh::ATTRIBUTE_POSITION);
-    let substeps = ClothConfig::default().substeps as f32;
-    // Positions up to about 5 m from the origin.
-    let rounding = 8.0 * substeps * f32::EPSILON * 5.0;
+    let drawn = common::drawn_on_the_cpu;
+    let rounding = common::smoothing_rounding();
     let mut app = app();
     let cape = common::smoothed_cape(&mut app, None, None, false);
     let (interpolated, extrapolated) = common::smoothing_errors(&mut app, cape, drawn);
@@ -2709,20 +2707,7 @@ fn a_flag_glued_to_a_car_by_its_inertia_streams_in_the_cars_airflow() {
 #[test]
 fn a_triangle_strip_mesh_hangs_as_its_triangle_list() {
     let (cols, rows) = (9u32, 7u32);
-    let grid = Grid::new(cols, rows, 0.8, 0.6);
-    let positions: Vec<[f32; 3]> = grid.positions().iter().map(|p| p.to_array()).collect();
-    let (mut strip, mut list) = (Vec::new(), Vec::new());
-    for j in 0..rows - 1 {
-        let (t, b) = (|i: u32| j * cols + i, |i: u32| (j + 1) * cols + i);
-        for i in 0..cols {
-            strip.extend([t(i) as u16, b(i) as u16]);
-        }
-        strip.push(u16::MAX);
-        for i in 0..cols - 1 {
-            list.extend([t(i), b(i), t(i + 1)]);
-            list.extend([t(i + 1), b(i), b(i + 1)]);
-        }
-    }
+    let (grid, positions, strip, list) = common::strip_grid(cols, rows);
     let mesh = |topology, indices| {
         Mesh::new(topology, RenderAssetUsages::default())
             .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions.clone())

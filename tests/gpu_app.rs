@@ -2053,8 +2053,7 @@ fn a_smoothed_gpu_cape_is_drawn_where_its_character_is_drawn() {
         let layout = app.world().resource::<Assets<Mesh>>().get(&handle).unwrap();
         positions_on_the_gpu(app, handle.id(), layout).expect("the cape is on the GPU")
     };
-    let substeps = ClothConfig::default().substeps as f32;
-    let rounding = 8.0 * substeps * f32::EPSILON * 5.0;
+    let rounding = common::smoothing_rounding();
     for (smoothing, want, glued) in [
         (None, None, false),
         (Some(ClothSmoothing::Interpolate), Some(0), false),
@@ -2118,20 +2117,8 @@ fn a_triangle_strip_mesh_runs_on_the_gpu_as_its_list() {
         return;
     }
     let (cols, rows) = (9u32, 7u32);
-    let grid = Grid::new(cols, rows, 0.8, 0.6);
-    let positions: Vec<[f32; 3]> = grid.positions().iter().map(|p| p.to_array()).collect();
-    let (mut strip, mut list) = (Vec::new(), Vec::new());
-    for j in 0..rows - 1 {
-        let (t, b) = (|i: u32| j * cols + i, |i: u32| (j + 1) * cols + i);
-        for i in 0..cols {
-            strip.extend([t(i) as u16, b(i) as u16]);
-        }
-        strip.push(u16::MAX);
-        for i in 0..cols - 1 {
-            list.extend([t(i), b(i), t(i + 1)].map(|v| v as u16));
-            list.extend([t(i + 1), b(i), b(i + 1)].map(|v| v as u16));
-        }
-    }
+    let (grid, positions, strip, list) = common::strip_grid(cols, rows);
+    let list: Vec<u16> = list.iter().map(|&v| v as u16).collect();
     let mut app = render_app_with(ClothPlugins::default(), false);
     let mut spawn = |topology, indices: Vec<u16>| {
         let mesh = Mesh::new(topology, RenderAssetUsages::default())

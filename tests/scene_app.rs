@@ -595,45 +595,19 @@ mod avian {
     /// it up to a step's walk (5 cm) off.
     #[test]
     fn a_smoothed_cape_on_an_interpolated_avian_body_is_drawn_with_it() {
-        let substeps = ClothConfig::default().substeps as f32;
-        let rounding = 8.0 * substeps * f32::EPSILON * 5.0;
         let mut worst = Vec::new();
         for smoothing in [None, Some(ClothSmoothing::Interpolate)] {
             let mut app = avian_app();
-            app.insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
-                std::time::Duration::from_secs_f64(1.0 / 144.0),
-            ));
-            let grid = Grid::new(8, 8, 0.5, 0.5);
-            let mesh = app
-                .world_mut()
-                .resource_mut::<Assets<Mesh>>()
-                .add(grid_mesh(&grid));
-            let at = Transform::from_xyz(0.0, 1.5, 0.0)
-                .with_rotation(Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2));
             let body = app
                 .world_mut()
                 .spawn((
                     RigidBody::Kinematic,
                     LinearVelocity(Vec3::new(3.0, 0.0, 0.0)),
                     TransformInterpolation,
-                    at,
+                    common::cape_pose(),
                 ))
                 .id();
-            let offset = grid.positions()[0];
-            let pins = ClothPins(vec![ClothPin {
-                vertex: 0,
-                anchor: PinAnchor::Entity {
-                    entity: body,
-                    offset,
-                },
-            }]);
-            let mut cape = app
-                .world_mut()
-                .spawn((Mesh3d(mesh), at, Cloth::default(), pins));
-            if let Some(s) = smoothing {
-                cape.insert(s);
-            }
-            let cape = cape.id();
+            let (cape, vertex, offset) = common::cape_on(&mut app, body, smoothing, None, false);
             let mut off = 0.0f32;
             for frame in 0..216 {
                 app.update();
@@ -645,26 +619,21 @@ mod avian {
                     .get::<GlobalTransform>(body)
                     .unwrap()
                     .transform_point(offset);
-                let handle = &w.get::<Mesh3d>(cape).unwrap().0;
-                let Some(bevy::mesh::VertexAttributeValues::Float32x3(p)) = w
-                    .resource::<Assets<Mesh>>()
-                    .get(handle)
-                    .unwrap()
-                    .attribute(Mesh::ATTRIBUTE_POSITION)
-                else {
-                    panic!("positions");
-                };
                 let drawn = w
                     .get::<GlobalTransform>(cape)
                     .unwrap()
-                    .transform_point(Vec3::from(p[0]));
+                    .transform_point(common::drawn_on_the_cpu(&app, cape)[vertex as usize]);
                 off = off.max(drawn.distance(drawn_body));
             }
             eprintln!("{smoothing:?}: the pinned corner {off} m from the drawn body");
             worst.push(off);
         }
         assert!(worst[0] > 0.03, "as stepped: {} m off", worst[0]);
-        assert!(worst[1] < rounding, "interpolated: {} m off", worst[1]);
+        assert!(
+            worst[1] < common::smoothing_rounding(),
+            "interpolated: {} m off",
+            worst[1]
+        );
     }
 }
 

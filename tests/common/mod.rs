@@ -362,12 +362,27 @@ fn walk(mut walker: ResMut<Walker>, mut transforms: Query<&mut Transform>, time:
     }
 }
 
-/// A 0.5 m cape hung from a character walking at [`WALK_SPEED`] along x (moved in
-/// `FixedUpdate`), its top row pinned to the character, `glued` to it (`ClothInertia` 0: the
-/// walk carried, not felt) or not; frames of 1/144 s over the 60 Hz fixed step. Returns the
-/// cape, its pinned vertex 0 and that vertex's offset in the character's frame.
-pub fn smoothed_cape(
+/// Where the capes of [`cape_on`] and their characters start: 1.5 m up, the grid turned
+/// upright (row 0 on top).
+pub fn cape_pose() -> Transform {
+    Transform::from_xyz(0.0, 1.5, 0.0)
+        .with_rotation(Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2))
+}
+
+/// The f32 rounding bound of the smoothing tests: a pin's velocity is a difference of
+/// positions (up to about 5 m from the origin) over a substep, 2 ε |x| / h, drawn along for
+/// at most a step (`substeps` substeps), with a factor 4 of slack for the other roundings.
+pub fn smoothing_rounding() -> f32 {
+    8.0 * ClothConfig::default().substeps as f32 * f32::EPSILON * 5.0
+}
+
+/// A 0.5 m cape at [`cape_pose`], its top row pinned to `character` (standing there),
+/// `glued` to it (`ClothInertia` 0: its motion carried, not felt) or not; frames of 1/144 s
+/// over the 60 Hz fixed step. Returns the cape, its pinned vertex 0 and that vertex's offset
+/// in the character's frame.
+pub fn cape_on(
     app: &mut App,
+    character: Entity,
     smoothing: Option<ClothSmoothing>,
     backend: Option<bevy_cloth::gpu::ClothBackend>,
     glued: bool,
@@ -380,15 +395,6 @@ pub fn smoothed_cape(
         .world_mut()
         .resource_mut::<Assets<Mesh>>()
         .add(grid_mesh(&grid));
-    let at = Transform::from_xyz(0.0, 1.5, 0.0)
-        .with_rotation(Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2));
-    let character = app.world_mut().spawn(at).id();
-    app.insert_resource(Walker {
-        entity: character,
-        before: 0.0,
-        now: 0.0,
-    })
-    .add_systems(FixedUpdate, walk);
     let rest = grid.positions();
     let pins = (0..8)
         .map(|i| ClothPin {
@@ -399,9 +405,9 @@ pub fn smoothed_cape(
             },
         })
         .collect();
-    let mut cape = app
-        .world_mut()
-        .spawn((Mesh3d(mesh), at, Cloth::default(), ClothPins(pins)));
+    let mut cape =
+        app.world_mut()
+            .spawn((Mesh3d(mesh), cape_pose(), Cloth::default(), ClothPins(pins)));
     if let Some(s) = smoothing {
         cape.insert(s);
     }
@@ -412,6 +418,61 @@ pub fn smoothed_cape(
         cape.insert(ClothInertia::new(0.0).relative_to(character));
     }
     (cape.id(), grid.index(0, 0), rest[grid.index(0, 0) as usize])
+}
+
+/// [`cape_on`] a character walking at [`WALK_SPEED`] along x (moved in `FixedUpdate`; the
+/// [`Walker`]).
+pub fn smoothed_cape(
+    app: &mut App,
+    smoothing: Option<ClothSmoothing>,
+    backend: Option<bevy_cloth::gpu::ClothBackend>,
+    glued: bool,
+) -> (Entity, u32, Vec3) {
+    let character = app.world_mut().spawn(cape_pose()).id();
+    app.insert_resource(Walker {
+        entity: character,
+        before: 0.0,
+        now: 0.0,
+    })
+    .add_systems(FixedUpdate, walk);
+    cape_on(app, character, smoothing, backend, glued)
+}
+
+/// The local positions of cloth `e`'s mesh as the CPU wrote them.
+pub fn drawn_on_the_cpu(app: &App, e: Entity) -> Vec<Vec3> {
+    let handle = &app.world().get::<Mesh3d>(e).unwrap().0;
+    match app
+        .world()
+        .resource::<Assets<Mesh>>()
+        .get(handle)
+        .and_then(|m| m.attribute(Mesh::ATTRIBUTE_POSITION))
+    {
+        Some(bevy::mesh::VertexAttributeValues::Float32x3(p)) => {
+            p.iter().map(|&v| Vec3::from(v)).collect()
+        }
+        _ => panic!("cloth {e} has no positions"),
+    }
+}
+
+/// A `cols × rows` grid (0.8 × 0.6 m) as triangle strips, one per row of quads, restarted
+/// with `u16::MAX`, and the same triangles as a list written out by hand (Vulkan's strip
+/// order: every other triangle turned): the grid, its positions, the strip, the list.
+pub fn strip_grid(cols: u32, rows: u32) -> (Grid, Vec<[f32; 3]>, Vec<u16>, Vec<u32>) {
+    let grid = Grid::new(cols, rows, 0.8, 0.6);
+    let positions: Vec<[f32; 3]> = grid.positions().iter().map(|p| p.to_array()).collect();
+    let (mut strip, mut list) = (Vec::new(), Vec::new());
+    for j in 0..rows - 1 {
+        let (t, b) = (|i: u32| j * cols + i, |i: u32| (j + 1) * cols + i);
+        for i in 0..cols {
+            strip.extend([t(i) as u16, b(i) as u16]);
+        }
+        strip.push(u16::MAX);
+        for i in 0..cols - 1 {
+            list.extend([t(i), b(i), t(i + 1)]);
+            list.extend([t(i + 1), b(i), b(i + 1)]);
+        }
+    }
+    (grid, positions, strip, list)
 }
 
 /// Runs the [`smoothed_cape`] app 1.5 s and returns how far its pinned `vertex` is drawn
@@ -433,8 +494,8 @@ pub fn smoothing_errors(
         let fraction = app.world().resource::<Time<Fixed>>().overstep_fraction();
         let walker = app.world().resource::<Walker>();
         let (before, now) = (walker.before, walker.now);
-        let turn = Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2);
-        let at = |x: f32| Vec3::new(x, 1.5, 0.0) + turn * offset;
+        let pose = cape_pose();
+        let at = |x: f32| Vec3::new(x, 0.0, 0.0) + pose.transform_point(offset);
         let gt = *app.world().get::<GlobalTransform>(cape).unwrap();
         let local = drawn(app, cape)[vertex as usize];
         let p = gt.transform_point(local);
