@@ -120,8 +120,9 @@ pub mod prelude {
     pub use crate::ClothPlugins;
     pub use crate::cloth::{
         Cloth, ClothBackstop, ClothConfig, ClothError, ClothFailed, ClothInertia, ClothInvalid,
-        ClothPick, ClothPin, ClothPins, ClothPlugin, ClothSelfCollision, ClothSim, ClothSkinning,
-        ClothSmoothing, ClothTearing, ClothTethers, ClothTorn, MaxDistance, PinAnchor,
+        ClothPick, ClothPin, ClothPinRule, ClothPins, ClothPlugin, ClothSelfCollision, ClothSim,
+        ClothSkinning, ClothSmoothing, ClothTearing, ClothTethers, ClothTorn, ColorChannel,
+        MaxDistance, PinAnchor, VertexSelection,
     };
     #[cfg(feature = "avian")]
     pub use crate::collider::avian::ClothAvianPlugin;

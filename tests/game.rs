@@ -8,7 +8,7 @@ use std::time::Duration;
 use bevy::asset::{AssetEvent, AssetEventSystems, RenderAssetUsages};
 use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
 use bevy::prelude::*;
-use bevy_cloth::cloth::ClothSource;
+use bevy_cloth::cloth::{ClothSource, PinRuleError};
 use bevy_cloth::prelude::*;
 use bevy_cloth::solver::DEFAULT_TELEPORT_DISTANCE;
 
@@ -2745,5 +2745,292 @@ fn a_triangle_strip_mesh_hangs_as_its_triangle_list() {
     assert!(
         a.simulation().state().positions[grid.index(4, 6) as usize].y < 1.7,
         "and it hangs"
+    );
+}
+
+/// Bevy's own plane mesh, 1 m square in the XZ plane, 9 × 9 vertices.
+fn bevy_plane() -> Mesh {
+    Plane3d::default()
+        .mesh()
+        .size(1.0, 1.0)
+        .subdivisions(7)
+        .build()
+}
+
+/// The vertices of `mesh` whose rest position passes `keep`.
+fn vertices_where(mesh: &Mesh, keep: impl Fn(Vec3) -> bool) -> Vec<u32> {
+    let p = attr3(mesh, Mesh::ATTRIBUTE_POSITION);
+    (0..p.len() as u32)
+        .filter(|&i| keep(p[i as usize]))
+        .collect()
+}
+
+/// The lowest and highest height of `vertices` of a cloth now.
+fn heights(app: &App, e: Entity, vertices: &[u32]) -> (f32, f32) {
+    let cloth = sim(app, e);
+    vertices
+        .iter()
+        .map(|&v| cloth.position(v).y)
+        .fold((f32::MAX, f32::MIN), |(lo, hi), y| (lo.min(y), hi.max(y)))
+}
+
+#[test]
+fn a_pin_rule_pins_what_the_same_hand_written_list_pins_and_follows_changes() {
+    let mut app = app();
+    let mesh = bevy_plane();
+    let back = vertices_where(&mesh, |p| p.z == -0.5);
+    let front = vertices_where(&mesh, |p| p.z == 0.5);
+    assert_eq!((back.len(), front.len()), (9, 9));
+    let handle = add_mesh(&mut app, mesh);
+    let at = Transform::from_xyz(0.0, 2.0, 0.0);
+    let edge = |towards: Vec3| {
+        ClothPinRule::rest(VertexSelection::Farthest {
+            towards,
+            within: 0.0,
+        })
+    };
+    let by_rule = app
+        .world_mut()
+        .spawn((
+            Mesh3d(handle.clone()),
+            at,
+            Cloth::default(),
+            edge(Vec3::NEG_Z),
+        ))
+        .id();
+    let by_hand = app
+        .world_mut()
+        .spawn((
+            Mesh3d(handle),
+            at,
+            Cloth::default(),
+            ClothPins::rest(back.clone()),
+        ))
+        .id();
+    run(&mut app, 60);
+    assert_eq!(
+        app.world().get::<ClothPins>(by_rule),
+        Some(&ClothPins::rest(back.clone()))
+    );
+    // The same pins from the first step: the same cloth, bit for bit.
+    assert_eq!(sim(&app, by_rule).steps(), sim(&app, by_hand).steps());
+    assert_eq!(
+        sim(&app, by_rule).simulation().state().positions,
+        sim(&app, by_hand).simulation().state().positions
+    );
+    // It hangs from its back edge, the front edge fallen.
+    assert_eq!(heights(&app, by_rule, &back), (2.0, 2.0));
+    assert!(heights(&app, by_rule, &front).1 < 1.3);
+    // The rule changed at runtime: the front edge is pinned (pulled back to its rest place),
+    // the back edge falls.
+    *app.world_mut().get_mut::<ClothPinRule>(by_rule).unwrap() = edge(Vec3::Z);
+    run(&mut app, 90);
+    assert_eq!(
+        app.world().get::<ClothPins>(by_rule),
+        Some(&ClothPins::rest(front.clone()))
+    );
+    assert_eq!(heights(&app, by_rule, &front), (2.0, 2.0));
+    assert!(heights(&app, by_rule, &back).1 < 1.3);
+    // Another mesh put in: the rule is resolved on it (11 vertices along an edge).
+    let bigger = Plane3d::default()
+        .mesh()
+        .size(1.0, 1.0)
+        .subdivisions(9)
+        .build();
+    let bigger_front = vertices_where(&bigger, |p| p.z == 0.5);
+    assert_eq!(bigger_front.len(), 11);
+    let bigger = add_mesh(&mut app, bigger);
+    app.world_mut().entity_mut(by_rule).insert(Mesh3d(bigger));
+    run(&mut app, 30);
+    assert_eq!(
+        app.world().get::<ClothPins>(by_rule),
+        Some(&ClothPins::rest(bigger_front.clone()))
+    );
+    assert_eq!(sim(&app, by_rule).simulation().state().len(), 121);
+    assert_eq!(heights(&app, by_rule, &bigger_front), (2.0, 2.0));
+}
+
+#[test]
+fn a_painted_pin_mask_pins_the_painted_vertices_and_is_not_drawn() {
+    let mut app = app();
+    let mut mesh = bevy_plane();
+    let corners = vertices_where(&mesh, |p| p.z == -0.5 && p.x.abs() == 0.5);
+    let far_edge = vertices_where(&mesh, |p| p.z == 0.5);
+    assert_eq!((corners.len(), far_edge.len()), (2, 9));
+    let paint: Vec<[f32; 4]> = (0..mesh.count_vertices() as u32)
+        .map(|v| {
+            if corners.contains(&v) {
+                [0.9, 0.1, 0.1, 1.0]
+            } else {
+                [0.2, 0.2, 0.2, 1.0]
+            }
+        })
+        .collect();
+    mesh.insert_attribute(Mesh::ATTRIBUTE_COLOR, paint);
+    let handle = add_mesh(&mut app, mesh);
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(handle.clone()),
+            Transform::from_xyz(0.0, 2.0, 0.0),
+            Cloth::default(),
+            ClothPinRule::rest(VertexSelection::Painted {
+                channel: ColorChannel::Red,
+                at_least: 0.5,
+            }),
+        ))
+        .id();
+    run(&mut app, 60);
+    assert_eq!(
+        app.world().get::<ClothPins>(e),
+        Some(&ClothPins::rest(corners.clone()))
+    );
+    // Held at the two corners, the rest hangs from them.
+    assert_eq!(heights(&app, e, &corners), (2.0, 2.0));
+    assert!(heights(&app, e, &far_edge).1 < 1.3);
+    // The cloth's own mesh draws no paint; the user's mesh keeps it.
+    assert!(mesh_of(&app, e).attribute(Mesh::ATTRIBUTE_COLOR).is_none());
+    let source = app.world().resource::<Assets<Mesh>>().get(&handle).unwrap();
+    assert!(source.attribute(Mesh::ATTRIBUTE_COLOR).is_some());
+}
+
+#[test]
+fn a_pin_rule_that_pins_nothing_is_reported_before_the_cloth_starts_and_while_it_runs() {
+    let mut app = app();
+    app.init_resource::<Failures>()
+        .add_systems(Update, collect_failures);
+    let mesh = bevy_plane();
+    let back = vertices_where(&mesh, |p| p.z == -0.5);
+    let handle = add_mesh(&mut app, mesh);
+    // A box in world space by mistake (the entity stands 2 m up): nothing of the mesh in it.
+    let world_box = ClothPinRule::rest(VertexSelection::Within {
+        min: Vec3::new(-1.0, 1.9, -0.6),
+        max: Vec3::new(1.0, 2.1, -0.4),
+    });
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(handle),
+            Transform::from_xyz(0.0, 2.0, 0.0),
+            Cloth::default(),
+            world_box,
+        ))
+        .id();
+    run(&mut app, 5);
+    let Some(ClothInvalid(ClothError::PinRule(PinRuleError::NothingSelected(why)))) =
+        app.world().get::<ClothInvalid>(e)
+    else {
+        panic!("not refused: {:?}", app.world().get::<ClothInvalid>(e));
+    };
+    // The message says where the mesh's vertices are.
+    assert!(
+        why.contains("[-0.5, 0, -0.5]") && why.contains("[0.5, 0, 0.5]"),
+        "{why}"
+    );
+    assert!(app.world().get::<ClothSim>(e).is_none());
+    assert_eq!(app.world().resource::<Failures>().0.len(), 1);
+    // The box in the mesh's space: built, pinned.
+    *app.world_mut().get_mut::<ClothPinRule>(e).unwrap() =
+        ClothPinRule::rest(VertexSelection::Within {
+            min: Vec3::new(-1.0, -0.1, -0.6),
+            max: Vec3::new(1.0, 0.1, -0.4),
+        });
+    run(&mut app, 30);
+    assert!(app.world().get::<ClothInvalid>(e).is_none());
+    assert_eq!(
+        app.world().get::<ClothPins>(e),
+        Some(&ClothPins::rest(back.clone()))
+    );
+    let steps = sim(&app, e).steps();
+    // Painted on a mesh with no paint while it runs: reported once, the pins kept.
+    *app.world_mut().get_mut::<ClothPinRule>(e).unwrap() =
+        ClothPinRule::rest(VertexSelection::Painted {
+            channel: ColorChannel::Red,
+            at_least: 0.5,
+        });
+    run(&mut app, 10);
+    assert_eq!(
+        sim(&app, e).rejected(),
+        Some(&ClothError::PinRule(PinRuleError::NoColors))
+    );
+    assert!(sim(&app, e).steps() > steps + 5, "it stopped");
+    assert_eq!(
+        app.world().get::<ClothPins>(e),
+        Some(&ClothPins::rest(back.clone()))
+    );
+    assert_eq!(heights(&app, e, &back), (2.0, 2.0));
+    assert_eq!(app.world().resource::<Failures>().0.len(), 2);
+    // Fixed: in use again.
+    *app.world_mut().get_mut::<ClothPinRule>(e).unwrap() =
+        ClothPinRule::rest(VertexSelection::Farthest {
+            towards: Vec3::NEG_Z,
+            within: 0.0,
+        });
+    run(&mut app, 2);
+    assert_eq!(sim(&app, e).rejected(), None);
+}
+
+#[test]
+fn a_pin_rule_waits_for_a_gltf_mesh_to_load_and_hangs_it_by_its_edge() {
+    let mut app = app();
+    app.add_plugins((
+        bevy::image::ImagePlugin::default(),
+        bevy::world_serialization::WorldSerializationPlugin,
+        bevy::gltf::GltfPlugin::default(),
+    ));
+    app.finish();
+    app.cleanup();
+    // The banner of `assets/banner_statue.gltf` (flat, 2.1 m up in its file), spawned before
+    // its mesh has loaded, its -X edge pinned: the game never sees its vertex indices.
+    let banner: Handle<Mesh> = app
+        .world()
+        .resource::<AssetServer>()
+        .load("banner_statue.gltf#Mesh1/Primitive0");
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(banner.clone()),
+            Transform::from_xyz(0.0, 2.1, 0.0),
+            Cloth::default(),
+            ClothPinRule::rest(VertexSelection::Farthest {
+                towards: Vec3::NEG_X,
+                within: 0.001,
+            }),
+        ))
+        .id();
+    let start = std::time::Instant::now();
+    while app.world().get::<ClothSim>(e).is_none() {
+        assert!(
+            start.elapsed().as_secs() < 30,
+            "the banner did not load: {:?}",
+            app.world().get::<ClothInvalid>(e)
+        );
+        app.update();
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    run(&mut app, 120);
+    let source = app.world().resource::<Assets<Mesh>>().get(&banner).unwrap();
+    let p = attr3(source, Mesh::ATTRIBUTE_POSITION);
+    let left = p.iter().map(|v| v.x).fold(f32::MAX, f32::min);
+    let right = p.iter().map(|v| v.x).fold(f32::MIN, f32::max);
+    let pinned = vertices_where(source, |v| v.x <= left + 0.001);
+    let far = vertices_where(source, |v| v.x == right);
+    // One column of the 33 × 33 banner (its seam runs elsewhere).
+    assert_eq!(pinned.len(), 33);
+    assert_eq!(
+        app.world().get::<ClothPins>(e),
+        Some(&ClothPins::rest(pinned.clone()))
+    );
+    let (lo, hi) = heights(&app, e, &pinned);
+    assert!(
+        (lo - 2.1).abs() < 1e-5 && (hi - 2.1).abs() < 1e-5,
+        "{lo}..{hi}"
+    );
+    // It hangs from that edge: the far edge is most of the banner's width below it.
+    let drop = 2.1 - heights(&app, e, &far).1;
+    assert!(
+        drop > 0.7 * (right - left),
+        "far edge only {drop} m down (banner {} m wide)",
+        right - left
     );
 }

@@ -2152,3 +2152,83 @@ fn a_triangle_strip_mesh_runs_on_the_gpu_as_its_list() {
         "and it hangs (local y)"
     );
 }
+
+/// A Bevy `Plane3d` painted at two corners and pinned there by a `ClothPinRule` runs on the
+/// GPU (its own mesh without the paint) and hangs exactly as the same plane, unpainted, pinned
+/// by a hand-written list beside it (their vertex slabs equal).
+#[test]
+fn a_painted_pin_rule_runs_on_the_gpu_as_the_same_pins_by_hand() {
+    use bevy::mesh::VertexAttributeValues;
+    if common::gpu_or_skip("a_painted_pin_rule_runs_on_the_gpu_as_the_same_pins_by_hand").is_none()
+    {
+        return;
+    }
+    let plane = Plane3d::default()
+        .mesh()
+        .size(1.0, 1.0)
+        .subdivisions(7)
+        .build();
+    let Some(VertexAttributeValues::Float32x3(p)) = plane.attribute(Mesh::ATTRIBUTE_POSITION)
+    else {
+        panic!("positions");
+    };
+    let corners: Vec<u32> = (0..p.len() as u32)
+        .filter(|&v| p[v as usize][2] == -0.5 && p[v as usize][0].abs() == 0.5)
+        .collect();
+    assert_eq!(corners.len(), 2);
+    let paint: Vec<[f32; 4]> = (0..p.len() as u32)
+        .map(|v| {
+            if corners.contains(&v) {
+                [1.0, 0.0, 0.0, 1.0]
+            } else {
+                [0.0, 0.0, 0.0, 1.0]
+            }
+        })
+        .collect();
+    let painted = plane
+        .clone()
+        .with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, paint);
+    let mut app = render_app_with(ClothPlugins::default(), false);
+    let mut spawn = |mesh: Mesh, pins: Option<ClothPins>| {
+        let mesh = app.world_mut().resource_mut::<Assets<Mesh>>().add(mesh);
+        let mut e = app.world_mut().spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(0.0, 2.0, 0.0),
+            Cloth::default(),
+            ClothBackend::Gpu,
+        ));
+        match pins {
+            Some(pins) => e.insert(pins),
+            None => e.insert(ClothPinRule::rest(VertexSelection::Painted {
+                channel: ColorChannel::Red,
+                at_least: 0.5,
+            })),
+        };
+        e.id()
+    };
+    let by_rule = spawn(painted, None);
+    let by_hand = spawn(plane, Some(ClothPins::rest(corners.clone())));
+    common::run(&mut app, 60);
+    assert!(in_use(&app, by_rule).gpu, "the ruled cloth runs on the GPU");
+    assert_eq!(
+        app.world().get::<ClothPins>(by_rule),
+        Some(&ClothPins::rest(corners.clone()))
+    );
+    let drawn = |e: Entity| {
+        let handle = app.world().get::<Mesh3d>(e).unwrap().0.clone();
+        let layout = app.world().resource::<Assets<Mesh>>().get(&handle).unwrap();
+        assert!(
+            layout.attribute(Mesh::ATTRIBUTE_COLOR).is_none(),
+            "no paint drawn"
+        );
+        positions_on_the_gpu(&app, handle.id(), layout).expect("on the GPU")
+    };
+    let (a, b) = (drawn(by_rule), drawn(by_hand));
+    assert_eq!(a, b, "the rule pins what the list pins");
+    // Held at its two corners (local y 0), the rest hangs.
+    for &c in &corners {
+        assert_eq!(a[c as usize].y, 0.0);
+    }
+    let lowest = a.iter().map(|v| v.y).fold(f32::MAX, f32::min);
+    assert!(lowest < -0.3, "it hangs (lowest local y {lowest})");
+}

@@ -55,6 +55,7 @@ impl Built {
             uneven_warned: false,
             cloth_error: None,
             pins_error: None,
+            rule_error: None,
             carry: None,
             inertia_from: None,
             inertia_error: None,

@@ -40,6 +40,8 @@ pub enum ClothError {
     /// `SkinnedMesh` or joint attributes, a weight map of the wrong length, a bad distance, a
     /// joint with no pose): the reason.
     Skinning(String),
+    /// A [`ClothPinRule`](super::ClothPinRule) gives no pins: the reason.
+    PinRule(super::PinRuleError),
     /// The solver rejected the mesh, masses, pins or parameters.
     Solver(SolverError),
 }
@@ -80,6 +82,7 @@ impl core::fmt::Display for ClothError {
                 write!(f, "the pin anchor {e} does not exist or has no transform")
             }
             ClothError::Skinning(why) => write!(f, "skinned clothing: {why}"),
+            ClothError::PinRule(e) => e.fmt(f),
             ClothError::Solver(e) => e.fmt(f),
         }
     }
@@ -112,7 +115,8 @@ pub struct ClothFailed {
 /// Present on a cloth entity that cannot be simulated, with the reason.
 ///
 /// The plugin tries again when [`Cloth`](super::Cloth), [`ClothConfig`](super::ClothConfig),
-/// [`ClothPins`](super::ClothPins) or [`Mesh3d`] change.
+/// [`ClothPins`](super::ClothPins), [`ClothPinRule`](super::ClothPinRule) or [`Mesh3d`]
+/// change.
 #[derive(Component, Clone, Debug, PartialEq)]
 pub struct ClothInvalid(pub ClothError);
 

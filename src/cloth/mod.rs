@@ -16,6 +16,7 @@ mod components;
 mod error;
 mod inertia;
 mod mesh;
+mod pin_rule;
 mod pins;
 mod plugin;
 mod sim;
@@ -30,6 +31,7 @@ pub use components::{
     ClothSteppedElsewhere, ClothTearing, ClothTethers, ClothTorn, PinAnchor,
 };
 pub use error::{ClothError, ClothFailed, ClothInvalid};
+pub use pin_rule::{ClothPinRule, ColorChannel, PinRuleError, VertexSelection};
 pub use plugin::ClothPlugin;
 pub use sim::{ClothPick, ClothSim, ClothSource};
 pub use skinning::{ClothBackstop, ClothSkinning, MaxDistance};

@@ -2,15 +2,16 @@
 
 use bevy::prelude::*;
 
+use super::pin_rule::resolve_pin_rules;
 use super::skinning::{skin_cloths, unskin_free_cloths};
 use super::systems::{
     init_cloths, on_cloth_removed, rebuild_changed_meshes, retry_cloths, step_cloths, sync_cloths,
 };
 use super::writeback::write_back;
 use super::{
-    Cloth, ClothConfig, ClothFailed, ClothInertia, ClothPin, ClothPins, ClothSelfCollision,
-    ClothSkinning, ClothSmoothing, ClothSource, ClothTearing, ClothTethers, ClothTorn,
-    ClothWorkers, PinAnchor,
+    Cloth, ClothConfig, ClothFailed, ClothInertia, ClothPin, ClothPinRule, ClothPins,
+    ClothSelfCollision, ClothSkinning, ClothSmoothing, ClothSource, ClothTearing, ClothTethers,
+    ClothTorn, ClothWorkers, PinAnchor,
 };
 use crate::foundation::{ClothSchedule, ClothSystems};
 
@@ -21,7 +22,8 @@ use crate::foundation::{ClothSchedule, ClothSystems};
 /// does not depend on the frame rate. Set the rate with `Time::<Fixed>::from_hz(..)`.
 ///
 /// Its systems, in [`ClothSystems::Prepare`]: `retry_cloths` (cloths whose settings were
-/// fixed, or whose mesh or [`Cloth`] changed to valid settings, are rebuilt), `init_cloths`
+/// fixed, or whose mesh or [`Cloth`] changed to valid settings, are rebuilt),
+/// `resolve_pin_rules` ([`ClothPinRule`]s written into [`ClothPins`]), `init_cloths`
 /// (new cloths are built once their mesh has loaded) and `sync_cloths` (changed settings and
 /// pins applied, pins moved to their anchors), `unskin_free_cloths` (a `Cloth` without [`ClothSkinning`] on a
 /// skinned mesh takes its `SkinnedMesh` off), `skin_cloths` ([`ClothSkinning`]: the skin's
@@ -40,6 +42,7 @@ impl Plugin for ClothPlugin {
             .register_type::<ClothPins>()
             .register_type::<ClothPin>()
             .register_type::<PinAnchor>()
+            .register_type::<ClothPinRule>()
             .register_type::<ClothSelfCollision>()
             .register_type::<ClothTethers>()
             .register_type::<ClothTearing>()
@@ -56,6 +59,7 @@ impl Plugin for ClothPlugin {
                 (
                     (
                         retry_cloths,
+                        resolve_pin_rules,
                         init_cloths,
                         sync_cloths,
                         unskin_free_cloths,

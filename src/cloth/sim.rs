@@ -67,6 +67,9 @@ pub struct ClothSim {
     pub(super) uneven_warned: bool,
     /// A pin list that was refused (the last valid pins hold meanwhile).
     pub(super) pins_error: Option<ClothError>,
+    /// A [`ClothPinRule`](super::ClothPinRule) change that gave no pins (the last pins hold
+    /// meanwhile).
+    pub(super) rule_error: Option<ClothError>,
     /// A [`Cloth`](super::Cloth) change that was refused (the cloth built from the last valid
     /// one runs meanwhile).
     pub(super) cloth_error: Option<ClothError>,
@@ -437,7 +440,8 @@ impl ClothSim {
     }
 
     /// Why the latest [`Cloth`](super::Cloth), [`ClothConfig`](super::ClothConfig), opt-in
-    /// feature or [`ClothPins`](super::ClothPins) change was refused, while the cloth runs on
+    /// feature, [`ClothPins`](super::ClothPins) or [`ClothPinRule`](super::ClothPinRule) change
+    /// was refused, while the cloth runs on
     /// its last valid ones; `None` when everything asked for is in use.
     #[must_use]
     pub fn rejected(&self) -> Option<&ClothError> {
@@ -445,6 +449,7 @@ impl ClothSim {
             .as_ref()
             .or(self.settings_error.as_ref())
             .or(self.pins_error.as_ref())
+            .or(self.rule_error.as_ref())
     }
 
     /// Wall-clock seconds the last CPU step of this cloth took (0 before the first step and

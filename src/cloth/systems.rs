@@ -9,12 +9,13 @@ use bevy::tasks::ComputeTaskPool;
 use super::build::{build, features, remake, reshape, warn_self_collision};
 use super::error::report;
 use super::inertia::carry_unfelt_motion;
+use super::pin_rule::drops_colors;
 use super::pins::{attach, follow_anchors, pin_list, repin};
 use super::skinning::{ClothSkin, ClothUnskinned};
 use super::{
-    Cloth, ClothConfig, ClothError, ClothFailed, ClothInertia, ClothInvalid, ClothPins,
-    ClothSelfCollision, ClothSim, ClothSource, ClothSteppedElsewhere, ClothTearing, ClothTethers,
-    ClothTorn, ClothWorkers, PinAnchor, TaskPoolParallel,
+    Cloth, ClothConfig, ClothError, ClothFailed, ClothInertia, ClothInvalid, ClothPinRule,
+    ClothPins, ClothSelfCollision, ClothSim, ClothSource, ClothSteppedElsewhere, ClothTearing,
+    ClothTethers, ClothTorn, ClothWorkers, PinAnchor, TaskPoolParallel,
 };
 use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
 use crate::foundation::{
@@ -45,6 +46,7 @@ pub(super) fn init_cloths(
             &Mesh3d,
             Option<&ClothSource>,
             FeatureQuery,
+            Option<&ClothPinRule>,
         ),
         (Without<ClothSim>, Without<ClothInvalid>),
     >,
@@ -103,7 +105,8 @@ pub(super) fn init_cloths(
             )
         });
     }
-    for ((entity, name), cloth, config, pins, mesh3d, source, (sc, tethers, tearing)) in &new {
+    for ((entity, name), cloth, config, pins, mesh3d, source, (sc, tethers, tearing), rule) in &new
+    {
         let who = EntityName::new(entity, name);
         // Rebuilding (after a change to `Cloth` or a fix): start from the mesh the user gave,
         // not from the cloth's own, deformed copy — unless the user has put another mesh in.
@@ -156,6 +159,10 @@ pub(super) fn init_cloths(
             // Features are checked before the cloth starts, so a bad one never runs a step.
             let wanted = features(&b.sim, sc, tethers, tearing);
             b.sim.set_features(wanted).map_err(SolverError::Params)?;
+            // A painted pin mask is not a colour: not drawn.
+            if drops_colors(rule) {
+                b.mesh.remove_attribute(Mesh::ATTRIBUTE_COLOR);
+            }
             Ok(b)
         });
         match built {
@@ -193,6 +200,7 @@ pub(super) fn retry_cloths(
                 Changed<Cloth>,
                 Changed<ClothConfig>,
                 Changed<ClothPins>,
+                Changed<ClothPinRule>,
                 Changed<Mesh3d>,
                 Changed<ClothSelfCollision>,
                 Changed<ClothTethers>,
