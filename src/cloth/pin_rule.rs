@@ -524,6 +524,39 @@ mod tests {
     }
 
     #[test]
+    fn the_anchors_entity_is_mapped_as_a_scene_maps_it() {
+        use bevy::ecs::entity::EntityHashMap;
+        let (a, b) = (
+            Entity::from_raw_u32(1).unwrap(),
+            Entity::from_raw_u32(2).unwrap(),
+        );
+        let mut map = EntityHashMap::default();
+        map.insert(a, b);
+        let select = VertexSelection::Farthest {
+            towards: Vec3::Y,
+            within: 0.0,
+        };
+        let mut attached = ClothPinRule::attached(select, a);
+        attached.map_entities(&mut map);
+        assert_eq!(attached.anchor, PinAnchor::Attached(b));
+        let mut hooked = ClothPinRule {
+            select,
+            anchor: PinAnchor::Entity {
+                entity: a,
+                offset: Vec3::X,
+            },
+        };
+        hooked.map_entities(&mut map);
+        assert_eq!(
+            hooked.anchor,
+            PinAnchor::Entity {
+                entity: b,
+                offset: Vec3::X
+            }
+        );
+    }
+
+    #[test]
     fn the_rule_reads_a_meshs_positions_and_colours() {
         let plane = Plane3d::default()
             .mesh()
