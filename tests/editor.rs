@@ -859,3 +859,28 @@ fn the_toggle_key_shows_and_hides_the_panel() {
     tap(&mut app, KeyCode::F9);
     assert!(!app.world().resource::<ClothEditor>().open);
 }
+
+/// Pins updated in the editor on a cloth pinned by a `ClothPinRule` take its place: the rule
+/// is removed, so rebuilding the cloth (a new weld tolerance) keeps the hand-made pins.
+#[test]
+fn pins_updated_by_hand_replace_a_pin_rule() {
+    let mut app = editor_app();
+    let e = actions::add_cloth(app.world_mut(), &small());
+    app.world_mut()
+        .entity_mut(e)
+        .insert(ClothPinRule::rest(VertexSelection::Farthest {
+            towards: Vec3::NEG_X,
+            within: 0.0,
+        }));
+    run(&mut app, 20);
+    // The rule's column: one vertex of each of the 10 rows.
+    assert_eq!(sim(&app, e).simulation().state().pins().len(), 10);
+    actions::pin_preset(app.world_mut(), e, PinPreset::TwoCorners).unwrap();
+    assert_eq!(actions::update_pins(app.world_mut(), e), Ok(2));
+    assert!(app.world().get::<ClothPinRule>(e).is_none());
+    // Built again from its mesh: still the two corners.
+    app.world_mut().get_mut::<Cloth>(e).unwrap().weld_tolerance = 1e-5;
+    run(&mut app, 20);
+    assert_eq!(sim(&app, e).simulation().state().pins().len(), 2);
+    assert_eq!(app.world().get::<ClothPins>(e).unwrap().0.len(), 2);
+}

@@ -15,7 +15,7 @@ use bevy::math::Ray3d;
 use bevy::prelude::*;
 
 use super::state::{ClothEditor, EditorGrid, EditorShape, NewCloth, NewShape, PinDraft, PinPreset};
-use crate::cloth::{Cloth, ClothPin, ClothPins, ClothSim, PinAnchor};
+use crate::cloth::{Cloth, ClothPin, ClothPinRule, ClothPins, ClothSim, PinAnchor};
 use crate::collider::{ClothCollider, ClothColliders, ColliderShape};
 use crate::foundation::grid_mesh;
 use crate::render::{VelvetMaterial, lined_velvet};
@@ -515,7 +515,9 @@ pub fn pin_preset(world: &mut World, cloth: Entity, preset: PinPreset) -> Option
 
 /// Applies `cloth`'s pin draft (the report's "update anchors"): vertices that stay pinned
 /// keep their anchors; newly pinned ones are held where they are now, carried by the cloth
-/// entity's transform (drag the cloth and they follow). Returns the number of pins.
+/// entity's transform (drag the cloth and they follow). A [`ClothPinRule`] on the cloth is
+/// removed: the pins are the user's from then on (a rule would choose them again when the
+/// cloth is next built). Returns the number of pins.
 ///
 /// # Errors
 /// A message when `cloth` is not a simulated cloth.
@@ -555,10 +557,16 @@ pub fn update_pins(world: &mut World, cloth: Entity) -> Result<usize, String> {
     if let Some(mut pins) = world.get_mut::<ClothPins>(cloth) {
         pins.0 = list;
     }
+    let ruled = world.entity_mut(cloth).take::<ClothPinRule>().is_some();
     if let Some(mut editor) = world.get_resource_mut::<ClothEditor>() {
         editor.drafts.remove(&cloth);
     }
-    say(world, format!("{name}: {n} pins"));
+    let rule = if ruled {
+        " (its pin rule removed: pinned by hand now)"
+    } else {
+        ""
+    };
+    say(world, format!("{name}: {n} pins{rule}"));
     Ok(n)
 }
 
