@@ -27,6 +27,10 @@
 //! }
 //! ```
 //!
+//! A mesh whose vertex indices the game does not know (a glTF cape, Bevy's `Plane3d`) is
+//! pinned by a [`ClothPinRule`](cloth::ClothPinRule) instead: its top edge, the vertices in a
+//! box, or those painted in its vertex colours.
+//!
 //! # Modules, bottom to top
 //! Each imports only from those listed before it (`tests/layers.rs` checks it).
 //! - [`solver`]: the pure solver (no Bevy): topology, constraints, collisions, wind, tearing,
