@@ -380,6 +380,30 @@ pub(super) fn warn_self_collision(
     }
 }
 
+/// Fewer triangles than this and a cloth cannot fold: it bends only along its edges, so it
+/// moves as a few flat plates (a 3 × 3 grid has 8 triangles).
+const COARSE_TRIANGLES: usize = 8;
+
+/// What to tell the user about a cloth of `triangles` triangles, when it is too coarse to fold
+/// (a modelling tool's default plane, exported as it is, has 2).
+fn coarse_warning(triangles: usize) -> Option<String> {
+    (triangles < COARSE_TRIANGLES).then(|| {
+        format!(
+            "its mesh has only {triangles} triangle(s), and cloth bends only along the edges \
+             between them, so it moves as {triangles} flat plate(s); subdivide it (in the \
+             modelling tool, or `Plane3d::default().mesh().subdivisions(n)`, or `grid_mesh`) \
+             for a cloth that folds"
+        )
+    })
+}
+
+/// Warns once, when a cloth is built, that its mesh is too coarse to fold.
+pub(super) fn warn_coarse(cs: &ClothSim, who: EntityName) {
+    if let Some(why) = coarse_warning(cs.sim.topology().triangles().len()) {
+        warn!("cloth {who}: {why}");
+    }
+}
+
 /// The solver features a cloth's opt-in components ask for.
 pub(super) fn features(
     sim: &Simulation,
@@ -397,5 +421,21 @@ pub(super) fn features(
             pins_per_vertex: t.pins_per_vertex,
         }),
         tear_threshold: tearing.map(|t| t.threshold),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_mesh_too_coarse_to_fold_is_named_and_a_three_by_three_grid_is_not() {
+        // Blender's default plane: two triangles.
+        let plate = coarse_warning(2).expect("two triangles cannot fold");
+        assert!(plate.contains("only 2 triangle"), "{plate}");
+        assert!(coarse_warning(7).is_some());
+        let grid = crate::solver::Grid::new(3, 3, 1.0, 1.0);
+        assert_eq!(grid.indices().len() / 3, 8);
+        assert_eq!(coarse_warning(grid.indices().len() / 3), None);
     }
 }

@@ -6,7 +6,7 @@ use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::tasks::ComputeTaskPool;
 
-use super::build::{build, features, remake, reshape, warn_self_collision};
+use super::build::{build, features, remake, reshape, warn_coarse, warn_self_collision};
 use super::error::report;
 use super::inertia::carry_unfelt_motion;
 use super::pin_rule::drops_colors;
@@ -169,6 +169,7 @@ pub(super) fn init_cloths(
             Ok(b) => {
                 let mut sim = b.into_sim(meshes);
                 warn_self_collision(&mut sim, sc, who);
+                warn_coarse(&sim, who);
                 let handle = sim.mesh().clone();
                 commands.entity(entity).try_insert((
                     Mesh3d(handle.clone()),
