@@ -7,14 +7,17 @@
 //! ```text
 //! cargo run --release --features editor --example editor
 //! cargo run --release --features editor --example editor -- --headless --frames 120
+//! cargo run --release --features editor --example editor -- --mesh-cloth banner_statue.gltf#Mesh1/Primitive0
 //! ```
-//! Right mouse + WASD/QE flies the camera.
+//! Right mouse + WASD/QE flies the camera. `--mesh-cloth PATH` adds a cloth made from a mesh
+//! file in the asset folder (as the panel's "add mesh cloth" does: hung by its top edge once
+//! it has loaded).
 
 #[path = "support/mod.rs"]
 mod support;
 
 use bevy::prelude::*;
-use bevy_cloth::editor::{ClothEditor, EditorShape};
+use bevy_cloth::editor::{ClothEditor, EditorShape, actions};
 use bevy_cloth::prelude::*;
 use support::Args;
 
@@ -151,6 +154,20 @@ fn select_pole(mut editor: ResMut<ClothEditor>, names: Query<(Entity, &Name)>) {
         .map(|(e, _)| e);
 }
 
+/// The `--mesh-cloth` file, if one was given.
+#[derive(Resource)]
+struct MeshCloth(String);
+
+fn add_mesh_cloth(world: &mut World) {
+    let Some(path) = world.remove_resource::<MeshCloth>() else {
+        return;
+    };
+    if let Err(why) = actions::add_mesh_cloth(world, &path.0) {
+        eprintln!("--mesh-cloth: {why}");
+        std::process::exit(2);
+    }
+}
+
 fn report(world: &mut World) -> support::Json {
     let objects = world
         .query_filtered::<(), Or<(With<Cloth>, With<ClothCollider>, With<WindZone>)>>()
@@ -166,8 +183,12 @@ fn report(world: &mut World) -> support::Json {
 fn main() {
     let args = Args::parse(include_str!("editor.rs"));
     let mut app = support::app(&args, "bevy_cloth editor", 1.0 / 60.0);
+    let mesh_cloth: String = args.get("mesh-cloth", String::new());
+    if !mesh_cloth.is_empty() {
+        app.insert_resource(MeshCloth(mesh_cloth));
+    }
     app.add_plugins(ClothEditorPlugin::default())
         .add_systems(Startup, setup)
-        .add_systems(PostStartup, select_pole);
+        .add_systems(PostStartup, (select_pole, add_mesh_cloth));
     support::run(app, &args, report);
 }

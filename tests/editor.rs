@@ -884,3 +884,56 @@ fn pins_updated_by_hand_replace_a_pin_rule() {
     assert_eq!(sim(&app, e).simulation().state().pins().len(), 2);
     assert_eq!(app.world().get::<ClothPins>(e).unwrap().0.len(), 2);
 }
+
+/// "add mesh cloth": a flat glTF mesh (the banner of `assets/banner_statue.gltf`, modelled
+/// lying in its xz plane) becomes cloth once it has loaded, stood up and hung by its top edge
+/// through a `ClothPinRule`; a scene file keeps its asset path.
+#[test]
+fn a_cloth_from_a_mesh_file_hangs_by_its_top_edge() {
+    let mut app = common::app();
+    app.add_plugins((
+        bevy::image::ImagePlugin::default(),
+        bevy::world_serialization::WorldSerializationPlugin,
+        bevy::gltf::GltfPlugin::default(),
+        ClothEditorPlugin::default(),
+    ));
+    app.finish();
+    app.cleanup();
+    let path = "banner_statue.gltf#Mesh1/Primitive0";
+    let e = actions::add_mesh_cloth(app.world_mut(), path).unwrap();
+    wait_for(&mut app, "the banner to become cloth", |w| {
+        w.get::<ClothSim>(e).is_some()
+    });
+    let status = app.world().resource::<ClothEditor>().status.clone();
+    assert!(status.contains("hung by its top edge"), "{status}");
+    assert!(app.world().get::<ClothPinRule>(e).is_some());
+    run(&mut app, 90);
+    let s = sim(&app, e);
+    let pins = &app.world().get::<ClothPins>(e).unwrap().0;
+    // One row of the 33 × 33 banner (and the seam's copy on it).
+    assert!((33..=34).contains(&pins.len()), "{} pins", pins.len());
+    // Its -z edge is on top, 0.65 m (half the banner) above where it was put (1.5 m), and
+    // the rest hangs below it.
+    for pin in pins {
+        let y = s.position(pin.vertex).y;
+        assert!(
+            (y - 2.15).abs() < 1e-4,
+            "pinned vertex {} at {y}",
+            pin.vertex
+        );
+    }
+    let n = s.weld().vertex_count() as u32;
+    let lowest = (0..n).map(|v| s.position(v).y).fold(f32::MAX, f32::min);
+    assert!(lowest < 1.0, "lowest point {lowest}: not hanging");
+    let saved = scene::save_scene(app.world_mut());
+    assert_eq!(saved.cloths.len(), 1);
+    assert_eq!(
+        saved.cloths[0].mesh,
+        scene::SavedMesh::Asset(path.to_string())
+    );
+    let e = actions::add_mesh_cloth(app.world_mut(), "cape.fbx").unwrap_err();
+    assert!(
+        e.contains("a cloth is read from a .gltf, .glb or .obj"),
+        "{e}"
+    );
+}

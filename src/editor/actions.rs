@@ -1,7 +1,8 @@
 //! What the editor's buttons do, as functions on `&mut World`: the panel calls exactly these,
 //! and so can game code and tests.
 //!
-//! - Add: [`add_cloth`], [`add_collider`], [`add_mesh_collider`], [`add_wind_zone`],
+//! - Add: [`add_cloth`], [`add_mesh_cloth`], [`add_collider`], [`add_mesh_collider`],
+//!   [`add_wind_zone`],
 //!   [`set_wind`].
 //! - Delete: [`delete`] (despawns with children; the meshes and materials go with their last
 //!   handle; pins anchored to the deleted entity are removed from every cloth).
@@ -14,8 +15,12 @@ use std::collections::BTreeSet;
 use bevy::math::Ray3d;
 use bevy::prelude::*;
 
-use super::state::{ClothEditor, EditorGrid, EditorShape, NewCloth, NewShape, PinDraft, PinPreset};
-use crate::cloth::{Cloth, ClothPin, ClothPinRule, ClothPins, ClothSim, PinAnchor};
+use super::state::{
+    ClothEditor, EditorGrid, EditorShape, MeshLoad, NewCloth, NewShape, PinDraft, PinPreset,
+};
+use crate::cloth::{
+    Cloth, ClothPin, ClothPinRule, ClothPins, ClothSim, PinAnchor, VertexSelection,
+};
 use crate::collider::{ClothCollider, ClothColliders, ColliderShape};
 use crate::foundation::grid_mesh;
 use crate::render::{VelvetMaterial, lined_velvet};
@@ -218,6 +223,34 @@ pub(crate) fn spawn_collider(
 /// # Errors
 /// A message when the path is empty, has another extension, or the app has no asset server.
 pub fn add_mesh_collider(world: &mut World, path: &str) -> Result<Entity, String> {
+    let (handle, full, stem) = load_mesh_file(world, path, "a mesh collider")?;
+    let n = next_number(world);
+    let id = spawn_collider(
+        world,
+        format!("{stem} {n}"),
+        ClothCollider::mesh(48),
+        Transform::from_xyz(0.0, 0.6, 1.2),
+        Some(handle.clone()),
+    );
+    let mut editor = world.get_resource_or_init::<ClothEditor>();
+    editor.loading.push(MeshLoad {
+        entity: id,
+        handle,
+        path: full.clone(),
+        cloth: false,
+    });
+    say(world, format!("loading {full}"));
+    Ok(id)
+}
+
+/// Starts loading the mesh at `path` in the asset folder (`.gltf`/`.glb`, its first
+/// primitive unless a `#Mesh…/Primitive…` label says which, or `.obj`): its handle, the full
+/// path and the file's stem. `what` names the object for the error.
+fn load_mesh_file(
+    world: &World,
+    path: &str,
+    what: &str,
+) -> Result<(Handle<Mesh>, String, String), String> {
     let path = path.trim();
     let (file, label) = match path.split_once('#') {
         Some((f, l)) => (f, Some(l)),
@@ -235,7 +268,7 @@ pub fn add_mesh_collider(world: &mut World, path: &str) -> Result<Entity, String
         (Some("gltf" | "glb" | "obj"), _) => path.to_string(),
         _ => {
             return Err(format!(
-                "{file}: a mesh collider is read from a .gltf, .glb or .obj file"
+                "{file}: {what} is read from a .gltf, .glb or .obj file"
             ));
         }
     };
@@ -248,18 +281,83 @@ pub fn add_mesh_collider(world: &mut World, path: &str) -> Result<Entity, String
         .and_then(|s| s.to_str())
         .unwrap_or("Mesh")
         .to_string();
+    Ok((handle, full, stem))
+}
+
+/// Adds a cloth made from a mesh file in the asset folder (as [`add_mesh_collider`] reads
+/// it), 1.5 m above the ground in front of the origin (over where a mesh collider is added),
+/// named after the file. It becomes
+/// cloth once the mesh has loaded ([`make_mesh_cloth`]), hung by its top edge; if the file
+/// fails to load the object is removed again and the status line says why.
+///
+/// # Errors
+/// A message when the path is empty, has another extension, or the app has no asset server.
+pub fn add_mesh_cloth(world: &mut World, path: &str) -> Result<Entity, String> {
+    let (handle, full, stem) = load_mesh_file(world, path, "a cloth")?;
     let n = next_number(world);
-    let id = spawn_collider(
+    let id = world
+        .spawn((
+            Name::new(format!("{stem} {n}")),
+            Mesh3d(handle.clone()),
+            // Above where "add mesh collider" puts a collider, to drape over it.
+            Transform::from_xyz(0.0, 1.5, 1.2),
+        ))
+        .id();
+    dress_cloth(
         world,
-        format!("{stem} {n}"),
-        ClothCollider::mesh(48),
-        Transform::from_xyz(0.0, 0.6, 1.2),
-        Some(handle.clone()),
+        id,
+        CLOTH_COLOURS[(n as usize - 1) % CLOTH_COLOURS.len()],
     );
     let mut editor = world.get_resource_or_init::<ClothEditor>();
-    editor.loading.push((id, handle, full.clone()));
+    editor.loading.push(MeshLoad {
+        entity: id,
+        handle,
+        path: full.clone(),
+        cloth: true,
+    });
     say(world, format!("loading {full}"));
     Ok(id)
+}
+
+/// Makes the object of a loaded mesh file a cloth hung by its top edge: a mesh lying flat
+/// (its height under 1 % of its size, as a modelling tool's plane is exported) is stood up a
+/// quarter turn about x, its -z edge on top; any other hangs from the vertices within 0.1 % of
+/// its size of its highest point. Pinned by a [`ClothPinRule`]; re-pin in its card.
+pub fn make_mesh_cloth(world: &mut World, entity: Entity, mesh: &Mesh) {
+    let Some(bevy::mesh::VertexAttributeValues::Float32x3(p)) =
+        mesh.attribute(Mesh::ATTRIBUTE_POSITION)
+    else {
+        say(world, "the mesh has no positions: it stays as it is");
+        return;
+    };
+    let (lo, hi) = p
+        .iter()
+        .map(|v| Vec3::from(*v))
+        .filter(|v| v.is_finite())
+        .fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), v| (lo.min(v), hi.max(v)),
+        );
+    let size = (hi - lo).length();
+    if !(size.is_finite() && size > 0.0) {
+        say(world, "the mesh has no size: it stays as it is");
+        return;
+    }
+    let flat = hi.y - lo.y < 0.01 * size;
+    let towards = if flat { Vec3::NEG_Z } else { Vec3::Y };
+    let Ok(mut e) = world.get_entity_mut(entity) else {
+        return;
+    };
+    if flat && let Some(mut t) = e.get_mut::<Transform>() {
+        t.rotation = Quat::from_rotation_x(core::f32::consts::FRAC_PI_2) * t.rotation;
+    }
+    e.insert((
+        Cloth::default(),
+        ClothPinRule::rest(VertexSelection::Farthest {
+            towards,
+            within: 1e-3 * size,
+        }),
+    ));
 }
 
 /// Adds a wind zone: a 2 m box of 6 m/s wind beside the origin, fading over 1 m.
@@ -342,7 +440,7 @@ pub fn delete(world: &mut World, entity: Entity) -> bool {
         if editor.drag.is_some_and(|d| gone.contains(&d.entity)) {
             editor.drag = None;
         }
-        editor.loading.retain(|(e, ..)| !gone.contains(e));
+        editor.loading.retain(|l| !gone.contains(&l.entity));
     }
     world.entity_mut(entity).despawn();
     if stale > 0 {

@@ -294,8 +294,17 @@ fn add_section(ui: &mut egui::Ui, world: &mut World) {
                 if path != world.resource::<ClothEditor>().mesh_path {
                     world.resource_mut::<ClothEditor>().mesh_path = path.clone();
                 }
+            });
+            ui.horizontal(|ui| {
+                let path = world.resource::<ClothEditor>().mesh_path.clone();
                 if ui.button("add mesh collider").clicked() {
                     match actions::add_mesh_collider(world, &path) {
+                        Ok(e) => world.resource_mut::<ClothEditor>().selected = Some(e),
+                        Err(m) => actions::say(world, m),
+                    }
+                }
+                if ui.button("add mesh cloth").clicked() {
+                    match actions::add_mesh_cloth(world, &path) {
                         Ok(e) => world.resource_mut::<ClothEditor>().selected = Some(e),
                         Err(m) => actions::say(world, m),
                     }

@@ -6,12 +6,12 @@ use bevy::prelude::*;
 use bevy_egui::egui;
 use bevy_egui::{EguiContext, PrimaryEguiContext};
 
-use super::actions::{say, shape_mesh};
+use super::actions::{make_mesh_cloth, say, shape_mesh};
 use super::camera::ClothCameraBlock;
 use super::obj::ObjMeshLoader;
 use super::overlay::overlay_and_pointer;
 use super::panel::panel_contents;
-use super::state::{ClothEditor, EditorGrid, EditorShape};
+use super::state::{ClothEditor, EditorGrid, EditorShape, MeshLoad};
 use super::stats;
 use crate::collider::ClothCollider;
 use crate::gpu::{ClothBackendInUse, ClothReadback};
@@ -190,7 +190,8 @@ fn sync_shape_meshes(
     }
 }
 
-/// Reports mesh collider files that failed to load, and removes their colliders.
+/// Reports mesh files that failed to load (and removes their objects), and makes the objects
+/// of loaded cloth files cloth.
 fn watch_mesh_loads(world: &mut World) {
     let Some(loading) = world
         .get_resource::<ClothEditor>()
@@ -203,7 +204,13 @@ fn watch_mesh_loads(world: &mut World) {
         return;
     };
     let mut still = Vec::new();
-    for (entity, handle, path) in loading {
+    for load in loading {
+        let MeshLoad {
+            entity,
+            ref handle,
+            ref path,
+            cloth,
+        } = load;
         match server.load_state(handle.id()) {
             bevy::asset::LoadState::Failed(e) => {
                 if world.get_entity(entity).is_ok() {
@@ -211,8 +218,20 @@ fn watch_mesh_loads(world: &mut World) {
                 }
                 say(world, format!("could not load {path}: {e}"));
             }
-            bevy::asset::LoadState::Loaded => say(world, format!("loaded {path}")),
-            _ => still.push((entity, handle, path)),
+            bevy::asset::LoadState::Loaded => {
+                let mesh = world.resource::<Assets<Mesh>>().get(handle).cloned();
+                match mesh {
+                    Some(mesh) if cloth => {
+                        make_mesh_cloth(world, entity, &mesh);
+                        say(
+                            world,
+                            format!("loaded {path}: a cloth hung by its top edge"),
+                        );
+                    }
+                    _ => say(world, format!("loaded {path}")),
+                }
+            }
+            _ => still.push(load),
         }
     }
     world.resource_mut::<ClothEditor>().loading = still;

@@ -26,7 +26,7 @@ pub struct ClothEditor {
     pub drafts: HashMap<Entity, PinDraft>,
     /// Values of the "add cloth" dialog.
     pub new_cloth: NewCloth,
-    /// Path typed for "add mesh collider" (relative to the asset folder).
+    /// Path typed for "add mesh collider" and "add mesh cloth" (relative to the asset folder).
     pub mesh_path: String,
     /// Path typed for "save" and "load" (a file path).
     pub scene_path: String,
@@ -34,8 +34,8 @@ pub struct ClothEditor {
     pub status: String,
     /// An axis drag in progress.
     pub(crate) drag: Option<AxisDrag>,
-    /// Mesh colliders whose file is still loading, with the path asked for.
-    pub(crate) loading: Vec<(Entity, Handle<Mesh>, String)>,
+    /// Mesh colliders and cloths whose file is still loading.
+    pub(crate) loading: Vec<MeshLoad>,
     /// Names given so far, for "Cloth 3", "Sphere 2", ...
     pub(crate) counter: u32,
     /// The selected object whose card was last opened for it.
@@ -156,4 +156,17 @@ pub enum NewShape {
     Capsule,
     /// A floor.
     Plane,
+}
+
+/// A mesh file the editor is loading for an object it added.
+#[derive(Clone, Debug)]
+pub(crate) struct MeshLoad {
+    /// The object.
+    pub entity: Entity,
+    /// The mesh.
+    pub handle: Handle<Mesh>,
+    /// The path asked for (with its label).
+    pub path: String,
+    /// Whether the object becomes a cloth once the mesh is in (else it is a mesh collider).
+    pub cloth: bool,
 }
