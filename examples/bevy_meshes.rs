@@ -67,73 +67,61 @@ fn setup(
     // Bevy's plane lies in XZ, its front up: turned 90° about X it stands in XY, its -Z edge
     // on top.
     let stand_up = Quat::from_rotation_x(core::f32::consts::FRAC_PI_2);
-    let flag = commands
-        .spawn((
+    let edge = |towards| VertexSelection::Farthest {
+        towards,
+        within: 0.0,
+    };
+    let painted = VertexSelection::Painted {
+        channel: ColorChannel::Red,
+        at_least: 0.5,
+    };
+    let pieces = [
+        (
             Piece::Flag,
-            Mesh3d(meshes.add(Plane3d::default().mesh().size(1.6, 1.0).subdivisions(30))),
+            meshes.add(Plane3d::default().mesh().size(1.6, 1.0).subdivisions(30)),
             Transform::from_xyz(-1.4, 2.6, 0.0).with_rotation(stand_up),
-            Cloth {
-                mass: 0.3,
-                ..default()
-            },
-            config,
-            ClothPinRule::rest(VertexSelection::Farthest {
-                towards: Vec3::NEG_X,
-                within: 0.0,
-            }),
-        ))
-        .id();
-    let tube = commands
-        .spawn((
+            0.3,
+            edge(Vec3::NEG_X),
+            Color::srgb(0.75, 0.2, 0.15),
+        ),
+        (
             Piece::Tube,
-            Mesh3d(
-                meshes.add(
-                    Cylinder::new(0.35, 0.9)
-                        .mesh()
-                        .resolution(32)
-                        .segments(12)
-                        .without_caps(),
-                ),
+            meshes.add(
+                Cylinder::new(0.35, 0.9)
+                    .mesh()
+                    .resolution(32)
+                    .segments(12)
+                    .without_caps(),
             ),
             Transform::from_xyz(0.6, 2.0, 0.0),
-            Cloth {
-                mass: 0.8,
-                ..default()
-            },
-            config,
-            ClothPinRule::rest(VertexSelection::Farthest {
-                towards: Vec3::Y,
-                within: 0.0,
-            }),
-        ))
-        .id();
-    let painted = commands
-        .spawn((
+            0.8,
+            edge(Vec3::Y),
+            Color::srgb(0.85, 0.7, 0.25),
+        ),
+        (
             Piece::Painted,
-            Mesh3d(meshes.add(painted_plane())),
+            meshes.add(painted_plane()),
             Transform::from_xyz(2.3, 1.9, 0.0).with_rotation(stand_up),
-            Cloth {
-                mass: 0.3,
-                ..default()
-            },
+            0.3,
+            painted,
+            Color::srgb(0.2, 0.45, 0.8),
+        ),
+    ];
+    for (piece, mesh, at, mass, select, color) in pieces {
+        let mut cloth = commands.spawn((
+            piece,
+            Mesh3d(mesh),
+            at,
+            Cloth { mass, ..default() },
             config,
-            ClothPinRule::rest(VertexSelection::Painted {
-                channel: ColorChannel::Red,
-                at_least: 0.5,
-            }),
-        ))
-        .id();
+            ClothPinRule::rest(select),
+        ));
+        if materials.is_some() {
+            cloth.insert(support::ClothLook(color));
+        }
+    }
     commands.spawn(ClothCollider::plane().with_thickness(0.01));
     if let Some(mut materials) = materials {
-        commands
-            .entity(flag)
-            .insert(support::ClothLook(Color::srgb(0.75, 0.2, 0.15)));
-        commands
-            .entity(tube)
-            .insert(support::ClothLook(Color::srgb(0.85, 0.7, 0.25)));
-        commands
-            .entity(painted)
-            .insert(support::ClothLook(Color::srgb(0.2, 0.45, 0.8)));
         let metal = materials.add(Color::srgb(0.6, 0.6, 0.62));
         commands.spawn((
             Mesh3d(meshes.add(Cylinder::new(0.03, 3.0))),

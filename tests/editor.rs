@@ -701,14 +701,7 @@ fn a_scene_file_that_cannot_be_built_changes_nothing() {
 #[test]
 fn a_scene_file_naming_a_gltf_mesh_loads_it_before_replacing_the_scene() {
     let mut app = common::app();
-    app.add_plugins((
-        ClothEditorPlugin::default(),
-        bevy::image::ImagePlugin::default(),
-        bevy::world_serialization::WorldSerializationPlugin,
-        bevy::gltf::GltfPlugin::default(),
-    ));
-    app.finish();
-    app.cleanup();
+    common::add_gltf(&mut app, ClothEditorPlugin::default());
     app.update();
     let cloth = scene::SavedCloth {
         name: Some("Banner".into()),
@@ -891,14 +884,7 @@ fn pins_updated_by_hand_replace_a_pin_rule() {
 #[test]
 fn a_cloth_from_a_mesh_file_hangs_by_its_top_edge() {
     let mut app = common::app();
-    app.add_plugins((
-        bevy::image::ImagePlugin::default(),
-        bevy::world_serialization::WorldSerializationPlugin,
-        bevy::gltf::GltfPlugin::default(),
-        ClothEditorPlugin::default(),
-    ));
-    app.finish();
-    app.cleanup();
+    common::add_gltf(&mut app, ClothEditorPlugin::default());
     let path = "banner_statue.gltf#Mesh1/Primitive0";
     let e = actions::add_mesh_cloth(app.world_mut(), path).unwrap();
     wait_for(&mut app, "the banner to become cloth", |w| {

@@ -13,7 +13,7 @@ use bevy_cloth::prelude::*;
 use bevy_cloth::solver::DEFAULT_TELEPORT_DISTANCE;
 
 mod common;
-use common::{Failures, app, app_with_frame, collect_failures, run};
+use common::{Failures, app, app_with_frame, bevy_plane, collect_failures, run, vertices_where};
 
 fn add_mesh(app: &mut App, mesh: Mesh) -> Handle<Mesh> {
     app.world_mut().resource_mut::<Assets<Mesh>>().add(mesh)
@@ -1121,13 +1121,7 @@ fn switching_solver_and_substeps_does_not_fling_the_cloth() {
 fn a_gltf_banner_with_a_uv_seam_drapes_over_a_gltf_statue() {
     use bevy::gltf::{Gltf, GltfMesh, GltfNode};
     let mut app = app();
-    app.add_plugins((
-        bevy::image::ImagePlugin::default(),
-        bevy::world_serialization::WorldSerializationPlugin,
-        bevy::gltf::GltfPlugin::default(),
-    ));
-    app.finish();
-    app.cleanup();
+    common::add_gltf(&mut app, ());
     let handle: Handle<Gltf> = app
         .world()
         .resource::<AssetServer>()
@@ -2748,23 +2742,6 @@ fn a_triangle_strip_mesh_hangs_as_its_triangle_list() {
     );
 }
 
-/// Bevy's own plane mesh, 1 m square in the XZ plane, 9 × 9 vertices.
-fn bevy_plane() -> Mesh {
-    Plane3d::default()
-        .mesh()
-        .size(1.0, 1.0)
-        .subdivisions(7)
-        .build()
-}
-
-/// The vertices of `mesh` whose rest position passes `keep`.
-fn vertices_where(mesh: &Mesh, keep: impl Fn(Vec3) -> bool) -> Vec<u32> {
-    let p = attr3(mesh, Mesh::ATTRIBUTE_POSITION);
-    (0..p.len() as u32)
-        .filter(|&i| keep(p[i as usize]))
-        .collect()
-}
-
 /// The lowest and highest height of `vertices` of a cloth now.
 fn heights(app: &App, e: Entity, vertices: &[u32]) -> (f32, f32) {
     let cloth = sim(app, e);
@@ -2853,21 +2830,11 @@ fn a_pin_rule_pins_what_the_same_hand_written_list_pins_and_follows_changes() {
 #[test]
 fn a_painted_pin_mask_pins_the_painted_vertices_and_is_not_drawn() {
     let mut app = app();
-    let mut mesh = bevy_plane();
-    let corners = vertices_where(&mesh, |p| p.z == -0.5 && p.x.abs() == 0.5);
-    let far_edge = vertices_where(&mesh, |p| p.z == 0.5);
+    let plane = bevy_plane();
+    let corners = vertices_where(&plane, |p| p.z == -0.5 && p.x.abs() == 0.5);
+    let far_edge = vertices_where(&plane, |p| p.z == 0.5);
     assert_eq!((corners.len(), far_edge.len()), (2, 9));
-    let paint: Vec<[f32; 4]> = (0..mesh.count_vertices() as u32)
-        .map(|v| {
-            if corners.contains(&v) {
-                [0.9, 0.1, 0.1, 1.0]
-            } else {
-                [0.2, 0.2, 0.2, 1.0]
-            }
-        })
-        .collect();
-    mesh.insert_attribute(Mesh::ATTRIBUTE_COLOR, paint);
-    let handle = add_mesh(&mut app, mesh);
+    let handle = add_mesh(&mut app, common::painted(plane, &corners));
     let e = app
         .world_mut()
         .spawn((
@@ -2973,13 +2940,7 @@ fn a_pin_rule_that_pins_nothing_is_reported_before_the_cloth_starts_and_while_it
 #[test]
 fn a_pin_rule_waits_for_a_gltf_mesh_to_load_and_hangs_it_by_its_edge() {
     let mut app = app();
-    app.add_plugins((
-        bevy::image::ImagePlugin::default(),
-        bevy::world_serialization::WorldSerializationPlugin,
-        bevy::gltf::GltfPlugin::default(),
-    ));
-    app.finish();
-    app.cleanup();
+    common::add_gltf(&mut app, ());
     // The banner of `assets/banner_statue.gltf` (flat, 2.1 m up in its file), spawned before
     // its mesh has loaded, its -X edge pinned: the game never sees its vertex indices.
     let banner: Handle<Mesh> = app

@@ -2158,36 +2158,14 @@ fn a_triangle_strip_mesh_runs_on_the_gpu_as_its_list() {
 /// by a hand-written list beside it (their vertex slabs equal).
 #[test]
 fn a_painted_pin_rule_runs_on_the_gpu_as_the_same_pins_by_hand() {
-    use bevy::mesh::VertexAttributeValues;
     if common::gpu_or_skip("a_painted_pin_rule_runs_on_the_gpu_as_the_same_pins_by_hand").is_none()
     {
         return;
     }
-    let plane = Plane3d::default()
-        .mesh()
-        .size(1.0, 1.0)
-        .subdivisions(7)
-        .build();
-    let Some(VertexAttributeValues::Float32x3(p)) = plane.attribute(Mesh::ATTRIBUTE_POSITION)
-    else {
-        panic!("positions");
-    };
-    let corners: Vec<u32> = (0..p.len() as u32)
-        .filter(|&v| p[v as usize][2] == -0.5 && p[v as usize][0].abs() == 0.5)
-        .collect();
+    let plane = common::bevy_plane();
+    let corners = common::vertices_where(&plane, |p| p.z == -0.5 && p.x.abs() == 0.5);
     assert_eq!(corners.len(), 2);
-    let paint: Vec<[f32; 4]> = (0..p.len() as u32)
-        .map(|v| {
-            if corners.contains(&v) {
-                [1.0, 0.0, 0.0, 1.0]
-            } else {
-                [0.0, 0.0, 0.0, 1.0]
-            }
-        })
-        .collect();
-    let painted = plane
-        .clone()
-        .with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, paint);
+    let painted = common::painted(plane.clone(), &corners);
     let mut app = render_app_with(ClothPlugins::default(), false);
     let mut spawn = |mesh: Mesh, pins: Option<ClothPins>| {
         let mesh = app.world_mut().resource_mut::<Assets<Mesh>>().add(mesh);

@@ -10,7 +10,7 @@ use super::{
     Cloth, ClothConfig, ClothError, ClothPins, ClothSelfCollision, ClothSim, ClothTearing,
     ClothTethers,
 };
-use crate::foundation::{EntityName, FixedPoses, read_mesh};
+use crate::foundation::{EntityName, FixedPoses, finite_bounds, read_mesh};
 use crate::solver::{
     EVEN_EDGE_SPREAD, Features, MAX_SELF_COLLISION_EDGES, MeshBinding, SelfCollision, Simulation,
     SolverError, Stretch, TetherParams, TopologyError, TopologyOptions, limits,
@@ -93,15 +93,8 @@ fn build_unpinned(
         })
         .into());
     }
-    let (lo, hi) = data.positions.iter().filter(|p| p.is_finite()).fold(
-        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
-        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-    );
-    let size = if lo.cmple(hi).all() {
-        (hi - lo).length()
-    } else {
-        0.0
-    };
+    let size =
+        finite_bounds(data.positions.iter().copied()).map_or(0.0, |(lo, hi)| (hi - lo).length());
     let binding = MeshBinding::new(
         &data.positions,
         data.attributes(),

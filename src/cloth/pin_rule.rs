@@ -10,7 +10,7 @@ use super::systems::note_rejection;
 use super::{
     Cloth, ClothError, ClothInvalid, ClothPin, ClothPins, ClothSim, ClothSource, PinAnchor,
 };
-use crate::foundation::EntityName;
+use crate::foundation::{EntityName, finite_bounds};
 
 /// Pins the vertices of a cloth's mesh that a [`VertexSelection`] chooses, all to the same
 /// kind of anchor: the way to pin a mesh made elsewhere (a glTF cape from a modelling tool,
@@ -235,16 +235,9 @@ impl VertexSelection {
                 .map(|(i, _)| i as u32)
                 .collect()
         };
-        let bounds = || {
-            let (lo, hi) = positions.iter().filter(|p| p.is_finite()).fold(
-                (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-                |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-            );
-            if lo.cmple(hi).all() {
-                format!("its vertices rest between {lo} and {hi} (mesh space)")
-            } else {
-                "it has no vertex with a finite position".to_owned()
-            }
+        let bounds = || match finite_bounds(positions.iter().copied()) {
+            Some((lo, hi)) => format!("its vertices rest between {lo} and {hi} (mesh space)"),
+            None => "it has no vertex with a finite position".to_owned(),
         };
         let selected = match *self {
             VertexSelection::Within { min, max } => {

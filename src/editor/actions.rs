@@ -22,7 +22,7 @@ use crate::cloth::{
     Cloth, ClothPin, ClothPinRule, ClothPins, ClothSim, PinAnchor, VertexSelection,
 };
 use crate::collider::{ClothCollider, ClothColliders, ColliderShape};
-use crate::foundation::grid_mesh;
+use crate::foundation::{finite_bounds, grid_mesh};
 use crate::render::{VelvetMaterial, lined_velvet};
 use crate::solver::{Shape, Topology, WindParams, ray_shape};
 use crate::wind::{Wind, WindZone};
@@ -232,15 +232,22 @@ pub fn add_mesh_collider(world: &mut World, path: &str) -> Result<Entity, String
         Transform::from_xyz(0.0, 0.6, 1.2),
         Some(handle.clone()),
     );
-    let mut editor = world.get_resource_or_init::<ClothEditor>();
-    editor.loading.push(MeshLoad {
-        entity: id,
-        handle,
-        path: full.clone(),
-        cloth: false,
-    });
-    say(world, format!("loading {full}"));
+    watch_load(world, id, handle, full, false);
     Ok(id)
+}
+
+/// Has the editor watch the load of `entity`'s mesh file (see `MeshLoad`), and says so.
+fn watch_load(world: &mut World, entity: Entity, handle: Handle<Mesh>, path: String, cloth: bool) {
+    say(world, format!("loading {path}"));
+    world
+        .get_resource_or_init::<ClothEditor>()
+        .loading
+        .push(MeshLoad {
+            entity,
+            handle,
+            path,
+            cloth,
+        });
 }
 
 /// Starts loading the mesh at `path` in the asset folder (`.gltf`/`.glb`, its first
@@ -308,14 +315,7 @@ pub fn add_mesh_cloth(world: &mut World, path: &str) -> Result<Entity, String> {
         id,
         CLOTH_COLOURS[(n as usize - 1) % CLOTH_COLOURS.len()],
     );
-    let mut editor = world.get_resource_or_init::<ClothEditor>();
-    editor.loading.push(MeshLoad {
-        entity: id,
-        handle,
-        path: full.clone(),
-        cloth: true,
-    });
-    say(world, format!("loading {full}"));
+    watch_load(world, id, handle, full, true);
     Ok(id)
 }
 
@@ -330,19 +330,12 @@ pub fn make_mesh_cloth(world: &mut World, entity: Entity, mesh: &Mesh) {
         say(world, "the mesh has no positions: it stays as it is");
         return;
     };
-    let (lo, hi) = p
-        .iter()
-        .map(|v| Vec3::from(*v))
-        .filter(|v| v.is_finite())
-        .fold(
-            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-            |(lo, hi), v| (lo.min(v), hi.max(v)),
-        );
-    let size = (hi - lo).length();
-    if !(size.is_finite() && size > 0.0) {
+    let bounds = finite_bounds(p.iter().map(|v| Vec3::from(*v)));
+    let Some((lo, hi)) = bounds.filter(|(lo, hi)| lo != hi) else {
         say(world, "the mesh has no size: it stays as it is");
         return;
-    }
+    };
+    let size = (hi - lo).length();
     let flat = hi.y - lo.y < 0.01 * size;
     let towards = if flat { Vec3::NEG_Z } else { Vec3::Y };
     let Ok(mut e) = world.get_entity_mut(entity) else {

@@ -173,6 +173,16 @@ pub fn strip_triangles(strip: &[u32], restart: u32) -> Vec<u32> {
     out
 }
 
+/// The box around the finite ones of `positions` (lowest corner, highest corner); `None`
+/// when none is finite.
+pub(crate) fn finite_bounds(positions: impl IntoIterator<Item = Vec3>) -> Option<(Vec3, Vec3)> {
+    let (lo, hi) = positions.into_iter().filter(|p| p.is_finite()).fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(p), hi.max(p)),
+    );
+    lo.cmple(hi).all().then_some((lo, hi))
+}
+
 /// A hash of everything in `mesh` (topology, every attribute, indices): an asset event that
 /// leaves it the same (the engine touching an asset it did not change) rebuilds nothing.
 pub(crate) fn mesh_fingerprint(mesh: &Mesh) -> u64 {

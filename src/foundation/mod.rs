@@ -16,7 +16,7 @@ mod pose;
 pub use animation::ClothAnimationPlugin;
 
 pub use mesh::{MeshData, MeshError, grid_mesh, read_mesh, strip_triangles, try_grid_mesh};
-pub(crate) use mesh::{mesh_fingerprint, modified_meshes};
+pub(crate) use mesh::{finite_bounds, mesh_fingerprint, modified_meshes};
 pub use pose::FixedPoses;
 
 use bevy::asset::AssetEventSystems;

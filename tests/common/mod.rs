@@ -562,3 +562,52 @@ pub fn flag_on_a_car(
     run(app, 180);
     mean_of(app, flag, &fly) - mean_of(app, flag, &hoist)
 }
+
+/// Adds glTF loading (and what it needs) to a headless app, with `more` plugins, and finishes
+/// its plugins' set-up.
+pub fn add_gltf<M>(app: &mut App, more: impl bevy::app::Plugins<M>) {
+    app.add_plugins((
+        bevy::image::ImagePlugin::default(),
+        bevy::world_serialization::WorldSerializationPlugin,
+        bevy::gltf::GltfPlugin::default(),
+    ))
+    .add_plugins(more);
+    app.finish();
+    app.cleanup();
+}
+
+/// Bevy's own plane mesh, 1 m square in the XZ plane, 9 × 9 vertices.
+pub fn bevy_plane() -> Mesh {
+    Plane3d::default()
+        .mesh()
+        .size(1.0, 1.0)
+        .subdivisions(7)
+        .build()
+}
+
+/// The vertices of `mesh` whose rest position passes `keep`.
+pub fn vertices_where(mesh: &Mesh, keep: impl Fn(Vec3) -> bool) -> Vec<u32> {
+    let Some(bevy::mesh::VertexAttributeValues::Float32x3(p)) =
+        mesh.attribute(Mesh::ATTRIBUTE_POSITION)
+    else {
+        panic!("the mesh has no Float32x3 positions");
+    };
+    (0..p.len() as u32)
+        .filter(|&i| keep(Vec3::from(p[i as usize])))
+        .collect()
+}
+
+/// `mesh` with `vertices` painted red in its vertex colours, the rest dark grey (a pin mask
+/// as a modelling tool paints it).
+pub fn painted(mesh: Mesh, vertices: &[u32]) -> Mesh {
+    let paint: Vec<[f32; 4]> = (0..mesh.count_vertices() as u32)
+        .map(|v| {
+            if vertices.contains(&v) {
+                [1.0, 0.0, 0.0, 1.0]
+            } else {
+                [0.2, 0.2, 0.2, 1.0]
+            }
+        })
+        .collect();
+    mesh.with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, paint)
+}
