@@ -349,13 +349,8 @@ pub(super) fn resolve_pin_rules(
         if !(rule.is_changed() || building) {
             continue;
         }
-        // The mesh the user gave, not the cloth's own copy (which the plugin rewrites).
-        let source_handle = match source {
-            Some(s) if s.copy == mesh3d.0 => s.source.id(),
-            _ => mesh3d.0.id(),
-        };
         // Not loaded yet: the cloth waits for it too (and says so).
-        let Some(mesh) = meshes.get(source_handle) else {
+        let Some(mesh) = meshes.get(ClothSource::user_mesh(source, mesh3d)) else {
             continue;
         };
         let who = EntityName::new(entity, name);

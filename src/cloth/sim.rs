@@ -501,3 +501,17 @@ pub struct ClothSource {
     /// `source`'s contents when the cloth was built from it (a changed asset rebuilds it).
     pub(crate) fingerprint: u64,
 }
+
+impl ClothSource {
+    /// The mesh a cloth showing `shown` is built from: the user's mesh, not the cloth's own,
+    /// deformed copy — unless the user has put another mesh in (`shown` is not the copy).
+    pub(super) fn user_mesh<'a>(
+        source: Option<&'a ClothSource>,
+        shown: &'a Mesh3d,
+    ) -> &'a Handle<Mesh> {
+        match source {
+            Some(s) if s.copy == shown.0 => &s.source,
+            _ => &shown.0,
+        }
+    }
+}

@@ -108,12 +108,8 @@ pub(super) fn init_cloths(
     for ((entity, name), cloth, config, pins, mesh3d, source, (sc, tethers, tearing), rule) in &new
     {
         let who = EntityName::new(entity, name);
-        // Rebuilding (after a change to `Cloth` or a fix): start from the mesh the user gave,
-        // not from the cloth's own, deformed copy — unless the user has put another mesh in.
-        let source_handle = match source {
-            Some(s) if s.copy == mesh3d.0 => s.source.clone(),
-            _ => mesh3d.0.clone(),
-        };
+        // Rebuilding (after a change to `Cloth` or a fix): start from the mesh the user gave.
+        let source_handle = ClothSource::user_mesh(source, mesh3d).clone();
         let Some(mesh) = meshes.get(&source_handle) else {
             // Not loaded yet: wait. Failed to load: say so once.
             let failed = asset_server.as_ref().is_some_and(|s| {
