@@ -8,7 +8,7 @@ use std::time::Duration;
 use bevy::asset::{AssetEvent, AssetEventSystems, RenderAssetUsages};
 use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
 use bevy::prelude::*;
-use bevy_cloth::cloth::{ClothSource, PinRuleError};
+use bevy_cloth::cloth::{ClothSource, OVERSTRETCH, OVERSTRETCH_SECONDS, PinRuleError};
 use bevy_cloth::prelude::*;
 use bevy_cloth::solver::DEFAULT_TELEPORT_DISTANCE;
 
@@ -2994,4 +2994,74 @@ fn a_pin_rule_waits_for_a_gltf_mesh_to_load_and_hangs_it_by_its_edge() {
         "far edge only {drop} m down (banner {} m wide)",
         right - left
     );
+}
+
+/// A fine cloth hanging from two corners at the default 10 substeps pulls its corners out
+/// to several times their length: after a second of that the cloth says so, once, and names
+/// the remedies. With tethers, on a coarser cloth, hanging from its whole top edge, or meant
+/// to tear, it does not (a modelling tool's tiny detail edges, which stretch most, are left
+/// out of the look: `solver::metrics`'s unit test).
+#[test]
+fn a_cloth_stretched_to_twice_its_length_says_so_and_a_held_one_does_not() {
+    let mut app = app();
+    let upright = Transform::from_rotation(Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2));
+    let mut hang = |n: u32, top_edge: bool, extra: &dyn Fn(&mut EntityWorldMut)| {
+        let grid = Grid::new(n, n, 1.0, 1.0);
+        let pins: Vec<u32> = if top_edge {
+            (0..n).map(|i| grid.index(i, 0)).collect()
+        } else {
+            vec![grid.index(0, 0), grid.index(n - 1, 0)]
+        };
+        let mesh = add_mesh(&mut app, grid_mesh(&grid));
+        let mut e = app.world_mut().spawn((
+            Mesh3d(mesh),
+            upright,
+            Cloth::default(),
+            ClothPins::rest(pins),
+        ));
+        extra(&mut e);
+        e.id()
+    };
+    let corners = hang(64, false, &|_| {});
+    let tethered = hang(64, false, &|e| {
+        e.insert(ClothTethers::default());
+    });
+    let coarse = hang(24, false, &|_| {});
+    let curtain = hang(64, true, &|_| {});
+    let tearing = hang(64, false, &|e| {
+        e.insert(ClothTearing { threshold: 8.0 });
+    });
+    let mut was = Vec::new();
+    let mut tearing_strain = 0.0f32;
+    run(&mut app, 1);
+    for _ in 0..180 {
+        run(&mut app, 1);
+        let s = sim(&app, corners);
+        was.push((s.overstretched(), s.max_strain(), s.steps()));
+        tearing_strain = tearing_strain.max(sim(&app, tearing).max_strain());
+    }
+    // Not before a second of it: the first second is the cloth falling into place.
+    let first = was.iter().position(|w| w.0).expect("never said");
+    assert!(
+        was[first].2 >= (60.0 * OVERSTRETCH_SECONDS) as u64,
+        "said after {} steps",
+        was[first].2
+    );
+    assert!(
+        was[first].1 > 2.0 * OVERSTRETCH,
+        "said at strain {}",
+        was[first].1
+    );
+    for e in [tethered, coarse, curtain, tearing] {
+        let s = sim(&app, e);
+        assert!(
+            !s.overstretched(),
+            "{e}: said at largest strain {}",
+            s.max_strain()
+        );
+    }
+    // Tethered, the same cloth stays near its size; the one allowed to stretch eightfold before
+    // it tears stretched as the first did.
+    assert!(sim(&app, tethered).max_strain() < 0.1);
+    assert!(tearing_strain > 2.0 * OVERSTRETCH, "{tearing_strain}");
 }

@@ -64,6 +64,8 @@ impl Built {
             reshapes: 0,
             reshape_error: None,
             made_from: self.made_from,
+            stretched_for: 0.0,
+            overstretched: false,
         }
     }
 }

@@ -33,6 +33,6 @@ pub use components::{
 pub use error::{ClothError, ClothFailed, ClothInvalid};
 pub use pin_rule::{ClothPinRule, ColorChannel, PinRuleError, VertexSelection};
 pub use plugin::ClothPlugin;
-pub use sim::{ClothPick, ClothSim, ClothSource};
+pub use sim::{ClothPick, ClothSim, ClothSource, OVERSTRETCH, OVERSTRETCH_SECONDS};
 pub use skinning::{ClothBackstop, ClothSkinning, MaxDistance};
 pub use workers::{ClothWorkers, TaskPoolParallel};

@@ -8,7 +8,9 @@ use bevy::prelude::*;
 use super::ClothError;
 use super::ClothTorn;
 use crate::foundation::EntityName;
-use crate::solver::{Carry, MeshBinding, Simulation, Weld, WindField, ray_hit, teleport_offset};
+use crate::solver::{
+    Carry, MeshBinding, Simulation, Weld, WindField, max_stretch, ray_hit, teleport_offset,
+};
 
 /// The running simulation of a cloth entity, inserted by the plugin on its first step.
 ///
@@ -95,7 +97,23 @@ pub struct ClothSim {
     /// The [`Cloth`](super::Cloth) the simulation was made from (a change that keeps its
     /// welding is applied in place, see `build::remake`).
     pub(super) made_from: super::Cloth,
+    /// Fixed-time seconds the cloth has been overstretched, less those it has not since (see
+    /// [`ClothSim::overstretched`]).
+    pub(super) stretched_for: f32,
+    /// Whether the overstretch warning was given (once per cloth built).
+    pub(super) overstretched: bool,
 }
+
+/// Steps between two looks at a cloth's stretch (a pass over its edges).
+const STRETCH_LOOK_STEPS: u64 = 15;
+
+/// Stretch (`length / rest − 1`) past which a visible edge counts as overstretched: twice its
+/// rest length.
+pub const OVERSTRETCH: f32 = 1.0;
+
+/// Fixed-time seconds a cloth stays overstretched before [`ClothSim::overstretched`] (and the
+/// warning).
+pub const OVERSTRETCH_SECONDS: f32 = 1.0;
 
 impl ClothSim {
     /// The solver-side simulation (topology, state in world space, parameters), in particle
@@ -143,6 +161,68 @@ impl ClothSim {
              pose (recovery {})",
             self.steps, self.recoveries
         );
+    }
+
+    /// Looks at the cloth's stretch every [`STRETCH_LOOK_STEPS`] steps of `dt` and warns once
+    /// when its visible edges (the 90 % longest at rest: a modelling tool's tiny detail edges
+    /// left out) have stayed past [`OVERSTRETCH`] for [`OVERSTRETCH_SECONDS`]. A cloth that
+    /// tears is left alone: its edges tear first, or are allowed to stretch that far.
+    pub(super) fn watch_stretch(&mut self, dt: f32, who: EntityName<'_>) {
+        if self.overstretched
+            || !self.steps.is_multiple_of(STRETCH_LOOK_STEPS)
+            || self.sim.features().tear_threshold.is_some()
+        {
+            return;
+        }
+        let topology = self.sim.topology();
+        let stretch = max_stretch(
+            &self.sim.state().positions,
+            topology.edges(),
+            topology.short_rest_edge(),
+        );
+        let span = dt * STRETCH_LOOK_STEPS as f32;
+        self.stretched_for = if stretch > OVERSTRETCH {
+            self.stretched_for + span
+        } else {
+            (self.stretched_for - span).max(0.0)
+        };
+        if self.stretched_for < OVERSTRETCH_SECONDS {
+            return;
+        }
+        self.overstretched = true;
+        let params = self.sim.params();
+        let fix = if self.sim.features().tethers.is_some() {
+            "raise `ClothConfig::substeps` (stretch falls with the substep's length), or pin it \
+             at more vertices"
+        } else {
+            "add `ClothTethers` (long-range attachments that keep each vertex within its rest \
+             distance of the pins: 10–25 % more time), raise `ClothConfig::substeps` (stretch \
+             falls with the substep's length), or pin it at more vertices"
+        };
+        warn!(
+            "cloth {who}: its edges have been stretched to more than {} times their rest \
+             length for {OVERSTRETCH_SECONDS} s ({:.1} times now; {} particles, {} substeps × {} \
+             iteration(s) a step): at these settings it cannot hold its own weight from its \
+             pins. For a cloth that hangs at its size, {fix}. If it is meant to stretch this \
+             far, this is said only once",
+            1.0 + OVERSTRETCH,
+            1.0 + stretch,
+            topology.vertex_count(),
+            params.substeps,
+            params.iterations,
+        );
+    }
+
+    /// Whether the cloth has been overstretched: its visible edges (a modelling tool's tiny
+    /// detail edges left out) pulled past twice their rest length ([`OVERSTRETCH`]) for
+    /// [`OVERSTRETCH_SECONDS`] of fixed time, which a fine cloth hanging from a few pins does
+    /// at the default 10 substeps (a 64² grid from two corners: its corners stretch 3–5 fold).
+    /// It was logged once as a warning naming the remedies (`ClothTethers`, more substeps, more
+    /// pins). Looked at on the CPU, and for a GPU cloth only when its state is read back
+    /// ([`ClothReadback`](crate::gpu::ClothReadback)); never for a cloth that tears.
+    #[must_use]
+    pub fn overstretched(&self) -> bool {
+        self.overstretched
     }
 
     /// After edges tore (particle pairs): counts them, drops their triangles from the drawn

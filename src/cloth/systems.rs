@@ -576,6 +576,7 @@ pub(super) fn step_cloths(
         add_impulses(colliders, cloth.sim.impulses(), &mut impulses);
         cloth.note_torn(entity, &report.torn, &mut torn);
         cloth.steps += 1;
+        cloth.watch_stretch(dt, EntityName::new(entity, name));
         // A sleeping cloth did not move: its mesh stays as it is.
         cloth.dirty |= !report.asleep;
     }

@@ -397,6 +397,15 @@ fn live_numbers(ui: &mut egui::Ui, world: &mut World, e: Entity) {
             });
     });
     ui.label(egui::RichText::new("max strain % (left), step ms (right), last 10 s").small());
+    if world
+        .get::<ClothSim>(e)
+        .is_some_and(ClothSim::overstretched)
+    {
+        ui.colored_label(
+            Color32::from_rgb(250, 150, 60),
+            "stretched past twice its length: turn tethers on, or raise the substeps",
+        );
+    }
     if let Some(err) = world.get::<ClothSim>(e).and_then(|s| s.rejected()) {
         ui.colored_label(Color32::from_rgb(250, 110, 90), format!("refused: {err}"));
     }

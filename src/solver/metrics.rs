@@ -41,6 +41,25 @@ pub fn edge_strain(positions: &[Vec4], edges: &[Edge]) -> StrainStats {
     }
 }
 
+/// The largest stretch `length / rest − 1` among the edges at least `min_rest` long at rest
+/// (0 when none is longer than at rest; edges with a non-finite end are left out): how far
+/// the cloth's visible edges are pulled. A modelling tool's mesh often has detail edges a
+/// hundred times shorter than the rest, whose strain says little about how the cloth looks;
+/// `min_rest` leaves them out.
+#[must_use]
+pub fn max_stretch(positions: &[Vec4], edges: &[Edge], min_rest: f32) -> f32 {
+    edges
+        .iter()
+        .filter(|e| e.rest > f32::EPSILON && e.rest >= min_rest)
+        .filter_map(|e| {
+            let len = positions[e.v[0] as usize]
+                .xyz()
+                .distance(positions[e.v[1] as usize].xyz());
+            len.is_finite().then_some(len / e.rest - 1.0)
+        })
+        .fold(0.0, f32::max)
+}
+
 /// Mean and largest distance between two sets of positions of the same length.
 #[must_use]
 pub fn position_distance(a: &[Vec4], b: &[Vec4]) -> (f32, f32) {
@@ -52,4 +71,38 @@ pub fn position_distance(a: &[Vec4], b: &[Vec4]) -> (f32, f32) {
         sum += f64::from(d);
     }
     ((sum / a.len().max(1) as f64) as f32, max)
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+
+    use super::*;
+    use crate::solver::mesh::EdgeKind;
+
+    fn edge(a: u32, b: u32, rest: f32) -> Edge {
+        Edge {
+            v: [a, b],
+            rest,
+            kind: EdgeKind::Stretch,
+        }
+    }
+
+    #[test]
+    fn max_stretch_reads_the_longest_pull_among_edges_long_enough() {
+        let p = |x: f32| Vec3::new(x, 0.0, 0.0).extend(0.0);
+        // 0–1 rest 1, now 2.5 apart (1.5); 1–2 rest 0.01, now 0.5 apart (49, a detail edge);
+        // 2–3 rest 1, now 0.2 apart (squeezed: no stretch).
+        let positions = [p(0.0), p(2.5), p(3.0), p(3.2)];
+        let edges = [edge(0, 1, 1.0), edge(1, 2, 0.01), edge(2, 3, 1.0)];
+        assert!((max_stretch(&positions, &edges, 0.0) - 49.0).abs() < 1e-3);
+        assert_eq!(max_stretch(&positions, &edges, 0.5), 1.5);
+        assert_eq!(max_stretch(&positions, &edges[2..], 0.5), 0.0);
+        // A non-finite end is left out, and so are zero-length edges.
+        let bad = [p(0.0), Vec4::new(f32::NAN, 0.0, 0.0, 0.0), p(0.0)];
+        assert_eq!(
+            max_stretch(&bad, &[edge(0, 1, 1.0), edge(0, 2, 0.0)], 0.0),
+            0.0
+        );
+    }
 }
