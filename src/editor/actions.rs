@@ -19,7 +19,7 @@ use super::state::{
     ClothEditor, EditorGrid, EditorShape, MeshLoad, NewCloth, NewShape, PinDraft, PinPreset,
 };
 use crate::cloth::{
-    Cloth, ClothPin, ClothPinRule, ClothPins, ClothSim, PinAnchor, VertexSelection,
+    Cloth, ClothPin, ClothPinRule, ClothPins, ClothSim, ClothTethers, PinAnchor, VertexSelection,
 };
 use crate::collider::{ClothCollider, ClothColliders, ColliderShape};
 use crate::foundation::{finite_bounds, grid_mesh};
@@ -322,7 +322,8 @@ pub fn add_mesh_cloth(world: &mut World, path: &str) -> Result<Entity, String> {
 /// Makes the object of a loaded mesh file a cloth hung by its top edge: a mesh lying flat
 /// (its height under 1 % of its size, as a modelling tool's plane is exported) is stood up a
 /// quarter turn about x, its -z edge on top; any other hangs from the vertices within 0.1 % of
-/// its size of its highest point. Pinned by a [`ClothPinRule`]; re-pin in its card.
+/// its size of its highest point. Pinned by a [`ClothPinRule`] (re-pin in its card), with
+/// [`ClothTethers`] (turn them off in its card).
 pub fn make_mesh_cloth(world: &mut World, entity: Entity, mesh: &Mesh) {
     let Some(bevy::mesh::VertexAttributeValues::Float32x3(p)) =
         mesh.attribute(Mesh::ATTRIBUTE_POSITION)
@@ -344,12 +345,15 @@ pub fn make_mesh_cloth(world: &mut World, entity: Entity, mesh: &Mesh) {
     if flat && let Some(mut t) = e.get_mut::<Transform>() {
         t.rotation = Quat::from_rotation_x(core::f32::consts::FRAC_PI_2) * t.rotation;
     }
+    // Tethered: a mesh made elsewhere is often far finer than the editor's grids, and at the
+    // default substeps a fine mesh hung from one edge stretches to a string.
     e.insert((
         Cloth::default(),
         ClothPinRule::rest(VertexSelection::Farthest {
             towards,
             within: 1e-3 * size,
         }),
+        ClothTethers::default(),
     ));
 }
 

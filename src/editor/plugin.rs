@@ -225,7 +225,7 @@ fn watch_mesh_loads(world: &mut World) {
                         make_mesh_cloth(world, entity, &mesh);
                         say(
                             world,
-                            format!("loaded {path}: a cloth hung by its top edge"),
+                            format!("loaded {path}: a cloth hung by its top edge, tethered"),
                         );
                     }
                     _ => say(world, format!("loaded {path}")),
