@@ -239,6 +239,57 @@ fn readback_and_switching_to_the_cpu_carry_the_gpu_state() {
     }
 }
 
+/// A GPU cloth read back is watched for overstretch as a CPU one is: a 64² grid hanging from
+/// two corners says so after a second; the same cloth tethered does not.
+#[test]
+fn a_read_back_gpu_cloth_stretched_to_twice_its_length_says_so() {
+    if common::gpu_or_skip("a_read_back_gpu_cloth_stretched_to_twice_its_length_says_so").is_none()
+    {
+        return;
+    }
+    let mut app = render_app();
+    let grid = Grid::new(64, 64, 1.0, 1.0);
+    let mut hang = |tethered: bool| {
+        let mesh = app
+            .world_mut()
+            .resource_mut::<Assets<Mesh>>()
+            .add(grid_mesh(&grid));
+        let mut e = app.world_mut().spawn((
+            Mesh3d(mesh),
+            Transform::from_rotation(Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2)),
+            Cloth::default(),
+            ClothPins::rest([grid.index(0, 0), grid.index(63, 0)]),
+            ClothBackend::Gpu,
+            ClothReadback,
+        ));
+        if tethered {
+            e.insert(ClothTethers::default());
+        }
+        e.id()
+    };
+    let (loose, held) = (hang(false), hang(true));
+    let said = |app: &App, e| {
+        app.world()
+            .get::<ClothSim>(e)
+            .is_some_and(ClothSim::overstretched)
+    };
+    let mut frames = 0;
+    while !said(&app, loose) {
+        common::run(&mut app, 1);
+        frames += 1;
+        assert!(frames < 400, "not said after {frames} frames");
+    }
+    assert!(in_use(&app, loose).gpu && in_use(&app, held).gpu);
+    assert!(frames >= 60, "said after {frames} frames, under a second");
+    common::run(&mut app, 60);
+    let sim = app.world().get::<ClothSim>(held).unwrap();
+    assert!(
+        !sim.overstretched() && sim.max_strain() < 0.1,
+        "tethered: {}",
+        sim.max_strain()
+    );
+}
+
 /// New settings on a GPU cloth go on from the GPU's state; an edit of the state through
 /// `simulation_mut` restarts it from the edit; a state the GPU turns NaN is caught and reset
 /// to the rest pose as on the CPU.

@@ -65,6 +65,7 @@ impl Built {
             reshape_error: None,
             made_from: self.made_from,
             stretched_for: 0.0,
+            since_look: 0.0,
             overstretched: false,
         }
     }

@@ -100,12 +100,14 @@ pub struct ClothSim {
     /// Fixed-time seconds the cloth has been overstretched, less those it has not since (see
     /// [`ClothSim::overstretched`]).
     pub(super) stretched_for: f32,
+    /// Game-time seconds since the cloth's stretch was last looked at.
+    pub(super) since_look: f32,
     /// Whether the overstretch warning was given (once per cloth built).
     pub(super) overstretched: bool,
 }
 
-/// Steps between two looks at a cloth's stretch (a pass over its edges).
-const STRETCH_LOOK_STEPS: u64 = 15;
+/// Game-time seconds between two looks at a cloth's stretch (a pass over its edges).
+const STRETCH_LOOK_SECONDS: f32 = 0.25;
 
 /// Stretch (`length / rest − 1`) past which a visible edge counts as overstretched: twice its
 /// rest length.
@@ -163,24 +165,27 @@ impl ClothSim {
         );
     }
 
-    /// Looks at the cloth's stretch every [`STRETCH_LOOK_STEPS`] steps of `dt` and warns once
-    /// when its visible edges (the 90 % longest at rest: a modelling tool's tiny detail edges
-    /// left out) have stayed past [`OVERSTRETCH`] for [`OVERSTRETCH_SECONDS`]. A cloth that
-    /// tears is left alone: its edges tear first, or are allowed to stretch that far.
-    pub(super) fn watch_stretch(&mut self, dt: f32, who: EntityName<'_>) {
-        if self.overstretched
-            || !self.steps.is_multiple_of(STRETCH_LOOK_STEPS)
-            || self.sim.features().tear_threshold.is_some()
-        {
+    /// Counts `elapsed` seconds of game time (a fixed step on the CPU, a frame's time for a
+    /// GPU state read back) and, every [`STRETCH_LOOK_SECONDS`], looks at the cloth's stretch;
+    /// warns once when its visible edges (the 90 % longest at rest: a modelling tool's tiny
+    /// detail edges left out) have stayed past [`OVERSTRETCH`] for [`OVERSTRETCH_SECONDS`]. A
+    /// cloth that tears is left alone: its edges tear first, or are allowed to stretch that
+    /// far.
+    pub(crate) fn watch_stretch(&mut self, elapsed: f32, who: EntityName<'_>) {
+        if self.overstretched || self.sim.features().tear_threshold.is_some() {
             return;
         }
+        self.since_look += elapsed.max(0.0);
+        if self.since_look < STRETCH_LOOK_SECONDS {
+            return;
+        }
+        let span = core::mem::take(&mut self.since_look);
         let topology = self.sim.topology();
         let stretch = max_stretch(
             &self.sim.state().positions,
             topology.edges(),
             topology.short_rest_edge(),
         );
-        let span = dt * STRETCH_LOOK_STEPS as f32;
         self.stretched_for = if stretch > OVERSTRETCH {
             self.stretched_for + span
         } else {
@@ -215,7 +220,7 @@ impl ClothSim {
 
     /// Whether the cloth has been overstretched: its visible edges (a modelling tool's tiny
     /// detail edges left out) pulled past twice their rest length ([`OVERSTRETCH`]) for
-    /// [`OVERSTRETCH_SECONDS`] of fixed time, which a fine cloth hanging from a few pins does
+    /// [`OVERSTRETCH_SECONDS`] of game time, which a fine cloth hanging from a few pins does
     /// at the default 10 substeps (a 64² grid from two corners: its corners stretch 3–5 fold).
     /// It was logged once as a warning naming the remedies (`ClothTethers`, more substeps, more
     /// pins). Looked at on the CPU, and for a GPU cloth only when its state is read back

@@ -464,6 +464,7 @@ fn upload(cloth: &ClothSim, layout: VertexLayout, carry: bool) -> GpuUpload {
 )]
 pub(crate) fn apply_gpu_results(
     mut commands: Commands,
+    time: Res<Time>,
     mut results: ResMut<GpuClothResults>,
     mut meshes: Option<ResMut<Assets<Mesh>>>,
     mut torn_messages: MessageWriter<ClothTorn>,
@@ -516,6 +517,7 @@ pub(crate) fn apply_gpu_results(
             cloth.recover(EntityName::new(entity, name), transform.copied());
         } else if let Some((positions, velocities)) = &r.state {
             cloth.receive_state(positions, velocities);
+            cloth.watch_stretch(time.delta_secs(), EntityName::new(entity, name));
             if leaving.is_some() {
                 // The last GPU state is some steps old; an anchor that teleported since
                 // takes the cloth along, as it would have on either backend.
