@@ -3065,3 +3065,55 @@ fn a_cloth_stretched_to_twice_its_length_says_so_and_a_held_one_does_not() {
     assert!(sim(&app, tethered).max_strain() < 0.1);
     assert!(tearing_strain > 2.0 * OVERSTRETCH, "{tearing_strain}");
 }
+
+/// A cloth with no pins has no anchor but its entity: when the entity jumps farther than the
+/// teleport distance in one step (a blanket put back on its bed), the whole cloth goes with
+/// it, and falls from there even if it had come to rest and slept; an entity moved less
+/// leaves the free cloth where it lies.
+#[test]
+fn a_cloth_without_pins_moves_with_its_entity_only_when_that_jumps() {
+    let mut app = app();
+    app.world_mut()
+        .spawn((ClothCollider::plane(), Transform::default()));
+    let grid = Grid::new(16, 16, 1.0, 1.0);
+    let mesh = add_mesh(&mut app, grid_mesh(&grid));
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(0.0, 0.3, 0.0),
+            Cloth::default(),
+        ))
+        .id();
+    run(&mut app, 240);
+    let centre = |app: &App| {
+        let s = sim(app, e).simulation().state();
+        (0..s.len()).map(|i| s.position(i)).sum::<Vec3>() / s.len() as f32
+    };
+    let lying = centre(&app);
+    assert!(lying.y < 0.05, "not on the floor: {lying}");
+    // A step of 1 m: the free cloth stays where it lies.
+    app.world_mut()
+        .get_mut::<Transform>(e)
+        .unwrap()
+        .translation
+        .x += 1.0;
+    run(&mut app, 1);
+    let after_step = centre(&app);
+    assert!(after_step.distance(lying) < 0.01, "{lying} -> {after_step}");
+    // A jump of 10 m along and 3 m up: the cloth goes with it, then falls to the floor there.
+    app.world_mut().get_mut::<Transform>(e).unwrap().translation += Vec3::new(10.0, 3.0, 0.0);
+    run(&mut app, 1);
+    let jumped = centre(&app) - after_step;
+    assert!(
+        jumped.distance(Vec3::new(10.0, 3.0, 0.0)) < 0.01,
+        "moved by {jumped}"
+    );
+    // (A flat sheet glides down in air: about 2 m/s.)
+    run(&mut app, 300);
+    let fallen = centre(&app);
+    assert!(
+        fallen.y < 0.05 && (fallen.x - after_step.x - 10.0).abs() < 0.1,
+        "{fallen}"
+    );
+}

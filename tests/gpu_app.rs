@@ -389,6 +389,65 @@ fn a_gpu_cloth_teleports_with_its_pins() {
     assert!(strain.max < 0.3, "dragged across: {strain:?}");
 }
 
+/// A GPU cloth with no pins goes with its entity when that jumps past the teleport distance,
+/// as on the CPU (`a_cloth_without_pins_moves_with_its_entity_only_when_that_jumps`).
+#[test]
+fn a_gpu_cloth_without_pins_jumps_with_its_entity() {
+    if common::gpu_or_skip("a_gpu_cloth_without_pins_jumps_with_its_entity").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    let grid = Grid::new(12, 12, 1.0, 1.0);
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    let e = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(0.0, 1.0, 0.0),
+            Cloth::default(),
+            ClothBackend::Gpu,
+            ClothReadback,
+        ))
+        .id();
+    let xs = |app: &App| {
+        let s = app.world().get::<ClothSim>(e).unwrap().simulation().state();
+        (0..s.len())
+            .map(|i| s.position(i).x)
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), x| {
+                (lo.min(x), hi.max(x))
+            })
+    };
+    common::run(&mut app, 30);
+    assert!(in_use(&app, e).gpu);
+    let before = xs(&app);
+    // A step of 1 m leaves the free cloth where it is; a jump of 6 m takes it along.
+    app.world_mut()
+        .get_mut::<Transform>(e)
+        .unwrap()
+        .translation
+        .x += 1.0;
+    common::run(&mut app, 6);
+    let stepped = xs(&app);
+    assert!(
+        (stepped.0 - before.0).abs() < 0.05 && (stepped.1 - before.1).abs() < 0.05,
+        "{before:?} -> {stepped:?}"
+    );
+    app.world_mut()
+        .get_mut::<Transform>(e)
+        .unwrap()
+        .translation
+        .x += 6.0;
+    common::run(&mut app, 6);
+    let jumped = xs(&app);
+    assert!(
+        (jumped.0 - stepped.0 - 6.0).abs() < 0.05 && (jumped.1 - stepped.1 - 6.0).abs() < 0.05,
+        "{stepped:?} -> {jumped:?}"
+    );
+}
+
 /// A 12×12 cloth at `x` held along its left and right columns by two anchors; returns the
 /// cloth and its anchors.
 fn spawn_held(app: &mut App, x: f32, backend: ClothBackend) -> (Entity, [Entity; 2]) {

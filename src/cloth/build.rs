@@ -66,6 +66,7 @@ impl Built {
             made_from: self.made_from,
             stretched_for: 0.0,
             since_look: 0.0,
+            origin: None,
             overstretched: false,
         }
     }

@@ -102,6 +102,9 @@ pub struct ClothSim {
     pub(super) stretched_for: f32,
     /// Game-time seconds since the cloth's stretch was last looked at.
     pub(super) since_look: f32,
+    /// Where the entity was at the last fixed step: a cloth with no pins moves with its
+    /// entity when that jumps past the teleport distance.
+    pub(super) origin: Option<Vec3>,
     /// Whether the overstretch warning was given (once per cloth built).
     pub(super) overstretched: bool,
 }

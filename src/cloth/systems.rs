@@ -21,7 +21,9 @@ use crate::collider::{ClothColliders, ClothContactImpulse, add_impulses};
 use crate::foundation::{
     EntityName, FixedPoses, SimulatedCloth, mesh_fingerprint, modified_meshes,
 };
-use crate::solver::{Carry, Environment, ManyItem, Serial, SolverError, StepReport, step_many};
+use crate::solver::{
+    Carry, Environment, ManyItem, Serial, SolverError, StepReport, step_many, teleport_offset,
+};
 use crate::wind::ClothWindField;
 
 /// How long a cloth may wait for its mesh to load before it says so (once).
@@ -479,6 +481,24 @@ pub(super) fn sync_cloths(
             );
         }
         cs.teleport = None;
+        // A cloth with no pins has no anchor but its entity: when that jumps past the
+        // teleport distance in one step (a blanket put back on its bed, a cloth respawned),
+        // the whole cloth moves with it; an entity that moves less leaves the free cloth be.
+        let origin = poses
+            .get(entity)
+            .map(|p| p.translation())
+            .filter(|o| o.is_finite());
+        if cs.sim.state().pins().is_empty()
+            && let (Some(from), Some(to)) = (cs.origin, origin)
+            && let Some(offset) = teleport_offset([(from, to)], cloth.teleport_distance)
+        {
+            cs.sim.state_mut().teleport(offset, []);
+            // Asleep where it lay, it falls from where it is put.
+            cs.sim.wake();
+            cs.teleport = Some(offset);
+            cs.dirty = true;
+        }
+        cs.origin = origin;
         if pins.is_changed() || cs.pins_error.is_some() {
             let result = list.and_then(|list| {
                 repin(
