@@ -12,8 +12,9 @@ use super::{
 };
 use crate::foundation::{EntityName, FixedPoses, finite_bounds, read_mesh};
 use crate::solver::{
-    EVEN_EDGE_SPREAD, Features, MAX_SELF_COLLISION_EDGES, MeshBinding, SelfCollision, Simulation,
-    SolverError, Stretch, TetherParams, TopologyError, TopologyOptions, limits,
+    EVEN_EDGE_SPREAD, Features, MAX_SELF_COLLISION_EDGES, MeshBinding, Pin, SelfCollision,
+    Simulation, SolverError, Stretch, TetherParams, Topology, TopologyError, TopologyOptions,
+    limits,
 };
 
 /// A cloth built from its mesh, before its own mesh asset exists.
@@ -67,6 +68,7 @@ impl Built {
             stretched_for: 0.0,
             since_look: 0.0,
             origin: None,
+            loose_warned: false,
             overstretched: false,
         }
     }
@@ -401,6 +403,34 @@ pub(super) fn warn_coarse(cs: &ClothSim, who: EntityName) {
     }
 }
 
+/// What to tell the user about pieces of a cloth's mesh (`topology`) that no pin holds while
+/// others are pinned (`pins`, particles): they fall on their own, away from the rest.
+fn loose_warning(topology: &Topology, pins: &[Pin]) -> Option<String> {
+    let (pieces, vertices) = topology.loose_pieces(pins.iter().map(|p| p.vertex));
+    (pieces > 0).then(|| {
+        format!(
+            "{vertices} of its {} particles, in {pieces} piece(s) of its mesh that no edge joins \
+             to a pinned vertex, fall on their own (parts kept separate in the modelling tool: \
+             hooks, trims, a second layer); pin them too, join them to the rest (vertices that \
+             only lie close are welded by a larger `Cloth::weld_tolerance`), or make them an \
+             entity of their own",
+            topology.vertex_count()
+        )
+    })
+}
+
+/// Warns once per cloth built, when it starts or is re-pinned, that pieces of its mesh hold
+/// no pin while others are pinned.
+pub(super) fn warn_loose(cs: &mut ClothSim, who: EntityName) {
+    if cs.loose_warned {
+        return;
+    }
+    if let Some(why) = loose_warning(cs.sim.topology(), cs.sim.state().pins()) {
+        cs.loose_warned = true;
+        warn!("cloth {who}: {why}");
+    }
+}
+
 /// The solver features a cloth's opt-in components ask for.
 pub(super) fn features(
     sim: &Simulation,
@@ -424,6 +454,35 @@ pub(super) fn features(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Two sheets, one of them pinned: the other is named, with its vertex count; both pinned,
+    /// or none (a cloth dropped on something), nothing is said.
+    #[test]
+    fn a_mesh_piece_no_pin_holds_is_named() {
+        let grid = crate::solver::Grid::new(3, 3, 1.0, 1.0);
+        let mut positions = grid.positions();
+        positions.extend(grid.positions().iter().map(|p| *p + Vec3::X * 5.0));
+        let mut indices = grid.indices();
+        indices.extend(grid.indices().iter().map(|i| i + 9));
+        let topology = Topology::from_triangles(
+            &positions,
+            None,
+            &indices,
+            crate::solver::TopologyOptions::default(),
+        )
+        .unwrap();
+        let pin = |vertex| Pin {
+            vertex,
+            target: Vec3::ZERO,
+        };
+        let why = loose_warning(&topology, &[pin(0), pin(2)]).expect("the second sheet is loose");
+        assert!(
+            why.starts_with("9 of its 18 particles, in 1 piece(s)"),
+            "{why}"
+        );
+        assert_eq!(loose_warning(&topology, &[pin(0), pin(9)]), None);
+        assert_eq!(loose_warning(&topology, &[]), None);
+    }
 
     #[test]
     fn a_mesh_too_coarse_to_fold_is_named_and_a_three_by_three_grid_is_not() {

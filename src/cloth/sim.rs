@@ -105,6 +105,9 @@ pub struct ClothSim {
     /// Where the entity was at the last fixed step: a cloth with no pins moves with its
     /// entity when that jumps past the teleport distance.
     pub(super) origin: Option<Vec3>,
+    /// Whether the warning that pieces of the mesh hold no pin was given (once per cloth
+    /// built).
+    pub(super) loose_warned: bool,
     /// Whether the overstretch warning was given (once per cloth built).
     pub(super) overstretched: bool,
 }

@@ -6,7 +6,9 @@ use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::tasks::ComputeTaskPool;
 
-use super::build::{build, features, remake, reshape, warn_coarse, warn_self_collision};
+use super::build::{
+    build, features, remake, reshape, warn_coarse, warn_loose, warn_self_collision,
+};
 use super::error::report;
 use super::inertia::carry_unfelt_motion;
 use super::pin_rule::drops_colors;
@@ -168,6 +170,7 @@ pub(super) fn init_cloths(
                 let mut sim = b.into_sim(meshes);
                 warn_self_collision(&mut sim, sc, who);
                 warn_coarse(&sim, who);
+                warn_loose(&mut sim, who);
                 let handle = sim.mesh().clone();
                 commands.entity(entity).try_insert((
                     Mesh3d(handle.clone()),
@@ -512,6 +515,7 @@ pub(super) fn sync_cloths(
             });
             if let Ok(offset) = &result {
                 cs.teleport = *offset;
+                warn_loose(cs, who);
             }
             note_rejection(
                 &mut commands,

@@ -576,6 +576,55 @@ impl Topology {
         &self.edges
     }
 
+    /// The pieces of the mesh (vertices joined by edges) that hold none of the `pinned`
+    /// vertices, when one is pinned at all: their count and their vertices'. Such a piece falls
+    /// on its own (a glTF curtain's separate hooks, a cape's loose clasp). Vertices in no
+    /// edge, and out-of-range pins, are left out; `(0, 0)` when nothing is pinned.
+    #[must_use]
+    pub fn loose_pieces(&self, pinned: impl IntoIterator<Item = u32>) -> (usize, usize) {
+        let n = self.vertex_count();
+        // Union–find over the edges, each root the smallest vertex of its piece.
+        let mut parent: Vec<u32> = (0..n as u32).collect();
+        fn root(parent: &mut [u32], mut v: u32) -> u32 {
+            while parent[v as usize] != v {
+                let up = parent[parent[v as usize] as usize];
+                parent[v as usize] = up;
+                v = up;
+            }
+            v
+        }
+        let mut in_edge = vec![false; n];
+        for e in &self.edges {
+            let (a, b) = (root(&mut parent, e.v[0]), root(&mut parent, e.v[1]));
+            parent[a.max(b) as usize] = a.min(b);
+            in_edge[e.v[0] as usize] = true;
+            in_edge[e.v[1] as usize] = true;
+        }
+        let mut held = vec![false; n];
+        let mut any = false;
+        for p in pinned {
+            if (p as usize) < n {
+                held[root(&mut parent, p) as usize] = true;
+                any = true;
+            }
+        }
+        if !any {
+            return (0, 0);
+        }
+        let (mut pieces, mut vertices) = (0, 0);
+        for v in 0..n as u32 {
+            if !in_edge[v as usize] {
+                continue;
+            }
+            let r = root(&mut parent, v);
+            if !held[r as usize] {
+                vertices += 1;
+                pieces += usize::from(r == v);
+            }
+        }
+        (pieces, vertices)
+    }
+
     /// Dihedral bending pairs, one per interior manifold edge.
     #[must_use]
     pub fn bends(&self) -> &[Bend] {
@@ -686,6 +735,35 @@ fn edge_spread(edges: &[Edge]) -> (f32, f32) {
 mod tests {
     use super::*;
     use crate::solver::mesh::Grid;
+
+    /// Two 3 × 3 sheets side by side and a lone triangle: pinning one sheet leaves the other
+    /// sheet and the triangle loose; pinning nothing, or a vertex of each, leaves none.
+    #[test]
+    fn loose_pieces_are_the_ones_no_pin_holds() {
+        let grid = Grid::new(3, 3, 1.0, 1.0);
+        let mut positions = grid.positions();
+        let mut indices = grid.indices();
+        let shift = |d: f32| move |p: &Vec3| *p + Vec3::new(d, 0.0, 0.0);
+        positions.extend(grid.positions().iter().map(shift(5.0)));
+        indices.extend(grid.indices().iter().map(|i| i + 9));
+        positions.extend([
+            Vec3::new(9.0, 0.0, 0.0),
+            Vec3::new(10.0, 0.0, 0.0),
+            Vec3::new(9.0, 0.0, 1.0),
+        ]);
+        indices.extend([18, 19, 20]);
+        // A vertex in no triangle is no piece.
+        positions.push(Vec3::splat(20.0));
+        let t = Topology::from_triangles(&positions, None, &indices, TopologyOptions::default())
+            .unwrap();
+        assert_eq!(t.loose_pieces([0, 2]), (2, 12));
+        assert_eq!(t.loose_pieces([4, 13]), (1, 3));
+        assert_eq!(t.loose_pieces([0, 9, 20]), (0, 0));
+        assert_eq!(t.loose_pieces([]), (0, 0));
+        // A pin on the vertex in no triangle holds nothing; one out of range is left out.
+        assert_eq!(t.loose_pieces([21, 99]), (3, 21));
+        assert_eq!(t.loose_pieces([99]), (0, 0));
+    }
 
     /// Even meshes have no self-collision scales (every vertex keeps the cloth's thickness);
     /// an uneven one gives its coarse vertices more and its fine ones less.
