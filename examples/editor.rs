@@ -183,6 +183,8 @@ fn report(world: &mut World) -> support::Json {
 fn main() {
     let args = Args::parse(include_str!("editor.rs"));
     let mut app = support::app(&args, "bevy_cloth editor", 1.0 / 60.0);
+    // The panel's mesh files (and `--mesh-cloth`) load with `--headless` too.
+    support::add_gltf_support(&mut app);
     let mesh_cloth: String = args.get("mesh-cloth", String::new());
     if !mesh_cloth.is_empty() {
         app.insert_resource(MeshCloth(mesh_cloth));
