@@ -420,9 +420,9 @@ fn loose_warning(topology: &Topology, pins: &[Pin]) -> Option<String> {
 }
 
 /// Warns once per cloth built, when it starts or is re-pinned, that pieces of its mesh hold
-/// no pin while others are pinned.
+/// no pin while others are pinned; not once it has torn (pieces torn off fall as they should).
 pub(super) fn warn_loose(cs: &mut ClothSim, who: EntityName) {
-    if cs.loose_warned {
+    if cs.loose_warned || cs.torn_edges > 0 {
         return;
     }
     if let Some(why) = loose_warning(cs.sim.topology(), cs.sim.state().pins()) {
