@@ -15,6 +15,7 @@ mod build;
 mod components;
 mod error;
 mod inertia;
+mod material;
 mod mesh;
 mod pin_rule;
 mod pins;

@@ -2,6 +2,7 @@
 
 use bevy::prelude::*;
 
+use super::material::warn_one_sided_materials;
 use super::pin_rule::resolve_pin_rules;
 use super::skinning::{skin_cloths, unskin_free_cloths};
 use super::systems::{
@@ -71,6 +72,10 @@ impl Plugin for ClothPlugin {
                 ),
             )
             .add_systems(PostUpdate, write_back.in_set(ClothSystems::Writeback))
+            .add_systems(
+                Update,
+                warn_one_sided_materials.run_if(resource_exists::<Assets<StandardMaterial>>),
+            )
             .add_systems(
                 PreUpdate,
                 rebuild_changed_meshes.run_if(resource_exists::<Messages<AssetEvent<Mesh>>>),
