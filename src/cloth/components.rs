@@ -61,6 +61,7 @@ impl_reflect_opaque!((in bevy_cloth::solver) SolverParams(Debug, Clone, PartialE
     // Tells the layers below that this entity is a cloth.
     crate::foundation::SimulatedCloth
 )]
+#[component(on_add = warn_without_plugin)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Cloth {
     /// Total mass in kilograms (finite, > 0).
@@ -82,6 +83,36 @@ pub struct Cloth {
     /// written back; where their source normals agree (a UV seam) they share a smooth normal,
     /// where they differ (a hard edge) each keeps its own side's normal.
     pub weld_tolerance: f32,
+}
+
+/// Put into the app by [`ClothPlugin`](super::ClothPlugin): a [`Cloth`] added to an app without
+/// it is simulated by nothing.
+#[derive(Resource, Default)]
+pub(crate) struct ClothPluginPresent;
+
+/// Put into the app the first time a [`Cloth`] is added without [`ClothPlugin`](super::ClothPlugin)
+/// (and said once).
+#[derive(Resource, Default)]
+pub(crate) struct ClothPluginMissing;
+
+/// A `Cloth` added to a running app (one with a clock: not a scene's own world) that has no
+/// `ClothPlugin` is simulated by nothing: said once, with the fix.
+fn warn_without_plugin(
+    mut world: bevy::ecs::world::DeferredWorld,
+    ctx: bevy::ecs::lifecycle::HookContext,
+) {
+    if world.contains_resource::<ClothPluginPresent>()
+        || world.contains_resource::<ClothPluginMissing>()
+        || !world.contains_resource::<Time>()
+    {
+        return;
+    }
+    world.commands().init_resource::<ClothPluginMissing>();
+    warn!(
+        "a Cloth was added (entity {}) to an app without the cloth plugins, so nothing \
+         simulates it; add `ClothPlugins::default()` to the app (after `DefaultPlugins`)",
+        ctx.entity
+    );
 }
 
 impl Cloth {
@@ -471,5 +502,30 @@ impl ClothPins {
     pub fn with(mut self, vertex: u32, anchor: PinAnchor) -> Self {
         self.0.push(ClothPin { vertex, anchor });
         self
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Spawning a `Cloth` in an app without the plugin is said once; not in a world with no
+    /// clock (a scene's own world), nor where the plugin is.
+    #[test]
+    fn a_cloth_in_an_app_without_the_plugin_is_named() {
+        let mut scene = World::new();
+        scene.spawn(Cloth::default());
+        scene.flush();
+        assert!(!scene.contains_resource::<ClothPluginMissing>());
+        let mut bare = World::new();
+        bare.init_resource::<Time>();
+        bare.spawn(Cloth::default());
+        bare.flush();
+        assert!(bare.contains_resource::<ClothPluginMissing>());
+        let mut app = App::new();
+        app.add_plugins((MinimalPlugins, super::super::ClothPlugin));
+        app.world_mut().spawn(Cloth::default());
+        app.world_mut().flush();
+        assert!(!app.world().contains_resource::<ClothPluginMissing>());
     }
 }

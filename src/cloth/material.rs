@@ -26,7 +26,11 @@ pub(super) fn one_sided_warning(material: &StandardMaterial) -> Option<String> {
 }
 
 /// A cloth entity drawn with a `StandardMaterial`.
-type Dressed<'a> = (Entity, Option<&'a Name>, &'a MeshMaterial3d<StandardMaterial>);
+type Dressed<'a> = (
+    Entity,
+    Option<&'a Name>,
+    &'a MeshMaterial3d<StandardMaterial>,
+);
 
 /// Warns once per cloth entity whose `StandardMaterial` (once loaded) culls a side. Runs only
 /// in apps with a renderer's materials.

@@ -2,6 +2,7 @@
 
 use bevy::prelude::*;
 
+use super::components::ClothPluginPresent;
 use super::material::warn_one_sided_materials;
 use super::pin_rule::resolve_pin_rules;
 use super::skinning::{skin_cloths, unskin_free_cloths};
@@ -52,6 +53,7 @@ impl Plugin for ClothPlugin {
             .register_type::<ClothSource>()
             .register_type::<ClothSmoothing>()
             .init_resource::<ClothWorkers>()
+            .init_resource::<ClothPluginPresent>()
             .add_message::<ClothTorn>()
             .add_message::<ClothFailed>()
             .add_observer(on_cloth_removed)
