@@ -389,6 +389,49 @@ fn a_gpu_cloth_teleports_with_its_pins() {
     assert!(strain.max < 0.3, "dragged across: {strain:?}");
 }
 
+/// `ClothPlugins` added before `DefaultPlugins` cannot set up its GPU backend (the renderer
+/// is not there yet when it is built): a cloth asking for the GPU runs on the CPU and says
+/// that the order is why, rather than blaming the device.
+#[test]
+fn cloth_plugins_added_before_the_renderer_say_so() {
+    if common::gpu_or_skip("cloth_plugins_added_before_the_renderer_say_so").is_none() {
+        return;
+    }
+    let mut app = App::new();
+    app.add_plugins(ClothPlugins::default())
+        .add_plugins(
+            DefaultPlugins
+                .build()
+                .disable::<bevy::winit::WinitPlugin>()
+                .set(WindowPlugin {
+                    primary_window: None,
+                    exit_condition: bevy::window::ExitCondition::DontExit,
+                    ..default()
+                }),
+        )
+        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+            1.0 / 60.0,
+        )))
+        .insert_resource(Time::<Fixed>::from_hz(60.0));
+    while app.plugins_state() == bevy::app::PluginsState::Adding {
+        bevy::tasks::tick_global_task_pools_on_main_thread();
+    }
+    app.finish();
+    app.cleanup();
+    let mut app = ExitingApp(Some(app));
+    let e = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    common::run(&mut app, 5);
+    let u = in_use(&app, e);
+    assert!(!u.gpu, "{u:?}");
+    assert!(
+        u.reason
+            .as_deref()
+            .is_some_and(|r| r.contains("add ClothPlugins after DefaultPlugins")),
+        "{u:?}"
+    );
+    assert!(app.world().get::<ClothSim>(e).unwrap().steps() >= 3);
+}
+
 /// A GPU cloth with no pins goes with its entity when that jumps past the teleport distance,
 /// as on the CPU (`a_cloth_without_pins_moves_with_its_entity_only_when_that_jumps`).
 #[test]

@@ -65,6 +65,14 @@ impl Default for ClothGpuPlugin {
     }
 }
 
+/// Whether the app had a renderer when [`ClothGpuPlugin`] was built.
+#[derive(Resource)]
+struct BuiltWithRenderer(bool);
+
+/// Why a renderer added after the cloth plugins is of no use to them.
+const PLUGIN_ORDER: &str = "ClothPlugins was added before the renderer (DefaultPlugins), so \
+                            its GPU backend was not set up; add ClothPlugins after DefaultPlugins";
+
 impl Plugin for ClothGpuPlugin {
     fn build(&self, app: &mut App) {
         let schedule = ClothSchedule::of(app);
@@ -93,6 +101,7 @@ impl Plugin for ClothGpuPlugin {
                 ),
             );
         let has_renderer = app.get_sub_app(RenderApp).is_some();
+        app.insert_resource(BuiltWithRenderer(has_renderer));
         // Refined in `finish`, once the renderer has its device.
         app.insert_resource(ClothGpuSupport {
             unavailable: Some(
@@ -133,8 +142,17 @@ impl Plugin for ClothGpuPlugin {
     }
 
     fn finish(&self, app: &mut App) {
+        let built_with_renderer = app
+            .world()
+            .get_resource::<BuiltWithRenderer>()
+            .is_some_and(|b| b.0);
         let unavailable = match app.get_sub_app_mut(RenderApp) {
             None => Some("the app has no renderer".to_owned()),
+            // The renderer came after this plugin was built: its render-world half is missing.
+            Some(_) if !built_with_renderer => {
+                warn!("{PLUGIN_ORDER}: a cloth that asks for the GPU runs on the CPU");
+                Some(PLUGIN_ORDER.to_owned())
+            }
             Some(render_app) => match render_app.world().get_resource::<RenderDevice>() {
                 None => Some("the renderer has no device".to_owned()),
                 Some(device) => match GpuKernels::check_limits(&device.limits()) {
