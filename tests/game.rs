@@ -3004,33 +3004,11 @@ fn a_pin_rule_waits_for_a_gltf_mesh_to_load_and_hangs_it_by_its_edge() {
 #[test]
 fn a_cloth_stretched_to_twice_its_length_says_so_and_a_held_one_does_not() {
     let mut app = app();
-    let upright = Transform::from_rotation(Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2));
-    let mut hang = |n: u32, top_edge: bool, extra: &dyn Fn(&mut EntityWorldMut)| {
-        let grid = Grid::new(n, n, 1.0, 1.0);
-        let pins: Vec<u32> = if top_edge {
-            (0..n).map(|i| grid.index(i, 0)).collect()
-        } else {
-            vec![grid.index(0, 0), grid.index(n - 1, 0)]
-        };
-        let mesh = add_mesh(&mut app, grid_mesh(&grid));
-        let mut e = app.world_mut().spawn((
-            Mesh3d(mesh),
-            upright,
-            Cloth::default(),
-            ClothPins::rest(pins),
-        ));
-        extra(&mut e);
-        e.id()
-    };
-    let corners = hang(64, false, &|_| {});
-    let tethered = hang(64, false, &|e| {
-        e.insert(ClothTethers::default());
-    });
-    let coarse = hang(24, false, &|_| {});
-    let curtain = hang(64, true, &|_| {});
-    let tearing = hang(64, false, &|e| {
-        e.insert(ClothTearing { threshold: 8.0 });
-    });
+    let corners = common::hung_grid(&mut app, 64, false, ());
+    let tethered = common::hung_grid(&mut app, 64, false, ClothTethers::default());
+    let coarse = common::hung_grid(&mut app, 24, false, ());
+    let curtain = common::hung_grid(&mut app, 64, true, ());
+    let tearing = common::hung_grid(&mut app, 64, false, ClothTearing { threshold: 8.0 });
     let mut was = Vec::new();
     let mut tearing_strain = 0.0f32;
     run(&mut app, 1);

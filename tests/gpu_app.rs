@@ -117,6 +117,12 @@ impl Drop for ExitingApp {
 /// `render_app` with `cloth`'s plugins; without pipelined rendering the render world stays a
 /// sub-app of `app`, where a test can look at it.
 fn render_app_with(cloth: ClothPlugins, pipelined: bool) -> ExitingApp {
+    render_app_in_order(cloth, pipelined, false)
+}
+
+/// [`render_app_with`], the cloth plugins added before `DefaultPlugins` when `cloth_first`
+/// (the order a game must not use).
+fn render_app_in_order(cloth: ClothPlugins, pipelined: bool, cloth_first: bool) -> ExitingApp {
     let mut app = App::new();
     let mut plugins = DefaultPlugins
         .build()
@@ -129,12 +135,15 @@ fn render_app_with(cloth: ClothPlugins, pipelined: bool) -> ExitingApp {
     if !pipelined {
         plugins = plugins.disable::<bevy::render::pipelined_rendering::PipelinedRenderingPlugin>();
     }
-    app.add_plugins(plugins)
-        .add_plugins(cloth)
-        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
-            1.0 / 60.0,
-        )))
-        .insert_resource(Time::<Fixed>::from_hz(60.0));
+    if cloth_first {
+        app.add_plugins(cloth).add_plugins(plugins);
+    } else {
+        app.add_plugins(plugins).add_plugins(cloth);
+    }
+    app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+        1.0 / 60.0,
+    )))
+    .insert_resource(Time::<Fixed>::from_hz(60.0));
     while app.plugins_state() == bevy::app::PluginsState::Adding {
         bevy::tasks::tick_global_task_pools_on_main_thread();
     }
@@ -248,26 +257,9 @@ fn a_read_back_gpu_cloth_stretched_to_twice_its_length_says_so() {
         return;
     }
     let mut app = render_app();
-    let grid = Grid::new(64, 64, 1.0, 1.0);
-    let mut hang = |tethered: bool| {
-        let mesh = app
-            .world_mut()
-            .resource_mut::<Assets<Mesh>>()
-            .add(grid_mesh(&grid));
-        let mut e = app.world_mut().spawn((
-            Mesh3d(mesh),
-            Transform::from_rotation(Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2)),
-            Cloth::default(),
-            ClothPins::rest([grid.index(0, 0), grid.index(63, 0)]),
-            ClothBackend::Gpu,
-            ClothReadback,
-        ));
-        if tethered {
-            e.insert(ClothTethers::default());
-        }
-        e.id()
-    };
-    let (loose, held) = (hang(false), hang(true));
+    let gpu = (ClothBackend::Gpu, ClothReadback);
+    let loose = common::hung_grid(&mut app, 64, false, gpu);
+    let held = common::hung_grid(&mut app, 64, false, (gpu, ClothTethers::default()));
     let said = |app: &App, e| {
         app.world()
             .get::<ClothSim>(e)
@@ -397,28 +389,7 @@ fn cloth_plugins_added_before_the_renderer_say_so() {
     if common::gpu_or_skip("cloth_plugins_added_before_the_renderer_say_so").is_none() {
         return;
     }
-    let mut app = App::new();
-    app.add_plugins(ClothPlugins::default())
-        .add_plugins(
-            DefaultPlugins
-                .build()
-                .disable::<bevy::winit::WinitPlugin>()
-                .set(WindowPlugin {
-                    primary_window: None,
-                    exit_condition: bevy::window::ExitCondition::DontExit,
-                    ..default()
-                }),
-        )
-        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
-            1.0 / 60.0,
-        )))
-        .insert_resource(Time::<Fixed>::from_hz(60.0));
-    while app.plugins_state() == bevy::app::PluginsState::Adding {
-        bevy::tasks::tick_global_task_pools_on_main_thread();
-    }
-    app.finish();
-    app.cleanup();
-    let mut app = ExitingApp(Some(app));
+    let mut app = render_app_in_order(ClothPlugins::default(), true, true);
     let e = spawn(&mut app, Some(ClothBackend::Gpu), false);
     common::run(&mut app, 5);
     let u = in_use(&app, e);

@@ -611,3 +611,27 @@ pub fn painted(mesh: Mesh, vertices: &[u32]) -> Mesh {
         .collect();
     mesh.with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, paint)
 }
+
+/// An `n` × `n`, 1 m grid cloth hung upright (row 0 on top) from its two top corners, or from
+/// its whole top edge, with `extra` on its entity.
+pub fn hung_grid(app: &mut App, n: u32, top_edge: bool, extra: impl Bundle) -> Entity {
+    let grid = Grid::new(n, n, 1.0, 1.0);
+    let pins: Vec<u32> = if top_edge {
+        (0..n).map(|i| grid.index(i, 0)).collect()
+    } else {
+        vec![grid.index(0, 0), grid.index(n - 1, 0)]
+    };
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    app.world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_rotation(Quat::from_rotation_x(-core::f32::consts::FRAC_PI_2)),
+            Cloth::default(),
+            ClothPins::rest(pins),
+            extra,
+        ))
+        .id()
+}
