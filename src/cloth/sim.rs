@@ -97,7 +97,7 @@ pub struct ClothSim {
     /// The [`Cloth`](super::Cloth) the simulation was made from (a change that keeps its
     /// welding is applied in place, see `build::remake`).
     pub(super) made_from: super::Cloth,
-    /// Fixed-time seconds the cloth has been overstretched, less those it has not since (see
+    /// Game-time seconds the cloth has been overstretched, less those it has not since (see
     /// [`ClothSim::overstretched`]).
     pub(super) stretched_for: f32,
     /// Game-time seconds since the cloth's stretch was last looked at.
@@ -119,7 +119,7 @@ const STRETCH_LOOK_SECONDS: f32 = 0.25;
 /// rest length.
 pub const OVERSTRETCH: f32 = 1.0;
 
-/// Fixed-time seconds a cloth stays overstretched before [`ClothSim::overstretched`] (and the
+/// Game-time seconds a cloth stays overstretched before [`ClothSim::overstretched`] (and the
 /// warning).
 pub const OVERSTRETCH_SECONDS: f32 = 1.0;
 
