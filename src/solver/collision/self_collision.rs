@@ -324,10 +324,11 @@ const BIN_BITS: u32 = 8;
 #[inline]
 fn cell_of(p: Vec3, inv_cell: f32) -> IVec3 {
     // floor() without a libm call (x86-64's baseline has no rounding instruction):
-    // truncate, then step down for negative non-integers.
+    // truncate, then step down for negative non-integers. The cast saturates far out (a cloth
+    // flung 2³¹ cells away): the step down then wraps, as WGSL's does, and never panics.
     let v = p * inv_cell;
     let t = v.as_ivec3();
-    t - IVec3::select(t.as_vec3().cmpgt(v), IVec3::ONE, IVec3::ZERO)
+    t.wrapping_sub(IVec3::select(t.as_vec3().cmpgt(v), IVec3::ONE, IVec3::ZERO))
 }
 
 /// The cell hash of [`count_self_crossings`] (the GPU's `sc_hash` mixes the same way).
@@ -2125,6 +2126,10 @@ mod tests {
                 "{x}"
             );
         }
+        // Beyond i32's range the cast saturates; the step down must not overflow.
+        let far = cell_of(Vec3::new(-1e12, 1e12, -3.5e9), 1.0);
+        assert_eq!(far.y, i32::MAX);
+        assert!(far.x == i32::MIN || far.x == i32::MAX, "{far}");
     }
 
     #[test]
