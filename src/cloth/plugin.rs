@@ -57,6 +57,7 @@ impl Plugin for ClothPlugin {
             .add_message::<ClothTorn>()
             .add_message::<ClothFailed>()
             .add_observer(on_cloth_removed)
+            .add_systems(Startup, say_if_unoptimized)
             .add_systems(
                 schedule,
                 (
@@ -89,6 +90,45 @@ impl Plugin for ClothPlugin {
             warn!(
                 "ClothPlugin: no Assets<Mesh> resource; add MeshPlugin (part of DefaultPlugins) \
                  and AssetPlugin, or no cloth will be simulated"
+            );
+        }
+    }
+}
+
+/// What to tell a user whose build compiled this crate without optimizations, or `None`.
+fn unoptimized_warning(unoptimized: bool) -> Option<&'static str> {
+    unoptimized.then_some(
+        "bevy_cloth was compiled without optimizations (a debug build), so its cloth runs 20 \
+         to 60 times slower than in a release build (the flag example: 83 ms a frame against \
+         1.4); optimize it in debug builds too, with `[profile.dev.package.bevy_cloth] \
+         opt-level = 3` in your Cargo.toml (or Bevy's advice, `[profile.dev.package.\"*\"] \
+         opt-level = 3`), or run with `--release`",
+    )
+}
+
+/// Says once, at startup, that the crate was compiled without optimizations (see
+/// [`unoptimized_warning`]).
+fn say_if_unoptimized() {
+    if let Some(why) = unoptimized_warning(cfg!(cloth_unoptimized)) {
+        warn!("{why}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_an_unoptimized_build_is_told_how_to_optimize_the_crate() {
+        assert_eq!(unoptimized_warning(false), None);
+        let why = unoptimized_warning(true).expect("an unoptimized build is told");
+        assert!(why.contains("[profile.dev.package.bevy_cloth]"), "{why}");
+        assert!(why.contains("opt-level = 3"), "{why}");
+        // CI runs the tests in release: there the crate must not call itself unoptimized.
+        if !cfg!(debug_assertions) {
+            assert!(
+                !cfg!(cloth_unoptimized),
+                "a release build took itself for unoptimized"
             );
         }
     }
