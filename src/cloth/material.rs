@@ -1,7 +1,7 @@
 //! A hint for the first thing a cloth dressed in a plain `StandardMaterial` shows: where it
 //! turns its back to the camera, it disappears.
 
-use bevy::ecs::entity::EntityHashSet;
+use bevy::ecs::entity::EntityHashMap;
 use bevy::prelude::*;
 use bevy::render::render_resource::Face;
 
@@ -32,22 +32,28 @@ type Dressed<'a> = (
     &'a MeshMaterial3d<StandardMaterial>,
 );
 
-/// Warns once per cloth entity whose `StandardMaterial` (once loaded) culls a side. Runs only
-/// in apps with a renderer's materials.
+/// Warns once per cloth entity and material whose `StandardMaterial` (once loaded) culls a
+/// side: again when the entity is given another material that does. Runs only in apps with a
+/// renderer's materials.
 pub(super) fn warn_one_sided_materials(
     materials: Res<Assets<StandardMaterial>>,
     cloths: Query<Dressed, With<ClothSim>>,
-    mut seen: Local<EntityHashSet>,
+    mut seen: Local<EntityHashMap<AssetId<StandardMaterial>>>,
 ) {
+    // Forget despawned cloths (and ones dressed otherwise now) once they are most of the map.
+    if seen.len() > 2 * cloths.iter().len() + 64 {
+        seen.retain(|entity, _| cloths.contains(*entity));
+    }
     for (entity, name, material) in &cloths {
-        if seen.contains(&entity) {
+        let id = material.id();
+        if seen.get(&entity) == Some(&id) {
             continue;
         }
         // A material still loading is looked at once it is there.
-        let Some(material) = materials.get(&material.0) else {
+        let Some(material) = materials.get(id) else {
             continue;
         };
-        seen.insert(entity);
+        seen.insert(entity, id);
         if let Some(why) = one_sided_warning(material) {
             warn!("cloth {}: {why}", EntityName::new(entity, name));
         }
