@@ -61,17 +61,20 @@ fn without_a_renderer_every_cloth_runs_on_the_cpu_and_says_why() {
     let u = in_use(&app, cpu);
     assert!(!u.gpu && u.reason.is_none(), "{u:?}");
     for e in [auto, gpu] {
-        let u = in_use(&app, e);
-        assert!(!u.gpu, "{u:?}");
-        assert!(
-            u.reason
-                .as_deref()
-                .is_some_and(|r| r.contains("no renderer")),
-            "{u:?}"
-        );
-        // And it is simulated, on the CPU.
-        assert!(app.world().get::<ClothSim>(e).unwrap().steps() >= 5);
+        on_the_cpu_because(&app, e, "no renderer", 5);
     }
+}
+
+/// Asserts that `e` runs on the CPU, says `why` in `ClothBackendInUse`, and has taken at least
+/// `steps` steps there.
+fn on_the_cpu_because(app: &App, e: Entity, why: &str, steps: u64) {
+    let u = in_use(app, e);
+    assert!(!u.gpu, "{u:?}");
+    assert!(
+        u.reason.as_deref().is_some_and(|r| r.contains(why)),
+        "{u:?}"
+    );
+    assert!(app.world().get::<ClothSim>(e).unwrap().steps() >= steps);
 }
 
 /// A rendering app with no window, driven by hand (see BEVY019.md).
@@ -392,15 +395,7 @@ fn cloth_plugins_added_before_the_renderer_say_so() {
     let mut app = render_app_in_order(ClothPlugins::default(), true, true);
     let e = spawn(&mut app, Some(ClothBackend::Gpu), false);
     common::run(&mut app, 5);
-    let u = in_use(&app, e);
-    assert!(!u.gpu, "{u:?}");
-    assert!(
-        u.reason
-            .as_deref()
-            .is_some_and(|r| r.contains("add ClothPlugins after DefaultPlugins")),
-        "{u:?}"
-    );
-    assert!(app.world().get::<ClothSim>(e).unwrap().steps() >= 3);
+    on_the_cpu_because(&app, e, "add ClothPlugins after DefaultPlugins", 3);
 }
 
 /// A GPU cloth with no pins goes with its entity when that jumps past the teleport distance,
