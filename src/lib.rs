@@ -92,7 +92,8 @@ pub struct ClothPlugins {
 
 impl ClothPlugins {
     /// Cloth plugins simulating in `schedule` (a fixed-timestep schedule keeps results
-    /// frame-rate independent).
+    /// frame-rate independent; `PostUpdate` steps once a frame after `Update`, so that a
+    /// character a game moves in `Update` wears its cloth in the same frame).
     pub fn new(schedule: impl ScheduleLabel) -> Self {
         Self {
             schedule: schedule.intern(),

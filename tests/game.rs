@@ -1725,6 +1725,34 @@ mod animated_bones {
         assert!(error > 0.01, "per-frame animation: pins only {error} m off");
     }
 
+    /// Simulated once a frame in `PostUpdate` (`ClothPlugins::new(PostUpdate)`), the cloth
+    /// steps after Bevy's per-frame animation: its pins sit on the bone as posed that frame
+    /// (a frame's swing, up to 7 cm at 30 fps, if it stepped before), and `ClothAnimationPlugin`
+    /// changes nothing there (Bevy's own advance is the cloth's clock; an advance of its own
+    /// beside it would stop or double the animation).
+    #[test]
+    fn simulated_in_post_update_the_cloth_sees_the_frames_pose() {
+        let frame = Duration::from_secs_f64(1.0 / 30.0);
+        let scene_with = |plugin: bool| {
+            let mut app = common::app_in(ClothPlugins::new(PostUpdate), frame);
+            app.add_plugins(bevy::animation::AnimationPlugin);
+            if plugin {
+                app.add_plugins(ClothAnimationPlugin);
+            }
+            scene_in(app)
+        };
+        let (plain, error) = run_scene(scene_with(false), 40);
+        let (with_plugin, error_with) = run_scene(scene_with(true), 40);
+        assert!(
+            error < 1e-5 && error_with < 1e-5,
+            "pins off the bone: {error} m, with the plugin {error_with} m"
+        );
+        assert_eq!(
+            plain, with_plugin,
+            "the plugin changed the cloth in PostUpdate"
+        );
+    }
+
     /// Added before `ClothPlugins` (its schedule not known yet), the plugin still puts the
     /// animation on the cloth's clock, as `App::run` finishes the plugins.
     #[test]
@@ -2670,6 +2698,41 @@ fn a_smoothed_cape_is_drawn_where_its_character_is_drawn() {
             );
         }
     }
+}
+
+/// A character the game moves in `Update`, not on the fixed clock: with cloth simulated once a
+/// frame in `PostUpdate` (`ClothPlugins::new(PostUpdate)`) its cape's pinned corner is drawn
+/// on the character in every frame, to within the f32 rounding of positions up to 5 m from the
+/// origin (a pinned vertex is set to its anchor, ε |x| each way, and drawn through the cape's
+/// transform: 1e-5 m is about twenty such steps at 4.5 m); simulated on the fixed clock (the
+/// default) it is read by the next fixed step and trails by up to a frame's walk. The cape
+/// steps once a frame then: 216 steps in 216 frames of 1/144 s, against 90 fixed steps.
+#[test]
+fn a_cape_on_a_character_moved_in_update_is_drawn_on_it_when_simulated_in_post_update() {
+    let frame = Duration::from_secs_f64(1.0 / 144.0);
+    let mut app = common::app_in(ClothPlugins::new(PostUpdate), frame);
+    let (cape, per_frame) = common::cape_moved_in_update(&mut app, None, common::drawn_on_the_cpu);
+    let steps = sim(&app, cape).steps();
+    let mut app = common::app_in(ClothPlugins::default(), frame);
+    let (fixed_cape, fixed) =
+        common::cape_moved_in_update(&mut app, None, common::drawn_on_the_cpu);
+    let fixed_steps = sim(&app, fixed_cape).steps();
+    eprintln!(
+        "corner off the character: in PostUpdate {per_frame} m ({steps} steps), fixed {fixed} m \
+         ({fixed_steps} steps)"
+    );
+    assert!(
+        per_frame < 1e-5,
+        "in PostUpdate the corner is drawn {per_frame} m off"
+    );
+    assert!(
+        fixed > 0.02,
+        "on the fixed clock it trails by a frame's walk: {fixed} m"
+    );
+    assert!(
+        (215..=216).contains(&steps) && (89..=91).contains(&fixed_steps),
+        "{steps} steps once a frame, {fixed_steps} on the fixed clock"
+    );
 }
 
 /// A flag glued to a car by `ClothInertia` (none of the car's motion felt as inertia) still

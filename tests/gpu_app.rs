@@ -2200,6 +2200,47 @@ fn a_smoothed_gpu_cape_is_drawn_where_its_character_is_drawn() {
     }
 }
 
+/// The GPU twin of `game`'s test of a cape on a character the game moves in `Update`: with
+/// cloth simulated once a frame in `PostUpdate` the GPU cape's pinned corner is drawn on the
+/// character in every frame, to within the f32 rounding of positions up to 5 m from the origin
+/// (1e-5 m, as there); on the fixed clock it trails by up to a frame's walk.
+#[test]
+fn a_gpu_cape_on_a_character_moved_in_update_is_drawn_on_it_when_simulated_in_post_update() {
+    if common::gpu_or_skip(
+        "a_gpu_cape_on_a_character_moved_in_update_is_drawn_on_it_when_simulated_in_post_update",
+    )
+    .is_none()
+    {
+        return;
+    }
+    let drawn = |app: &App, e: Entity| {
+        let handle = app.world().get::<Mesh3d>(e).unwrap().0.clone();
+        let layout = app.world().resource::<Assets<Mesh>>().get(&handle).unwrap();
+        positions_on_the_gpu(app, handle.id(), layout).expect("the cape is on the GPU")
+    };
+    let mut offs = Vec::new();
+    for cloth in [ClothPlugins::new(PostUpdate), ClothPlugins::default()] {
+        let mut app = render_app_with(cloth, false);
+        let (cape, off) = common::cape_moved_in_update(&mut app, Some(ClothBackend::Gpu), drawn);
+        assert!(in_use(&app, cape).gpu, "the cape runs on the GPU");
+        offs.push(off);
+    }
+    eprintln!(
+        "corner off the character: in PostUpdate {} m, fixed {} m",
+        offs[0], offs[1]
+    );
+    assert!(
+        offs[0] < 1e-5,
+        "in PostUpdate the corner is drawn {} m off",
+        offs[0]
+    );
+    assert!(
+        offs[1] > 0.02,
+        "on the fixed clock it trails by a frame's walk: {} m",
+        offs[1]
+    );
+}
+
 /// A GPU flag glued to a car by `ClothInertia` meets the car's airflow as on the CPU: its air
 /// (uploaded per step) is the wind less the carried motion's velocity. At 20 m/s in still air
 /// it streams behind its hoist as the CPU flag does; before, it hung limp.

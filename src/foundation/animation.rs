@@ -8,7 +8,7 @@ use bevy::prelude::*;
 
 use bevy::ecs::schedule::InternedScheduleLabel;
 
-use super::{ClothSystems, schedule_once};
+use super::{ClothSchedule, ClothSystems, schedule_once};
 
 /// Advances Bevy's animations on the cloth's fixed clock.
 ///
@@ -28,7 +28,9 @@ use super::{ClothSystems, schedule_once};
 /// events sees only the last fixed step of a frame (events in earlier ones may be missed). Bevy prepares a new animation graph in `PostUpdate`, so an
 /// animation started in a frame is applied from the first fixed step of the next frame on.
 ///
-/// Add it beside `ClothPlugins` (and Bevy's `AnimationPlugin`, part of `DefaultPlugins`).
+/// Add it beside `ClothPlugins` (and Bevy's `AnimationPlugin`, part of `DefaultPlugins`). With
+/// cloth simulated once a frame instead (`ClothPlugins::new(PostUpdate)`, after Bevy's
+/// animation) there is nothing to move and it does nothing.
 ///
 /// # Example
 /// ```no_run
@@ -48,12 +50,16 @@ impl Plugin for ClothAnimationPlugin {
     fn build(&self, app: &mut App) {
         schedule_once::<Self>(app, false, schedule_advance);
         app.init_resource::<Held>()
-            .add_systems(PostUpdate, hold.before(AnimationSystems))
+            .add_systems(
+                PostUpdate,
+                hold.before(AnimationSystems).run_if(on_the_fixed_clock),
+            )
             .add_systems(
                 PostUpdate,
                 release
                     .after(AnimationSystems)
-                    .before(bevy::transform::TransformSystems::Propagate),
+                    .before(bevy::transform::TransformSystems::Propagate)
+                    .run_if(on_the_fixed_clock),
             );
     }
 
@@ -62,7 +68,17 @@ impl Plugin for ClothAnimationPlugin {
     }
 }
 
+/// Whether cloth is simulated on the fixed clock (the plugin's work); simulated once a frame
+/// instead (`ClothPlugins::new(PostUpdate)`), Bevy's own per-frame animation is the cloth's
+/// clock already and the plugin leaves it alone.
+fn on_the_fixed_clock(schedule: Option<Res<ClothSchedule>>) -> bool {
+    schedule.is_some_and(|s| s.is_fixed())
+}
+
 fn schedule_advance(app: &mut App, schedule: InternedScheduleLabel) {
+    if !ClothSchedule(schedule).is_fixed() {
+        return;
+    }
     app.add_systems(
         schedule,
         (advance_animations, animate_targets)

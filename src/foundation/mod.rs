@@ -41,6 +41,9 @@ pub struct SimulatedCloth;
 ///    so the renderer draws the new shape in the same frame): write positions, normals and
 ///    tangents of cloths that moved into their meshes, once per rendered frame.
 ///
+/// With `ClothPlugins::new(PostUpdate)` the first two run once a frame in `PostUpdate`, after
+/// Bevy's animation and before `Writeback`.
+///
 /// Order your own systems against these, e.g. move a pin anchor `.before(ClothSystems::Prepare)`
 /// or read results `.after(ClothSystems::Simulate)` in the same schedule.
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -133,6 +136,16 @@ impl Plugin for ClothFoundationPlugin {
                     .after(TransformSystems::Propagate)
                     .before(AssetEventSystems),
             );
+        if self.schedule == PostUpdate.intern() {
+            // Simulated once a frame in PostUpdate (for characters a game moves in `Update`):
+            // after this frame's animation poses the bones, and stepped before its write-back.
+            app.configure_sets(
+                PostUpdate,
+                (ClothSystems::Prepare, ClothSystems::Simulate)
+                    .after(bevy::app::AnimationSystems)
+                    .before(ClothSystems::Writeback),
+            );
+        }
     }
 }
 

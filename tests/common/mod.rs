@@ -12,13 +12,18 @@ use bevy_cloth::solver::{Topology, TopologyOptions};
 /// A headless app (no window, no GPU) with the cloth plugins, a 60 Hz fixed step and frames
 /// of `frame` each.
 pub fn app_with_frame(frame: Duration) -> App {
+    app_in(ClothPlugins::default(), frame)
+}
+
+/// [`app_with_frame`] with `cloth` (e.g. `ClothPlugins::new(PostUpdate)`) for the plugins.
+pub fn app_in(cloth: ClothPlugins, frame: Duration) -> App {
     let mut app = App::new();
     app.add_plugins((
         MinimalPlugins,
         TransformPlugin,
         AssetPlugin::default(),
         MeshPlugin,
-        ClothPlugins::default(),
+        cloth,
     ))
     .insert_resource(TimeUpdateStrategy::ManualDuration(frame))
     .insert_resource(Time::<Fixed>::from_hz(60.0));
@@ -436,6 +441,39 @@ pub fn smoothed_cape(
     })
     .add_systems(FixedUpdate, walk);
     cape_on(app, character, smoothing, backend, glued)
+}
+
+/// A [`cape_on`] a character that the game moves in `Update` (not on the fixed clock), at
+/// [`WALK_SPEED`] along x, frames of 1/144 s, on `backend` if given. Runs 1.5 s and returns
+/// how far the cape's pinned corner is drawn (`drawn`: the mesh's local positions) from where
+/// its character is drawn, at worst over the last half second.
+pub fn cape_moved_in_update(
+    app: &mut App,
+    backend: Option<bevy_cloth::gpu::ClothBackend>,
+    drawn: impl Fn(&App, Entity) -> Vec<Vec3>,
+) -> (Entity, f32) {
+    let character = app.world_mut().spawn(cape_pose()).id();
+    app.add_systems(
+        Update,
+        move |time: Res<Time>, mut transforms: Query<&mut Transform>| {
+            if let Ok(mut t) = transforms.get_mut(character) {
+                t.translation.x += WALK_SPEED * time.delta_secs();
+            }
+        },
+    );
+    let (cape, vertex, offset) = cape_on(app, character, None, backend, false);
+    let mut worst = 0.0f32;
+    for frame in 0..216 {
+        app.update();
+        if frame < 144 {
+            continue;
+        }
+        let world = |e: Entity| *app.world().get::<GlobalTransform>(e).unwrap();
+        let want = world(character).transform_point(offset);
+        let got = world(cape).transform_point(drawn(app, cape)[vertex as usize]);
+        worst = worst.max(got.distance(want));
+    }
+    (cape, worst)
 }
 
 /// The local positions of cloth `e`'s mesh as the CPU wrote them.
