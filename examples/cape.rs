@@ -21,6 +21,10 @@
 //! `--inertia X` gives the cape a `ClothInertia` of `X` relative to the character; `--fps N`
 //! (headless) sets the frame rate the app runs at (the cloth and the animation step at 60 Hz
 //! whatever it is); `--per-frame-animation` leaves Bevy's animation once a frame, to compare.
+//! `--walk-in-update` moves the character in `Update`, as many games do, instead of on the
+//! fixed clock: the cape's pins then read it a frame late (see `pin_error`), unless
+//! `--cloth-in-post-update` also simulates the cloth once a frame after `Update`
+//! (`ClothPlugins::new(PostUpdate)`).
 //! The JSON line adds `pin_error` (largest distance, over every frame after the first
 //! second, between a pinned vertex and where its bone is drawn), `penetration` (deepest cape
 //! vertex inside a body collider over every step after the first second), `colliders`,
@@ -37,6 +41,7 @@ mod support;
 use std::time::Duration;
 
 use bevy::animation::{AnimationPlayer, graph::AnimationGraph, graph::AnimationGraphHandle};
+use bevy::ecs::schedule::ScheduleLabel;
 use bevy::gltf::GltfAssetLabel;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
@@ -425,7 +430,12 @@ fn report(world: &mut World) -> support::Json {
 
 fn main() {
     let args = Args::parse(include_str!("cape.rs"));
-    let mut app = support::app(&args, "bevy_cloth: cape", 1.0 / 60.0);
+    let schedule = if args.rest.contains_key("cloth-in-post-update") {
+        PostUpdate.intern()
+    } else {
+        FixedPostUpdate.intern()
+    };
+    let mut app = support::app_simulating_in(&args, "bevy_cloth: cape", 1.0 / 60.0, schedule);
     // A skinned glTF scene and its animations, also without a renderer.
     support::add_gltf_support(&mut app);
     if args.headless
@@ -441,11 +451,15 @@ fn main() {
     })
     .init_resource::<Measured>()
     .add_systems(Startup, setup)
-    .add_systems(FixedUpdate, walk)
-    .add_systems(FixedPostUpdate, measure_step.after(ClothSystems::Simulate))
+    .add_systems(schedule, measure_step.after(ClothSystems::Simulate))
     .add_systems(Last, measure_frame);
     // `--per-frame-animation` (to compare) leaves Bevy's animation once a frame, in
     // PostUpdate, after the frame's fixed steps.
+    if args.rest.contains_key("walk-in-update") {
+        app.add_systems(Update, walk);
+    } else {
+        app.add_systems(FixedUpdate, walk);
+    }
     if !args.rest.contains_key("per-frame-animation") {
         app.add_plugins(ClothAnimationPlugin);
     }

@@ -196,6 +196,16 @@ fn assets() -> AssetPlugin {
 /// The app every example starts from: a window with `DefaultPlugins`, or with `--headless`
 /// `MinimalPlugins` plus transforms, assets and meshes, stepping one fixed step per frame.
 pub fn app(args: &Args, title: &str, fixed_step: f64) -> App {
+    app_simulating_in(args, title, fixed_step, FixedPostUpdate)
+}
+
+/// [`app`] with cloth simulated in `schedule` (`ClothPlugins::new(schedule)`).
+pub fn app_simulating_in(
+    args: &Args,
+    title: &str,
+    fixed_step: f64,
+    schedule: impl bevy::ecs::schedule::ScheduleLabel + Clone,
+) -> App {
     let mut app = App::new();
     let backend = args.backend();
     if args.headless && backend != ClothBackend::Cpu {
@@ -244,13 +254,13 @@ pub fn app(args: &Args, title: &str, fixed_step: f64) -> App {
         .add_plugins((VelvetPlugin, ClothCameraPlugin))
         .add_systems(Update, dress_cloths);
     }
-    app.add_plugins(ClothPlugins::default().set(ClothGpuPlugin {
+    app.add_plugins(ClothPlugins::new(schedule.clone()).set(ClothGpuPlugin {
         default_backend: backend,
     }))
     .insert_resource(Time::<Fixed>::from_seconds(fixed_step))
     .init_resource::<ClothTiming>()
     .add_systems(
-        FixedPostUpdate,
+        schedule,
         (
             timing_start.before(ClothSystems::Prepare),
             timing_stop.after(ClothSystems::Simulate),
