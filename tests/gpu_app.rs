@@ -1509,6 +1509,14 @@ fn positions_on_the_gpu(app: &App, mesh: AssetId<Mesh>, layout: &Mesh) -> Option
     )
 }
 
+/// The local positions of GPU cloth `e`'s mesh as the GPU wrote them (the render world of a
+/// render app without pipelined rendering).
+fn drawn_on_the_gpu(app: &App, e: Entity) -> Vec<Vec3> {
+    let handle = app.world().get::<Mesh3d>(e).unwrap().0.clone();
+    let layout = app.world().resource::<Assets<Mesh>>().get(&handle).unwrap();
+    positions_on_the_gpu(app, handle.id(), layout).expect("the cloth is on the GPU")
+}
+
 /// A mesh put on a GPU cloth's entity after the frame's fixed steps (in `Update`, as a game
 /// swaps a level of detail) is the source of the next build, never a target: the GPU cloth
 /// writes into its own copy only. Before, it wrote its vertices into the new mesh's slab for
@@ -2167,11 +2175,6 @@ fn a_smoothed_gpu_cape_is_drawn_where_its_character_is_drawn() {
     if common::gpu_or_skip("a_smoothed_gpu_cape_is_drawn_where_its_character_is_drawn").is_none() {
         return;
     }
-    let drawn = |app: &App, e: Entity| {
-        let handle = app.world().get::<Mesh3d>(e).unwrap().0.clone();
-        let layout = app.world().resource::<Assets<Mesh>>().get(&handle).unwrap();
-        positions_on_the_gpu(app, handle.id(), layout).expect("the cape is on the GPU")
-    };
     let rounding = common::smoothing_rounding();
     for (smoothing, want, glued) in [
         (None, None, false),
@@ -2181,7 +2184,7 @@ fn a_smoothed_gpu_cape_is_drawn_where_its_character_is_drawn() {
     ] {
         let mut app = render_app_with(ClothPlugins::default(), false);
         let cape = common::smoothed_cape(&mut app, smoothing, Some(ClothBackend::Gpu), glued);
-        let errors = common::smoothing_errors(&mut app, cape, drawn);
+        let errors = common::smoothing_errors(&mut app, cape, drawn_on_the_gpu);
         assert!(in_use(&app, cape.0).gpu, "the cape runs on the GPU");
         eprintln!("{smoothing:?}, glued {glued}: {errors:?} m from the drawn character");
         match want {
@@ -2213,15 +2216,11 @@ fn a_gpu_cape_on_a_character_moved_in_update_is_drawn_on_it_when_simulated_in_po
     {
         return;
     }
-    let drawn = |app: &App, e: Entity| {
-        let handle = app.world().get::<Mesh3d>(e).unwrap().0.clone();
-        let layout = app.world().resource::<Assets<Mesh>>().get(&handle).unwrap();
-        positions_on_the_gpu(app, handle.id(), layout).expect("the cape is on the GPU")
-    };
     let mut offs = Vec::new();
     for cloth in [ClothPlugins::new(PostUpdate), ClothPlugins::default()] {
         let mut app = render_app_with(cloth, false);
-        let (cape, off) = common::cape_moved_in_update(&mut app, Some(ClothBackend::Gpu), drawn);
+        let (cape, off) =
+            common::cape_moved_in_update(&mut app, Some(ClothBackend::Gpu), drawn_on_the_gpu);
         assert!(in_use(&app, cape).gpu, "the cape runs on the GPU");
         offs.push(off);
     }

@@ -49,18 +49,6 @@ impl Plugin for ClothAnimationPlugin {
     /// before, in [`Plugin::finish`], once every plugin is built.
     fn build(&self, app: &mut App) {
         schedule_once::<Self>(app, false, schedule_advance);
-        app.init_resource::<Held>()
-            .add_systems(
-                PostUpdate,
-                hold.before(AnimationSystems).run_if(on_the_fixed_clock),
-            )
-            .add_systems(
-                PostUpdate,
-                release
-                    .after(AnimationSystems)
-                    .before(bevy::transform::TransformSystems::Propagate)
-                    .run_if(on_the_fixed_clock),
-            );
     }
 
     fn finish(&self, app: &mut App) {
@@ -68,23 +56,28 @@ impl Plugin for ClothAnimationPlugin {
     }
 }
 
-/// Whether cloth is simulated on the fixed clock (the plugin's work); simulated once a frame
-/// instead (`ClothPlugins::new(PostUpdate)`), Bevy's own per-frame animation is the cloth's
-/// clock already and the plugin leaves it alone.
-fn on_the_fixed_clock(schedule: Option<Res<ClothSchedule>>) -> bool {
-    schedule.is_some_and(|s| s.is_fixed())
-}
-
+/// Advances the animations in the cloth schedule and holds Bevy's own per-frame advance (the
+/// cloth's clock is the fixed one); in a schedule that is not fixed
+/// (`ClothPlugins::new(PostUpdate)`) Bevy's per-frame animation is the cloth's clock already
+/// and nothing is added.
 fn schedule_advance(app: &mut App, schedule: InternedScheduleLabel) {
     if !ClothSchedule(schedule).is_fixed() {
         return;
     }
-    app.add_systems(
-        schedule,
-        (advance_animations, animate_targets)
-            .chain()
-            .before(ClothSystems::Prepare),
-    );
+    app.init_resource::<Held>()
+        .add_systems(
+            schedule,
+            (advance_animations, animate_targets)
+                .chain()
+                .before(ClothSystems::Prepare),
+        )
+        .add_systems(PostUpdate, hold.before(AnimationSystems))
+        .add_systems(
+            PostUpdate,
+            release
+                .after(AnimationSystems)
+                .before(bevy::transform::TransformSystems::Propagate),
+        );
 }
 
 /// The animations [`hold`] paused this frame, to resume.
