@@ -287,6 +287,55 @@ fn assert_lies_in_the_hammock(app: &mut App, hammock: Entity, body: Entity) {
     assert!(low < 0.97, "the hammock does not sag: {low}");
 }
 
+/// Hills the same along x and along z (so that a height field's row order does not matter).
+#[cfg(any(feature = "avian", feature = "rapier"))]
+fn hills(x: f32, z: f32) -> f32 {
+    0.2 * (2.0 * x).sin() * (2.0 * z).sin() + 0.05 * (x + z)
+}
+
+/// The [`hills`] over 4 × 4 m sampled 33 × 33 times (x and z from −2 to 2).
+#[cfg(any(feature = "avian", feature = "rapier"))]
+fn hill_heights() -> Vec<Vec<f32>> {
+    let at = |i: usize| -2.0 + 4.0 * i as f32 / 32.0;
+    (0..33)
+        .map(|i| (0..33).map(|j| hills(at(i), at(j))).collect())
+        .collect()
+}
+
+/// Drops a 1.6 m, 24 × 24 cloth on the height field [`hill_heights`] placed at `at` and
+/// asserts that after four seconds it lies on it: no vertex under the ground (the field's
+/// facets lie within 2 mm of the hills), none left in the air.
+#[cfg(any(feature = "avian", feature = "rapier"))]
+fn assert_lies_on_the_hills(app: &mut App, at: Vec3) {
+    let grid = Grid::new(24, 24, 1.6, 1.6);
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    let cloth = app
+        .world_mut()
+        .spawn((
+            Mesh3d(mesh),
+            Transform::from_xyz(at.x + 0.2, at.y + 1.0, at.z - 0.3),
+            Cloth::default(),
+        ))
+        .id();
+    run(app, 240);
+    let s = sim(app, cloth).simulation().state();
+    let (mut lowest, mut highest) = (f32::MAX, f32::MIN);
+    for i in 0..s.len() {
+        let p = s.position(i) - at;
+        let over = p.y - hills(p.x, p.z);
+        lowest = lowest.min(over);
+        highest = highest.max(over);
+    }
+    assert!(lowest > -0.005, "a vertex {lowest} m under the ground");
+    assert!(
+        highest < 0.1,
+        "a vertex {highest} m over the ground after 4 s"
+    );
+}
+
 #[cfg(feature = "rapier")]
 mod rapier {
     use super::*;
@@ -366,6 +415,26 @@ mod rapier {
             ))
             .id();
         assert_lies_in_the_hammock(&mut app, hammock, body);
+    }
+
+    /// A rapier height field (a terrain) holds cloth up on the side it faces.
+    #[test]
+    fn a_cloth_dropped_on_a_rapier_height_field_lies_on_it() {
+        let mut app = app();
+        app.add_plugins((
+            RapierPhysicsPlugin::<NoUserData>::default(),
+            ClothRapierPlugin::default(),
+        ));
+        let rows = hill_heights();
+        // Column-major: one column after another (the hills are the same either way).
+        let heights: Vec<f32> = rows.iter().flatten().copied().collect();
+        let at = Vec3::new(0.4, -1.0, 0.0);
+        app.world_mut().spawn((
+            RigidBody::Fixed,
+            Collider::heightfield(heights, 33, 33, Vec3::new(4.0, 1.0, 4.0)),
+            Transform::from_translation(at),
+        ));
+        assert_lies_on_the_hills(&mut app, at);
     }
 
     /// Removing a rapier collider (or despawning its entity) removes the cloth collider the
@@ -533,6 +602,19 @@ mod avian {
         let mut app = avian_app();
         let (hammock, body) = box_on_hammock(&mut app);
         assert_lies_in_the_hammock(&mut app, hammock, body);
+    }
+
+    /// An avian height field (a terrain) holds cloth up on the side it faces.
+    #[test]
+    fn a_cloth_dropped_on_an_avian_height_field_lies_on_it() {
+        let mut app = avian_app();
+        let at = Vec3::new(0.4, -1.0, 0.0);
+        app.world_mut().spawn((
+            RigidBody::Static,
+            Collider::heightfield(hill_heights(), Vec3::new(4.0, 1.0, 4.0)),
+            Transform::from_translation(at),
+        ));
+        assert_lies_on_the_hills(&mut app, at);
     }
 
     #[test]

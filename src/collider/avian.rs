@@ -4,9 +4,10 @@
 //! Add [`ClothAvianPlugin`] to opt in. Every entity with an avian [`Collider`] (unless it has
 //! [`NoClothCollision`] or its own [`ClothCollider`](super::ClothCollider)) gets a mirrored
 //! [`ClothCollider`](super::ClothCollider): balls, cuboids and y-aligned capsules map to the
-//! analytic shapes, half-spaces with a +y normal to planes, and triangle meshes, convex hulls,
-//! cylinders, cones and other capsules are triangulated and baked into signed distance fields
-//! (compound shapes, height fields and other shapes are ignored, with a warning). Removing the
+//! analytic shapes, half-spaces with a +y normal to planes, and triangle meshes, height fields,
+//! convex hulls, cylinders, cones and other capsules are triangulated and baked into signed
+//! distance fields (compound shapes and other shapes are ignored, with a warning). A height
+//! field or an open triangle mesh (a terrain) keeps cloth on the side its triangles face. Removing the
 //! avian collider, or despawning its entity, removes the mirror.
 //!
 //! After each cloth step, the impulse the cloth gave each mirrored collider
@@ -170,6 +171,11 @@ fn shape_of(collider: &Collider, resolution: u32) -> Option<ColliderShape> {
         }
         TypedShape::Cone(c) => {
             let (v, i) = c.to_trimesh(24);
+            return bake(&v, &i, resolution);
+        }
+        // An open surface: cloth is kept on the side it faces (up).
+        TypedShape::HeightField(h) => {
+            let (v, i) = h.to_trimesh();
             return bake(&v, &i, resolution);
         }
         _ => return None,

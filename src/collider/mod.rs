@@ -46,8 +46,9 @@ pub enum ColliderMesh {
     /// A triangle mesh asset, baked into a signed distance field when it has loaded (and again
     /// when the asset changes, e.g. reloaded from disk): the entity's own [`Mesh3d`] when
     /// `mesh` is `None`. `resolution` is the number of cells along the mesh's longest side (48
-    /// is a good start). The mesh should be closed; an index buffer is optional. A skinned mesh
-    /// is baked in its bind pose and does not follow its bones.
+    /// is a good start). Cloth stays outside a closed mesh and on the side an open one's
+    /// triangles face (a terrain, a floor; see [`SdfGrid`]); an index buffer is optional. A
+    /// skinned mesh is baked in its bind pose and does not follow its bones.
     Asset {
         /// The mesh to bake, or `None` for the entity's `Mesh3d`.
         mesh: Option<Handle<Mesh>>,

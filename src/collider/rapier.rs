@@ -4,9 +4,11 @@
 //! Add [`ClothRapierPlugin`] to opt in. Every entity with a rapier [`Collider`] (unless it has
 //! [`NoClothCollision`] or its own [`ClothCollider`](super::ClothCollider)) gets a mirrored
 //! [`ClothCollider`](super::ClothCollider): balls, cuboids and y-aligned capsules map to the
-//! analytic shapes, half-spaces with a +y normal to planes, and triangle meshes, convex hulls,
-//! cylinders, cones and other capsules are triangulated and baked into signed distance fields
-//! (other shapes are ignored, with a warning). After each cloth step, the impulse the cloth
+//! analytic shapes, half-spaces with a +y normal to planes, and triangle meshes, height fields,
+//! convex hulls, cylinders, cones and other capsules are triangulated and baked into signed
+//! distance fields (other shapes are ignored, with a warning; a height field or an open
+//! triangle mesh, such as a terrain, keeps cloth on the side its triangles face). After each
+//! cloth step, the impulse the cloth
 //! gave each mirrored collider ([`ClothContactImpulse`]) is added, opposite to what the cloth
 //! received, to the [`ExternalImpulse`] of its dynamic rigid body (the collider's entity or its
 //! nearest ancestor with a [`RigidBody`]), which rapier applies on its next step.
@@ -143,6 +145,11 @@ fn shape_of(collider: &Collider, resolution: u32) -> Option<ColliderShape> {
         }
         ColliderView::Cone(c) => {
             let (v, i) = c.raw.to_trimesh(24);
+            return bake(&to_vec3(&v), &i, resolution);
+        }
+        // An open surface: cloth is kept on the side it faces (up).
+        ColliderView::HeightField(h) => {
+            let (v, i) = h.raw.to_trimesh();
             return bake(&to_vec3(&v), &i, resolution);
         }
         _ => return None,

@@ -7,8 +7,15 @@
 //! point, then the sign by ray parity along +x through each grid row. Lookups interpolate
 //! trilinearly; the gradient of the trilinear interpolant gives the push-out direction.
 //! Baking is `O(cells + triangles × band cells)`, not `O(cells × triangles)`.
+//!
+//! An open mesh (some edge, after welding, belongs to one triangle or to more than two) is
+//! signed by the side its triangles face instead (see [`SdfGrid`]).
+
+use std::collections::HashMap;
 
 use glam::{UVec3, Vec3};
+
+use crate::solver::mesh::Weld;
 
 /// Why a mesh cannot be baked.
 #[derive(Clone, Debug, PartialEq)]
@@ -37,16 +44,36 @@ impl core::fmt::Display for SdfError {
 impl std::error::Error for SdfError {}
 
 /// Signed distances sampled on a regular grid (negative inside).
+///
+/// A closed mesh (every edge shared by two triangles, once vertices that share a place are
+/// welded: split along UV seams and hard edges, a closed mesh is still closed) is signed by
+/// ray parity, whatever its winding. An *open* mesh (a terrain, a floor, a table top modelled
+/// as one sheet, a statue without a bottom) has no inside for a ray to count: it is signed by
+/// the side its triangles face. A sample is inside when it lies behind the surface by at most
+/// three cells, seen from its nearest point there along that point's angle-weighted
+/// pseudo-normal (Bærentzen and Aanæs, 2005), and that point is not on the mesh's rim. So
+/// cloth is kept on the front of a terrain or a floor, a vertex that got a little behind is
+/// pushed back to the front, and a cloth hanging over the rim of a sheet hangs down beside
+/// it. [`SdfGrid::is_open`] says which way a mesh was baked.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SdfGrid {
     origin: Vec3,
     cell: f32,
     dims: UVec3,
     phi: Vec<f32>,
+    open: bool,
 }
 
 /// Largest grid accepted, in cells (about 64 MB of distances).
 const MAX_CELLS: u64 = 16 << 20;
+
+/// How deep behind an open mesh's surface (in cells) a sample counts as inside; deeper ones
+/// are outside (the surface is a slab this thick behind its front side).
+const OPEN_DEPTH: f32 = 3.0;
+
+/// Vertices closer than this fraction of the mesh's size are one place when the bake looks
+/// for the mesh's rim (split along UV seams and hard edges, a closed mesh is still closed).
+const WELD_FRACTION: f32 = 1e-5;
 
 impl SdfGrid {
     /// Bakes the mesh on a grid whose longest side has `resolution` cells (plus a border of
@@ -71,8 +98,8 @@ impl SdfGrid {
 
     /// Bakes the mesh with cells of `cell` metres and `padding` cells of margin around it.
     ///
-    /// The mesh should be closed (watertight) and consistently wound; for open meshes the sign
-    /// is whatever ray parity gives.
+    /// A closed mesh is signed by ray parity (its winding does not matter); an open one by the
+    /// side its triangles face, which should then be consistent (see [`SdfGrid`]).
     ///
     /// # Errors
     /// [`SdfError`] for an empty or invalid mesh, a bad cell size or a grid over 16 M cells.
@@ -103,13 +130,22 @@ impl SdfGrid {
             cell,
             dims,
             phi: Vec::new(),
+            open: false,
         };
         let tris: Vec<[Vec3; 3]> = indices
             .chunks_exact(3)
             .map(|t| [t[0], t[1], t[2]].map(|i| positions[i as usize]))
             .collect();
-        grid.bake(&tris);
+        let open = OpenSurface::of(positions, indices, (hi - lo).max_element());
+        grid.bake(&tris, open.as_ref());
         Ok(grid)
+    }
+
+    /// Whether the mesh was baked as an open surface (signed by the side its triangles face)
+    /// rather than a closed one (signed by ray parity); see [`SdfGrid`].
+    #[must_use]
+    pub fn is_open(&self) -> bool {
+        self.open
     }
 
     fn index(&self, i: u32, j: u32, k: u32) -> usize {
@@ -120,7 +156,7 @@ impl SdfGrid {
         self.origin + Vec3::new(i as f32, j as f32, k as f32) * self.cell
     }
 
-    fn bake(&mut self, tris: &[[Vec3; 3]]) {
+    fn bake(&mut self, tris: &[[Vec3; 3]], open: Option<&OpenSurface>) {
         let [nx, ny, nz] = self.dims.to_array();
         let total = (nx * ny * nz) as usize;
         let far = (self.dims.as_vec3() * self.cell).length();
@@ -155,7 +191,27 @@ impl SdfGrid {
                 }
             }
         }
-        // 3. Sign by ray parity along +x.
+        // 3. Sign: an open surface by the side it faces, a closed mesh by ray parity along +x.
+        if let Some(open) = open {
+            let depth = OPEN_DEPTH * self.cell;
+            for k in 0..nz {
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let idx = self.index(i, j, k);
+                        let t = closest[idx];
+                        if t != u32::MAX
+                            && phi[idx] <= depth
+                            && open.behind(self.point(i, j, k), t as usize, &tris[t as usize])
+                        {
+                            phi[idx] = -phi[idx];
+                        }
+                    }
+                }
+            }
+            self.open = true;
+            self.phi = phi;
+            return;
+        }
         let mut crossings = vec![0u32; total];
         for tri in tris {
             self.count_crossings(tri, &mut crossings);
@@ -356,6 +412,145 @@ impl SdfGrid {
                 .max(Vec3::new(far.x, self.origin.y, self.origin.z).length()),
         ) + self.cell * (self.dims.as_vec3().length())
     }
+}
+
+/// The rim and pseudo-normals of an open mesh (see the module docs).
+struct OpenSurface {
+    /// Per triangle, its corners' places (vertices welded by position).
+    corners: Vec<[u32; 3]>,
+    /// Per triangle, its unit normal (zero when degenerate).
+    normals: Vec<Vec3>,
+    /// Per place, its angle-weighted normal (not normalised: only signs are taken).
+    place_normals: Vec<Vec3>,
+    /// Per place, whether it lies on the rim.
+    rim: Vec<bool>,
+    /// Per edge between two places (lower first): how many triangles share it and the sum of
+    /// their normals.
+    edges: HashMap<(u32, u32), (u32, Vec3)>,
+}
+
+impl OpenSurface {
+    /// The mesh's rim and normals; `None` when it is closed (every edge between two places
+    /// has exactly two triangles). `size` is its longest side.
+    fn of(positions: &[Vec3], indices: &[u32], size: f32) -> Option<Self> {
+        let weld = Weld::new(positions, None, size * WELD_FRACTION);
+        let places = weld.particle_count();
+        let mut corners = Vec::with_capacity(indices.len() / 3);
+        let mut normals = Vec::with_capacity(indices.len() / 3);
+        let mut place_normals = vec![Vec3::ZERO; places];
+        let mut edges: HashMap<(u32, u32), (u32, Vec3)> = HashMap::new();
+        for t in indices.chunks_exact(3) {
+            let c = [t[0], t[1], t[2]].map(|i| weld.particle(i));
+            let p = [t[0], t[1], t[2]].map(|i| positions[i as usize]);
+            let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+            corners.push(c);
+            normals.push(n);
+            if c[0] == c[1] || c[1] == c[2] || c[0] == c[2] || n == Vec3::ZERO {
+                continue; // no area: neither a side nor an edge of the surface
+            }
+            for k in 0..3 {
+                let (a, b, o) = (p[k], p[(k + 1) % 3], p[(k + 2) % 3]);
+                let angle = (b - a).angle_between(o - a);
+                if angle.is_finite() {
+                    place_normals[c[k] as usize] += angle * n;
+                }
+                let (u, v) = (c[k], c[(k + 1) % 3]);
+                let e = edges.entry((u.min(v), u.max(v))).or_insert((0, Vec3::ZERO));
+                e.0 += 1;
+                e.1 += n;
+            }
+        }
+        if edges.values().all(|&(count, _)| count == 2) {
+            return None;
+        }
+        let mut rim = vec![false; places];
+        for (&(u, v), &(count, _)) in &edges {
+            if count != 2 {
+                rim[u as usize] = true;
+                rim[v as usize] = true;
+            }
+        }
+        Some(Self {
+            corners,
+            normals,
+            place_normals,
+            rim,
+            edges,
+        })
+    }
+
+    /// Whether `p` lies behind triangle `t` (corners `tri`) as seen from its nearest point
+    /// there, by the pseudo-normal of the face, edge or corner that point is on; never when
+    /// that point is on the rim.
+    fn behind(&self, p: Vec3, t: usize, tri: &[Vec3; 3]) -> bool {
+        let c = self.corners[t];
+        let (q, feature) = closest_feature_on_triangle(p, tri);
+        let normal = match feature {
+            Feature::Face => self.normals[t],
+            Feature::Edge(k) => {
+                let (u, v) = (c[k], c[(k + 1) % 3]);
+                match self.edges.get(&(u.min(v), u.max(v))) {
+                    Some(&(2, sum)) => sum,
+                    _ => return false,
+                }
+            }
+            Feature::Corner(k) => {
+                if self.rim[c[k] as usize] {
+                    return false;
+                }
+                self.place_normals[c[k] as usize]
+            }
+        };
+        (p - q).dot(normal) < 0.0
+    }
+}
+
+/// Which part of a triangle a point's nearest point lies on: inside it, on edge `k` (corner
+/// `k` to corner `k + 1`), or at corner `k`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Feature {
+    Face,
+    Edge(usize),
+    Corner(usize),
+}
+
+/// The point of triangle `[a, b, c]` nearest `p` and the part it lies on (the regions of
+/// [`closest_point_on_triangle`]).
+fn closest_feature_on_triangle(p: Vec3, [a, b, c]: &[Vec3; 3]) -> (Vec3, Feature) {
+    let (ab, ac, ap) = (*b - *a, *c - *a, p - *a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return (*a, Feature::Corner(0));
+    }
+    let bp = p - *b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return (*b, Feature::Corner(1));
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return (*a + ab * (d1 / (d1 - d3)), Feature::Edge(0));
+    }
+    let cp = p - *c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return (*c, Feature::Corner(2));
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return (*a + ac * (d2 / (d2 - d6)), Feature::Edge(2));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let q = *b + (*c - *b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+        return (q, Feature::Edge(1));
+    }
+    let denom = va + vb + vc;
+    if denom.abs() < f32::MIN_POSITIVE {
+        return (closest_point_on_triangle(p, &[*a, *b, *c]), Feature::Face);
+    }
+    let (v, w) = (vb / denom, vc / denom);
+    (*a + ab * v + ac * w, Feature::Face)
 }
 
 fn bounds(positions: &[Vec3], indices: &[u32]) -> Result<(Vec3, Vec3), SdfError> {
@@ -576,6 +771,127 @@ mod tests {
                 assert_eq!(d.signum(), expect.signum(), "{q}: {d} vs {expect}");
             }
         }
+    }
+
+    /// A height field `h` over `[-2, 2]²` as `n × n` quads, triangles facing +y.
+    fn terrain(n: u32, h: impl Fn(f32, f32) -> f32) -> (Vec<Vec3>, Vec<u32>) {
+        let at = |i: u32| -2.0 + 4.0 * i as f32 / n as f32;
+        let mut p = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                let (x, z) = (at(i), at(j));
+                p.push(Vec3::new(x, h(x, z), z));
+            }
+        }
+        let mut idx = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let a = j * (n + 1) + i;
+                let (b, c, d) = (a + 1, a + n + 1, a + n + 2);
+                // (c - a) × (b - a) = +z × +x = +y.
+                idx.extend_from_slice(&[a, c, b, b, c, d]);
+            }
+        }
+        (p, idx)
+    }
+
+    fn hills(x: f32, z: f32) -> f32 {
+        0.3 * (1.5 * x).sin() * (1.2 * z).cos() + 0.1 * x
+    }
+
+    #[test]
+    fn an_open_terrain_is_solid_behind_its_front_and_nowhere_else() {
+        let (p, idx) = terrain(40, hills);
+        let grid = SdfGrid::from_mesh(&p, &idx, 64).unwrap();
+        assert!(grid.is_open());
+        let cell = grid.cell();
+        let mut seed = 5;
+        let (mut above, mut below) = (0, 0);
+        for _ in 0..4000 {
+            let (x, z) = (lcg(&mut seed) * 3.8 - 1.9, lcg(&mut seed) * 3.8 - 1.9);
+            let ground = hills(x, z);
+            // The slope is at most about 0.55, so the surface is within a height's
+            // distance and no nearer than 0.85 of it.
+            let up = ground + cell * 1.5 + lcg(&mut seed) * 1.0;
+            let (d, n) = grid.sample(Vec3::new(x, up, z));
+            assert!(d > 0.5 * cell, "({x}, {up}, {z}) over {ground}: {d}");
+            if up - ground > 2.0 * cell {
+                assert!(n.y > 0.5, "({x}, {up}, {z}): normal {n}");
+            }
+            above += 1;
+            // Behind the front by up to a cell and a half (how far a cloth vertex gets in a
+            // substep is a small part of that): inside, pushed back up.
+            let down = ground - cell * (0.5 + lcg(&mut seed));
+            let (d, n) = grid.sample(Vec3::new(x, down, z));
+            assert!(d < 0.0, "({x}, {down}, {z}) under {ground}: {d}");
+            assert!(n.y > 0.5, "({x}, {down}, {z}): normal {n}");
+            below += 1;
+        }
+        assert_eq!((above, below), (4000, 4000));
+        // Beside the rim, at any height, and far below: outside.
+        for y in [-1.5f32, -0.6, -0.2, 0.0, 0.3, 1.0] {
+            for (x, z) in [(2.0 + 3.0 * cell, 0.3), (-0.7, -2.0 - 3.0 * cell)] {
+                let (d, _) = grid.sample(Vec3::new(x, y, z));
+                assert!(d > 0.0, "({x}, {y}, {z}) beside the rim: {d}");
+            }
+        }
+        let (d, _) = grid.sample(Vec3::new(0.5, hills(0.5, 0.2) - 8.0 * cell, 0.2));
+        assert!(d > 0.0, "deep under the terrain: {d}");
+    }
+
+    #[test]
+    fn a_flat_sheet_has_a_front_and_a_back_and_no_inside_beyond_its_rim() {
+        let (p, idx) = terrain(8, |_, _| 0.0);
+        let grid = SdfGrid::from_mesh(&p, &idx, 48).unwrap();
+        let cell = grid.cell();
+        for (x, z) in [(0.0, 0.0), (1.3, -0.4), (-1.9, 1.9)] {
+            let (d, n) = grid.sample(Vec3::new(x, 0.1, z));
+            assert!(
+                (d - 0.1).abs() < 1e-3 && n.y > 0.99,
+                "({x}, {z}) over: {d} {n}"
+            );
+            let (d, n) = grid.sample(Vec3::new(x, -cell, z));
+            assert!(d < -0.5 * cell && n.y > 0.99, "({x}, {z}) under: {d} {n}");
+        }
+        // Below the rim and beyond it: outside, and the field leads away from the sheet.
+        let (d, n) = grid.sample(Vec3::new(2.0 + 2.0 * cell, -0.2, 0.0));
+        assert!(d > 0.0 && n.x > 0.5, "beside the rim: {d} {n}");
+    }
+
+    #[test]
+    fn a_closed_mesh_split_along_its_seams_is_still_closed() {
+        // Bevy's cuboid: four vertices of its own per face.
+        let e = Vec3::new(1.0, 0.5, 0.8);
+        let (corners, idx) = cube(e);
+        let (mut p, mut split) = (Vec::new(), Vec::new());
+        for t in idx.chunks_exact(3) {
+            for &i in t {
+                split.push(p.len() as u32);
+                p.push(corners[i as usize]);
+            }
+        }
+        let grid = SdfGrid::from_mesh(&p, &split, 40).unwrap();
+        assert!(!grid.is_open());
+        // Deeper than an open surface's slab: only parity makes it inside.
+        let (d, _) = grid.sample(Vec3::ZERO);
+        assert!(d < -OPEN_DEPTH * grid.cell(), "centre: {d}");
+        // And the sphere with its poles' duplicated vertices.
+        let (p, idx) = uv_sphere(1.0, 16, 24);
+        assert!(!SdfGrid::from_mesh(&p, &idx, 24).unwrap().is_open());
+        // A box without its top is open.
+        let grid =
+            SdfGrid::from_mesh(&corners, &idx_without_top(&corners, &cube(e).1), 40).unwrap();
+        assert!(grid.is_open());
+    }
+
+    /// `idx` without the triangles whose corners all lie at the box's top.
+    fn idx_without_top(p: &[Vec3], idx: &[u32]) -> Vec<u32> {
+        let top = p.iter().map(|v| v.y).fold(f32::MIN, f32::max);
+        idx.chunks_exact(3)
+            .filter(|t| !t.iter().all(|&i| p[i as usize].y == top))
+            .flatten()
+            .copied()
+            .collect()
     }
 
     #[test]
