@@ -70,6 +70,65 @@ fn mesh_colliders_are_baked_from_the_entity_mesh() {
     assert!(middle.y > 0.2 && middle.y < 0.3, "{middle}");
 }
 
+/// A collider entity with no mesh of its own bakes the mesh it names (as a glTF primitive
+/// loaded by its label would be), placed by its own transform.
+#[test]
+fn a_mesh_collider_bakes_the_mesh_asset_it_names() {
+    let mut app = app();
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(Cuboid::new(1.0, 0.4, 1.0).mesh().build());
+    app.world_mut().spawn((
+        ClothCollider::mesh_asset(mesh, 24).with_thickness(0.02),
+        Transform::from_xyz(0.0, 0.1, 0.0),
+    ));
+    let cloth = spawn_sheet(&mut app, 16, Transform::from_xyz(0.0, 0.7, 0.0), ());
+    run(&mut app, 120);
+    let s = sim(&app, cloth).simulation().state();
+    // On the top face (y = 0.1 + 0.2 + thickness).
+    let middle = s.position(8 * 16 + 8);
+    assert!(middle.y > 0.3 && middle.y < 0.4, "{middle}");
+}
+
+/// Bevy's solids, whose vertices are split along UV seams and hard edges, bake as closed
+/// meshes (cloth is kept outside, by ray parity, as deep as they go); its sheets and open
+/// shapes bake as open ones (cloth kept on the side they face).
+#[test]
+fn bevy_solids_bake_closed_and_bevy_sheets_open() {
+    use bevy_cloth::foundation::read_mesh;
+    use bevy_cloth::solver::SdfGrid;
+    let open = |mesh: Mesh| {
+        let data = read_mesh(&mesh).expect("a Bevy mesh reads");
+        SdfGrid::from_mesh(&data.positions, &data.indices, 32)
+            .expect("bakes")
+            .is_open()
+    };
+    let solids: [(&str, Mesh); 7] = [
+        ("uv sphere", Sphere::new(0.5).mesh().uv(32, 18)),
+        ("ico sphere", Sphere::new(0.5).mesh().ico(4).unwrap()),
+        ("cuboid", Cuboid::new(1.0, 0.4, 0.7).mesh().build()),
+        ("capsule", Capsule3d::new(0.2, 0.8).mesh().build()),
+        ("torus", Torus::new(0.3, 0.6).mesh().build()),
+        ("cylinder", Cylinder::new(0.3, 1.0).mesh().build()),
+        ("cone", Cone::new(0.4, 0.9).mesh().build()),
+    ];
+    for (name, mesh) in solids {
+        assert!(!open(mesh), "{name} baked as open");
+    }
+    let sheets: [(&str, Mesh); 3] = [
+        ("plane", Plane3d::default().mesh().subdivisions(8).build()),
+        (
+            "uncapped cylinder",
+            Cylinder::new(0.3, 1.0).mesh().without_caps().build(),
+        ),
+        ("the cloth grid", grid_mesh(&Grid::new(8, 8, 1.0, 1.0))),
+    ];
+    for (name, mesh) in sheets {
+        assert!(open(mesh), "{name} baked as closed");
+    }
+}
+
 #[test]
 fn wind_resource_pushes_the_cloth_and_zones_only_act_inside() {
     let mut calm = app();

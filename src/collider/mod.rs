@@ -148,6 +148,17 @@ impl ClothCollider {
         }))
     }
 
+    /// The mesh asset `mesh` (any entity's, or a glTF primitive loaded by its label, such as
+    /// `assets.load("statue.gltf#Mesh0/Primitive0")`), baked into a signed distance field of
+    /// `resolution` cells when it has loaded; the collider is placed by its own entity.
+    #[must_use]
+    pub fn mesh_asset(mesh: Handle<Mesh>, resolution: u32) -> Self {
+        Self::new(ColliderShape::Mesh(ColliderMesh::Asset {
+            mesh: Some(mesh),
+            resolution,
+        }))
+    }
+
     /// A mesh already baked into a signed distance field (shared, not copied).
     #[must_use]
     pub fn baked(field: Arc<SdfGrid>) -> Self {
@@ -348,7 +359,11 @@ fn bake_mesh_colliders(
                  cloths with this mesh, give the collider a mesh handle of its own)",
             ),
             (None, Some(m)) => Ok(&m.0),
-            (None, None) => Err("a Mesh shape needs a mesh handle or a Mesh3d"),
+            (None, None) => Err(
+                "ClothCollider::mesh bakes the entity's own Mesh3d, and it has none (a glTF \
+                 scene keeps its meshes on child entities: put the collider on the child with \
+                 the Mesh3d, or name the mesh with ClothCollider::mesh_asset)",
+            ),
         };
         let handle = match handle {
             Ok(h) => h,
