@@ -181,12 +181,21 @@ impl SdfGrid {
                 }
             }
         }
-        // 2. Fast sweeping: carry the nearest triangle to the rest of the grid.
+        // 2. Fast sweeping: carry the nearest triangle to the rest of the grid. Each triangle's
+        // bounding sphere (centroid, farthest corner) bounds its distance from below, so a
+        // neighbour's triangle that cannot come nearer is not measured (the same field).
+        let spheres: Vec<(Vec3, f32)> = tris
+            .iter()
+            .map(|t| {
+                let c = (t[0] + t[1] + t[2]) / 3.0;
+                (c, t.iter().map(|v| v.distance(c)).fold(0.0, f32::max))
+            })
+            .collect();
         for _ in 0..2 {
             for dk in [1i32, -1] {
                 for dj in [1i32, -1] {
                     for di in [1i32, -1] {
-                        self.sweep(tris, &mut phi, &mut closest, di, dj, dk);
+                        self.sweep(tris, &spheres, &mut phi, &mut closest, [di, dj, dk]);
                     }
                 }
             }
@@ -245,12 +254,14 @@ impl SdfGrid {
     fn sweep(
         &self,
         tris: &[[Vec3; 3]],
+        spheres: &[(Vec3, f32)],
         phi: &mut [f32],
         closest: &mut [u32],
-        di: i32,
-        dj: i32,
-        dk: i32,
+        [di, dj, dk]: [i32; 3],
     ) {
+        // Slack on the bound, far above its rounding: a triangle is skipped only when it is
+        // surely farther than the nearest one found.
+        let slack = 1e-3 * self.cell;
         let [nx, ny, nz] = self.dims.as_ivec3().to_array();
         let range = |n: i32, d: i32| -> Vec<i32> {
             if d > 0 {
@@ -274,15 +285,23 @@ impl SdfGrid {
                 for &i in &ri {
                     let idx = self.index(i as u32, j as u32, k as u32);
                     let p = self.point(i as u32, j as u32, k as u32);
-                    for (a, b, c) in neighbours {
+                    // The triangles already measured here (neighbours often share one).
+                    let mut seen = [u32::MAX; 7];
+                    for (m, (a, b, c)) in neighbours.into_iter().enumerate() {
                         let n = self.index((i - a) as u32, (j - b) as u32, (k - c) as u32);
                         let t = closest[n];
-                        if t != u32::MAX && t != closest[idx] {
-                            let d = point_triangle_distance(p, &tris[t as usize]);
-                            if d < phi[idx] {
-                                phi[idx] = d;
-                                closest[idx] = t;
-                            }
+                        if t == u32::MAX || t == closest[idx] || seen[..m].contains(&t) {
+                            continue;
+                        }
+                        seen[m] = t;
+                        let (centre, radius) = spheres[t as usize];
+                        if p.distance(centre) - radius > phi[idx] + slack {
+                            continue;
+                        }
+                        let d = point_triangle_distance(p, &tris[t as usize]);
+                        if d < phi[idx] {
+                            phi[idx] = d;
+                            closest[idx] = t;
                         }
                     }
                 }
