@@ -3166,7 +3166,7 @@ fn hills(x: f32, z: f32) -> f32 {
 }
 
 /// A terrain as a game makes one: Bevy's subdivided `Plane3d` (an open sheet, no underside)
-/// with its heights raised; on an entity placed at `at`.
+/// with its heights raised to the [`hills`].
 fn terrain_mesh() -> Mesh {
     let mut mesh = Plane3d::default()
         .mesh()
@@ -3193,31 +3193,6 @@ fn a_cloth_dropped_on_an_open_terrain_mesh_lies_on_its_hills() {
         Transform::from_translation(at),
         ClothCollider::mesh(64),
     ));
-    let grid = Grid::new(24, 24, 1.6, 1.6);
-    let mesh = add_mesh(&mut app, grid_mesh(&grid));
-    let cloth = app
-        .world_mut()
-        .spawn((
-            Mesh3d(mesh),
-            Transform::from_xyz(0.3, 0.0, 0.2).with_rotation(Quat::from_rotation_y(0.4)),
-            Cloth::default(),
-        ))
-        .id();
-    run(&mut app, 240);
-    let state = sim(&app, cloth).simulation().state();
-    let (mut lowest, mut highest) = (f32::MAX, f32::MIN);
-    for i in 0..state.len() {
-        let p = state.position(i) - at;
-        let over = p.y - hills(p.x, p.z);
-        lowest = lowest.min(over);
-        highest = highest.max(over);
-    }
-    // On the hills: no vertex under the ground (the collider's thickness keeps them a little
-    // over it; the 64-cell field's interpolation between 6 cm samples blurs the ground by
-    // far less than a centimetre on these slopes), none left in the air.
-    assert!(lowest > -0.005, "a vertex {lowest} m under the ground");
-    assert!(
-        highest < 0.1,
-        "a vertex {highest} m over the ground after 4 s"
-    );
+    let drop = Transform::from_xyz(0.3, 0.0, 0.2).with_rotation(Quat::from_rotation_y(0.4));
+    common::assert_lies_on_the_ground(&mut app, at, hills, drop);
 }

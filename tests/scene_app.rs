@@ -50,23 +50,39 @@ fn a_cloth_drapes_over_a_sphere_and_the_sphere_feels_its_weight() {
     assert!(impulse.y > -1.5 * weight_per_step, "{impulse}");
 }
 
-#[test]
-fn mesh_colliders_are_baked_from_the_entity_mesh() {
+/// Where the middle of a 16 × 16 sheet dropped from `drop_y` onto a 1 × 0.4 × 1 m box mesh
+/// ends up after two seconds; `collider` makes the box's collider from its mesh handle.
+fn middle_on_a_box_mesh(
+    collider: impl FnOnce(Handle<Mesh>) -> (ClothCollider, Option<Mesh3d>),
+    at: Vec3,
+    drop_y: f32,
+) -> Vec3 {
     let mut app = app();
     let mesh = app
         .world_mut()
         .resource_mut::<Assets<Mesh>>()
         .add(Cuboid::new(1.0, 0.4, 1.0).mesh().build());
-    app.world_mut().spawn((
-        Mesh3d(mesh),
-        ClothCollider::mesh(24).with_thickness(0.02),
-        Transform::default(),
+    let (collider, mesh3d) = collider(mesh);
+    let mut e = app.world_mut().spawn((
+        collider.with_thickness(0.02),
+        Transform::from_translation(at),
     ));
-    let cloth = spawn_sheet(&mut app, 16, Transform::from_xyz(0.0, 0.6, 0.0), ());
+    if let Some(m) = mesh3d {
+        e.insert(m);
+    }
+    let cloth = spawn_sheet(&mut app, 16, Transform::from_xyz(0.0, drop_y, 0.0), ());
     run(&mut app, 120);
-    let s = sim(&app, cloth).simulation().state();
+    sim(&app, cloth).simulation().state().position(8 * 16 + 8)
+}
+
+#[test]
+fn mesh_colliders_are_baked_from_the_entity_mesh() {
+    let middle = middle_on_a_box_mesh(
+        |m| (ClothCollider::mesh(24), Some(Mesh3d(m))),
+        Vec3::ZERO,
+        0.6,
+    );
     // The middle of the sheet rests on the top face (y = 0.2 + thickness), not below it.
-    let middle = s.position(8 * 16 + 8);
     assert!(middle.y > 0.2 && middle.y < 0.3, "{middle}");
 }
 
@@ -74,20 +90,9 @@ fn mesh_colliders_are_baked_from_the_entity_mesh() {
 /// loaded by its label would be), placed by its own transform.
 #[test]
 fn a_mesh_collider_bakes_the_mesh_asset_it_names() {
-    let mut app = app();
-    let mesh = app
-        .world_mut()
-        .resource_mut::<Assets<Mesh>>()
-        .add(Cuboid::new(1.0, 0.4, 1.0).mesh().build());
-    app.world_mut().spawn((
-        ClothCollider::mesh_asset(mesh, 24).with_thickness(0.02),
-        Transform::from_xyz(0.0, 0.1, 0.0),
-    ));
-    let cloth = spawn_sheet(&mut app, 16, Transform::from_xyz(0.0, 0.7, 0.0), ());
-    run(&mut app, 120);
-    let s = sim(&app, cloth).simulation().state();
+    let at = Vec3::new(0.0, 0.1, 0.0);
+    let middle = middle_on_a_box_mesh(|m| (ClothCollider::mesh_asset(m, 24), None), at, 0.7);
     // On the top face (y = 0.1 + 0.2 + thickness).
-    let middle = s.position(8 * 16 + 8);
     assert!(middle.y > 0.3 && middle.y < 0.4, "{middle}");
 }
 
@@ -361,38 +366,12 @@ fn hill_heights() -> Vec<Vec<f32>> {
         .collect()
 }
 
-/// Drops a 1.6 m, 24 × 24 cloth on the height field [`hill_heights`] placed at `at` and
-/// asserts that after four seconds it lies on it: no vertex under the ground (the field's
-/// facets lie within 2 mm of the hills), none left in the air.
+/// A 24 × 24 cloth dropped 1 m over the [`hills`] of a height field placed at `at` lies on
+/// them after four seconds (the field's facets lie within 2 mm of the hills).
 #[cfg(any(feature = "avian", feature = "rapier"))]
 fn assert_lies_on_the_hills(app: &mut App, at: Vec3) {
-    let grid = Grid::new(24, 24, 1.6, 1.6);
-    let mesh = app
-        .world_mut()
-        .resource_mut::<Assets<Mesh>>()
-        .add(grid_mesh(&grid));
-    let cloth = app
-        .world_mut()
-        .spawn((
-            Mesh3d(mesh),
-            Transform::from_xyz(at.x + 0.2, at.y + 1.0, at.z - 0.3),
-            Cloth::default(),
-        ))
-        .id();
-    run(app, 240);
-    let s = sim(app, cloth).simulation().state();
-    let (mut lowest, mut highest) = (f32::MAX, f32::MIN);
-    for i in 0..s.len() {
-        let p = s.position(i) - at;
-        let over = p.y - hills(p.x, p.z);
-        lowest = lowest.min(over);
-        highest = highest.max(over);
-    }
-    assert!(lowest > -0.005, "a vertex {lowest} m under the ground");
-    assert!(
-        highest < 0.1,
-        "a vertex {highest} m over the ground after 4 s"
-    );
+    let drop = Transform::from_translation(at + Vec3::new(0.2, 1.0, -0.3));
+    common::assert_lies_on_the_ground(app, at, hills, drop);
 }
 
 #[cfg(feature = "rapier")]

@@ -533,8 +533,9 @@ enum Feature {
     Corner(usize),
 }
 
-/// The point of triangle `[a, b, c]` nearest `p` and the part it lies on (the regions of
-/// [`closest_point_on_triangle`]).
+/// The point of triangle `[a, b, c]` nearest `p` (Ericson, *Real-Time Collision Detection*,
+/// 5.1.5) and the part it lies on; a zero-area triangle's nearest corner.
+#[inline]
 fn closest_feature_on_triangle(p: Vec3, [a, b, c]: &[Vec3; 3]) -> (Vec3, Feature) {
     let (ab, ac, ap) = (*b - *a, *c - *a, p - *a);
     let (d1, d2) = (ab.dot(ap), ac.dot(ap));
@@ -566,7 +567,14 @@ fn closest_feature_on_triangle(p: Vec3, [a, b, c]: &[Vec3; 3]) -> (Vec3, Feature
     }
     let denom = va + vb + vc;
     if denom.abs() < f32::MIN_POSITIVE {
-        return (closest_point_on_triangle(p, &[*a, *b, *c]), Feature::Face);
+        // Degenerate (zero-area) triangle: nearest of its corners.
+        let k = (0..3)
+            .min_by(|&x, &y| {
+                let (x, y) = ([a, b, c][x], [a, b, c][y]);
+                x.distance_squared(p).total_cmp(&y.distance_squared(p))
+            })
+            .unwrap_or(0);
+        return (*[a, b, c][k], Feature::Corner(k));
     }
     let (v, w) = (vb / denom, vc / denom);
     (*a + ab * v + ac * w, Feature::Face)
@@ -598,44 +606,8 @@ pub fn point_triangle_distance(p: Vec3, t: &[Vec3; 3]) -> f32 {
     (p - closest_point_on_triangle(p, t)).length()
 }
 
-pub(crate) fn closest_point_on_triangle(p: Vec3, [a, b, c]: &[Vec3; 3]) -> Vec3 {
-    let (ab, ac, ap) = (*b - *a, *c - *a, p - *a);
-    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return *a;
-    }
-    let bp = p - *b;
-    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
-    if d3 >= 0.0 && d4 <= d3 {
-        return *b;
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        return *a + ab * (d1 / (d1 - d3));
-    }
-    let cp = p - *c;
-    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
-    if d6 >= 0.0 && d5 <= d6 {
-        return *c;
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        return *a + ac * (d2 / (d2 - d6));
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        return *b + (*c - *b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-    }
-    let denom = va + vb + vc;
-    if denom.abs() < f32::MIN_POSITIVE {
-        // Degenerate (zero-area) triangle: nearest of its vertices.
-        return [*a, *b, *c]
-            .into_iter()
-            .min_by(|x, y| x.distance_squared(p).total_cmp(&y.distance_squared(p)))
-            .unwrap_or(*a);
-    }
-    let (v, w) = (vb / denom, vc / denom);
-    *a + ab * v + ac * w
+pub(crate) fn closest_point_on_triangle(p: Vec3, t: &[Vec3; 3]) -> Vec3 {
+    closest_feature_on_triangle(p, t).0
 }
 
 /// Sign of the orientation of the origin, `(x1, y1)`, `(x2, y2)` with consistent tie-breaking
