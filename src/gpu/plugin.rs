@@ -2,13 +2,13 @@
 //! their mesh's vertex slab in place. The main world's systems are in `backend.rs`, the
 //! render world's in `render.rs`.
 
-use std::sync::Mutex;
 use std::sync::mpsc::channel;
+use std::sync::{Mutex, OnceLock};
 
 use bevy::core_pipeline::schedule::camera_driver;
 use bevy::prelude::*;
 use bevy::render::mesh::allocator::MeshAllocatorSettings;
-use bevy::render::renderer::{RenderDevice, RenderGraph};
+use bevy::render::renderer::{RenderDevice, RenderGraph, RenderInstance};
 use bevy::render::{ExtractSchedule, Render, RenderApp, RenderSystems};
 
 use super::backend::{
@@ -51,6 +51,10 @@ use crate::foundation::{ClothSchedule, ClothSystems};
 /// A change of settings or pins carries the GPU state over; an edit through
 /// [`ClothSim::simulation_mut`](crate::cloth::ClothSim::simulation_mut) restarts the GPU cloth from the edited state; switching to the
 /// CPU reads the state back first (the cloth holds still until it arrives).
+///
+/// The plugin keeps the first renderer's wgpu instance until the process ends, so that the
+/// graphics driver is never unloaded while its own threads run (NVIDIA's Linux driver crashed
+/// processes that way, as they exited).
 #[derive(Clone, Copy, Debug)]
 pub struct ClothGpuPlugin {
     /// Backend of cloths without a [`ClothBackend`] component.
@@ -183,5 +187,35 @@ impl Plugin for ClothGpuPlugin {
             debug!("bevy_cloth: GPU backend unavailable: {why}");
         }
         app.insert_resource(ClothGpuSupport { unavailable });
+        keep_graphics_driver_loaded(app);
+    }
+
+    fn cleanup(&self, app: &mut App) {
+        // Added before the renderer, `finish` came before the renderer had its instance.
+        keep_graphics_driver_loaded(app);
+    }
+}
+
+/// The first renderer's graphics API instance, kept for the rest of the process.
+static KEPT_INSTANCE: OnceLock<RenderInstance> = OnceLock::new();
+
+/// Keeps the renderer's wgpu instance alive until the process ends, so that the graphics
+/// driver stays loaded.
+///
+/// When the last Vulkan instance is destroyed the Vulkan loader unloads the driver's
+/// libraries. NVIDIA's Linux driver (580, on an H100 and an H200) runs threads of its own
+/// that can outlive that: the process then crashed with SIGSEGV in code no library mapped any
+/// more, as it exited or when a later app started (the `gpu_app` tests, many render apps in
+/// one process; [wgpu #8365](https://github.com/gfx-rs/wgpu/issues/8365)). And after about
+/// thirty loads in one process the driver could not be loaded again ("vulkan
+/// drivers/libraries could not be loaded"), with nothing else left open. One instance kept
+/// (never destroyed: the operating system reclaims it with the process) keeps the driver
+/// loaded once; every other instance is destroyed as before.
+fn keep_graphics_driver_loaded(app: &App) {
+    let instance = app
+        .get_sub_app(RenderApp)
+        .and_then(|render| render.world().get_resource::<RenderInstance>());
+    if let Some(instance) = instance {
+        KEPT_INSTANCE.get_or_init(|| instance.clone());
     }
 }

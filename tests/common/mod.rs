@@ -105,9 +105,16 @@ pub fn placed_grid(grid: &Grid, place: impl Fn(Vec3) -> Vec3) -> Topology {
 
 /// A wgpu adapter and device for GPU tests, or `None` after printing why the test is skipped.
 /// With `CLOTH_REQUIRE_GPU=1` (set by CI) a missing adapter fails the test instead.
+///
+/// Every call shares one wgpu instance, kept for the whole test process: an instance per call
+/// made NVIDIA's Linux driver (580) load and unload its libraries each time, and after about
+/// thirty times in one process it could not be loaded any more (the plugin keeps its
+/// renderer's instance for the same reason: `gpu::plugin`'s `keep_graphics_driver_loaded`).
 pub fn gpu_or_skip(test: &str) -> Option<(wgpu::Adapter, wgpu::Device, wgpu::Queue)> {
-    let instance =
-        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    static INSTANCE: std::sync::OnceLock<wgpu::Instance> = std::sync::OnceLock::new();
+    let instance = INSTANCE.get_or_init(|| {
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
+    });
     let found =
         bevy::tasks::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
             .map_err(|e| e.to_string())
