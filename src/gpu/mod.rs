@@ -24,7 +24,7 @@ mod world;
 pub use backend::{ClothBackend, ClothBackendInUse, ClothGpuSupport, ClothOnGpu, ClothReadback};
 pub use kernels::{GpuKernels, GpuUnsupported, TILE};
 pub use layout::{WorldKey, gpu_part_count};
-pub use plugin::ClothGpuPlugin;
+pub use plugin::{ClothGpuPlugin, renderer_instance_kept};
 pub use world::{
     ClothFrame, DispatchCount, GpuFrame, GpuStage, GpuWorld, MotionTargets, StepColliders,
     TornEdges, TornFlags, sum_impulses,

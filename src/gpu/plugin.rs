@@ -199,6 +199,14 @@ impl Plugin for ClothGpuPlugin {
 /// The first renderer's graphics API instance, kept for the rest of the process.
 static KEPT_INSTANCE: OnceLock<RenderInstance> = OnceLock::new();
 
+/// Whether this process keeps a renderer's wgpu instance alive (see [`ClothGpuPlugin`]): true
+/// once an app with a renderer and the cloth plugins has been set up. For tests.
+#[doc(hidden)]
+#[must_use]
+pub fn renderer_instance_kept() -> bool {
+    KEPT_INSTANCE.get().is_some()
+}
+
 /// Keeps the renderer's wgpu instance alive until the process ends, so that the graphics
 /// driver stays loaded.
 ///
