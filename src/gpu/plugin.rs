@@ -191,7 +191,9 @@ impl Plugin for ClothGpuPlugin {
     }
 
     fn cleanup(&self, app: &mut App) {
-        // Added before the renderer, `finish` came before the renderer had its instance.
+        // For the plugin added before the renderer, whose `finish` came before the renderer
+        // had its instance. (In the usual order only `finish` can: pipelined rendering's
+        // `cleanup`, which runs before this one, moves the render world to its thread.)
         keep_graphics_driver_loaded(app);
     }
 }
