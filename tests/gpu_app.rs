@@ -384,9 +384,6 @@ fn a_gpu_cloth_teleports_with_its_pins() {
     assert!(strain.max < 0.3, "dragged across: {strain:?}");
 }
 
-/// `ClothPlugins` added before `DefaultPlugins` cannot set up its GPU backend (the renderer
-/// is not there yet when it is built): a cloth asking for the GPU runs on the CPU and says
-/// that the order is why, rather than blaming the device.
 /// The plugin keeps its renderer's wgpu instance for the rest of the process, also after the
 /// app is gone, so that the graphics driver is never unloaded under its own threads (NVIDIA's
 /// Linux driver crashed processes so, and after about thirty loads no longer loaded).
@@ -405,6 +402,9 @@ fn a_render_app_keeps_the_graphics_driver_loaded_after_it_ends() {
     assert!(bevy_cloth::gpu::renderer_instance_kept());
 }
 
+/// `ClothPlugins` added before `DefaultPlugins` cannot set up its GPU backend (the renderer
+/// is not there yet when it is built): a cloth asking for the GPU runs on the CPU and says
+/// that the order is why, rather than blaming the device.
 #[test]
 fn cloth_plugins_added_before_the_renderer_say_so() {
     if common::gpu_or_skip("cloth_plugins_added_before_the_renderer_say_so").is_none() {
