@@ -351,30 +351,13 @@ pub(super) fn warn_self_collision(
     cs.thickness_warned = asked;
     let topology = cs.sim.topology();
     let spread = topology.rest_edge_spread();
-    if let Some(sc) = sc
-        && !cs.uneven_warned
-        && spread > EVEN_EDGE_SPREAD
-    {
+    if sc.is_some() && !cs.uneven_warned && spread > EVEN_EDGE_SPREAD {
         cs.uneven_warned = true;
-        // The default thickness over a mesh's fine spacing (a tube finer around than along):
-        // a vertex's own neighbouring triangles lie within it.
-        let (mean, short) = (topology.mean_rest_edge(), topology.short_rest_edge());
-        let thick = if sc.thickness.is_none() && mean > 1.25 * short {
-            format!(
-                "; where the mesh is finer one way than the other (a tube of 24 × 8 quads), the \
-                 default thickness, its mean edge ({mean:.4} m), lies over its short edges \
-                 ({short:.4} m) and can tear the cloth apart: a thickness under {:.4} m holds \
-                 there",
-                1.25 * short
-            )
-        } else {
-            String::new()
-        };
         warn!(
             "cloth {who}: its edges are uneven for self-collision (the 90th percentile of their \
              lengths is {spread:.2} times the 10th, more than {EVEN_EDGE_SPREAD}): each vertex \
              keeps a thickness from its own edges, and layers can still pass through each other \
-             in a few places where the cloth crumples; a mesh remeshed to even edges holds{thick}"
+             in a few places where the cloth crumples; a mesh remeshed to even edges holds"
         );
     }
 }

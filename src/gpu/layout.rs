@@ -114,6 +114,10 @@ pub(crate) struct WorldLayout {
     /// Per vertex, the triangles whose first corner it is, in triangle order (self-collision
     /// finds triangles through their first corner; only in a world with self-collision).
     pub first_tri_at: u32,
+    /// Per vertex, the thickness it keeps from triangles over its cloth's (f32 bits:
+    /// `Topology::self_collision_triangle_scales`, else its own scale; only in a world with
+    /// self-collision).
+    pub sc_triangle_scale_at: u32,
     pub tether_at: u32,
     pub lab_at: u32,
     pub edges_at: u32,
@@ -318,6 +322,7 @@ impl WorldLayout {
         let mut lab_edges: Vec<(u32, [u32; 2])> = Vec::new();
         let mut tear_edges: Vec<[u32; 4]> = Vec::new();
         let mut edge_tris: Vec<(u32, [u32; 1])> = Vec::new();
+        let mut triangle_scales: Vec<u32> = Vec::new();
         let mut settle_edges: Vec<[u32; 3]> = Vec::new();
         let any_sc = sims.iter().any(|s| s.features().self_collision.is_some());
         for (c, sim) in sims.iter().enumerate() {
@@ -506,6 +511,14 @@ impl WorldLayout {
                 let scale = |i: usize| scales.get(i).copied().unwrap_or(1.0);
                 out.rest
                     .extend(rest.iter().enumerate().map(|(i, p)| p.extend(scale(i))));
+                let from_triangles = sim.topology().self_collision_triangle_scales();
+                triangle_scales.extend((0..rest.len()).map(|i| {
+                    from_triangles
+                        .get(i)
+                        .copied()
+                        .unwrap_or_else(|| scale(i))
+                        .to_bits()
+                }));
             }
         }
         out.any_sc = any_sc && out.head_words > 0;
@@ -565,6 +578,8 @@ impl WorldLayout {
         out.tri_at = topo.len() as u32;
         topo.extend(triangles.iter().flatten());
         if out.any_sc {
+            out.sc_triangle_scale_at = topo.len() as u32;
+            topo.extend(&triangle_scales);
             out.first_tri_at = append_lists(
                 &mut topo,
                 n,

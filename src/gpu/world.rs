@@ -128,6 +128,9 @@ pub(crate) struct WorldUniform {
     settle_strain_at: u32,
     settle_edges_at: u32,
     settle_edges: u32,
+    sc_triangle_scale_at: u32,
+    // The uniform's size a multiple of 16 bytes.
+    pad: [u32; 3],
 }
 
 #[repr(C)]
@@ -1039,6 +1042,8 @@ impl GpuWorld {
             settle_strain_at: s.settle_strain,
             settle_edges_at: l.settle_edges_at,
             settle_edges: l.settle_edges,
+            sc_triangle_scale_at: l.sc_triangle_scale_at,
+            pad: [0; 3],
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         // The per-frame words of every cloth's record: gravity·h and the damping factor (the

@@ -22,7 +22,8 @@
 // `topo` (u32): per cloth its record (`CLOTH_WORDS`) | per vertex its cloth | per vertex its
 // pin (NO_PIN: none) | per group its record (`GROUP_WORDS`) and colour bounds | per vertex
 // the triangles it belongs to (offsets, list) and the triangles | with self-collision, per
-// vertex the triangles whose first corner it is (offsets, list) | tethers | the lab solver's
+// vertex the thickness it keeps from triangles over its cloth's (f32 bits), then per vertex
+// the triangles whose first corner it is (offsets, list) | tethers | the lab solver's
 // edges | the tearing cloths' edges (a, b: global vertices; rest length bits; the slot of
 // the edge's distance constraint in `cons`, or `NO_PIN`), then per tearing edge its
 // triangles (offsets, list) | the edges of the cloths that settle a settings change (a, b:
@@ -91,6 +92,10 @@ struct World {
     settle_strain_at: u32,
     settle_edges_at: u32,
     settle_edges: u32,
+    sc_triangle_scale_at: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 // One substep of one step (binding 1, a dynamic offset per substep).

@@ -38,6 +38,11 @@ fn sc_thickness_of(i: u32, cl: Cloth) -> f32 {
     return cl.sc_thickness * state[P.rest_at + i].w;
 }
 
+// `Topology::self_collision_triangle_scales`: the thickness vertex `i` keeps from triangles.
+fn sc_triangle_thickness_of(i: u32, cl: Cloth) -> f32 {
+    return cl.sc_thickness * bitcast<f32>(topo[P.sc_triangle_scale_at + i]);
+}
+
 // `sdf::closest_point_on_triangle` (Ericson 5.1.5).
 fn sc_closest(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> vec3<f32> {
     let ab = b - a;
@@ -469,8 +474,10 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
     let tethers = (cl.flags & FLAG_TETHERS) != 0u;
     let a = sc_read(i, tethers);
     let prev_a = state[P.prev_at + i].xyz;
-    // The vertex keeps its own thickness from the others.
+    // The vertex keeps its own thickness from the others, and from triangles at most its
+    // triangle thickness.
     let thickness = sc_thickness_of(i, cl);
+    let triangle_thickness = sc_triangle_thickness_of(i, cl);
     var sum = vec3<f32>(0.0);
     var touching = 0.0;
     let count = atomicLoad(&scratch[P.ncount_at + i]);
@@ -492,7 +499,7 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
             a, prev_a,
             sc_read(k0, tethers), sc_read(k1, tethers), sc_read(k2, tethers),
             state[P.prev_at + k0].xyz, state[P.prev_at + k1].xyz, state[P.prev_at + k2].xyz,
-            slot & 3u, thickness, cl.sc_friction,
+            slot & 3u, triangle_thickness, cl.sc_friction,
         );
         sum += r.xyz;
         touching += r.w;

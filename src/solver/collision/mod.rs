@@ -16,5 +16,7 @@ pub use self_collision::{
     MAX_SELF_NEIGHBOURS, MAX_SELF_TRIANGLES, SelfCollision, SelfCollisionScratch,
     count_self_crossings, triangle_reach,
 };
-pub(crate) use self_collision::{find_self_collision_candidates, first_corner_reach, self_collide};
+pub(crate) use self_collision::{
+    Scales, find_self_collision_candidates, first_corner_reach, self_collide,
+};
 pub use shape::{Pose, Shape};

@@ -5,7 +5,12 @@
 //! On a mesh of uneven edges each vertex keeps its own thickness, `thickness` times its
 //! [`Topology::self_collision_scales`](crate::solver::Topology::self_collision_scales);
 //! everything below that says *thickness* is then the querying or correcting vertex's own. On
-//! an even mesh (no scales) every vertex keeps `thickness`.
+//! an even mesh (no scales) every vertex keeps `thickness`. From triangles a vertex of an
+//! uneven mesh keeps at most [`SHORT_EDGE_THICKNESS`](crate::solver::SHORT_EDGE_THICKNESS)
+//! of its shortest rest edge
+//! ([`Topology::self_collision_triangle_scales`](crate::solver::Topology::self_collision_triangle_scales)):
+//! where the mesh is finer one way than the other, the triangles one short edge beyond its
+//! own lie within its thickness, and holding it a whole thickness off them tears the cloth.
 //!
 //! Once per step, vertices go into a dense spatial hash (Müller, "Ten Minute Physics" 11) and
 //! every vertex collects, in parallel:
@@ -1502,6 +1507,16 @@ struct PassChunk<'a> {
     corrections: &'a mut [Vec3],
 }
 
+/// Per vertex, the thickness it keeps from other vertices and from triangles over the
+/// cloth's ([`Topology::self_collision_scales`](crate::solver::Topology::self_collision_scales)
+/// and [`Topology::self_collision_triangle_scales`](crate::solver::Topology::self_collision_triangle_scales));
+/// empty: the cloth's.
+#[derive(Clone, Copy, Default)]
+pub(crate) struct Scales<'a> {
+    pub vertices: &'a [f32],
+    pub triangles: &'a [f32],
+}
+
 /// One self-collision pass (Jacobi): every vertex sums its corrections from its touching
 /// neighbours and triangles against the positions before the pass, divided by their number,
 /// and all vertices move at once (`prev`: positions at the substep's start). The vertices run
@@ -1510,11 +1525,15 @@ pub(crate) fn self_collide(
     pos: &mut [Vec4],
     prev: &[Vec4],
     triangles: &[[u32; 3]],
-    scales: &[f32],
+    scales: Scales<'_>,
     params: SelfCollision,
     scratch: &mut SelfCollisionScratch,
     par: &impl Parallel,
 ) {
+    let Scales {
+        vertices: scales,
+        triangles: triangle_scales,
+    } = scales;
     let n = pos.len();
     if scratch.neighbour_count.len() != n || scratch.triangle_count.len() != n {
         return;
@@ -1542,9 +1561,15 @@ pub(crate) fn self_collide(
         for (&i, out) in c.active.iter().zip(c.corrections.iter_mut()) {
             let i = i as usize;
             let (a, prev_a) = (read[i], prev[i]);
-            // The vertex keeps its own thickness from the others.
+            // The vertex keeps its own thickness from the others, and from triangles at most
+            // its triangle thickness (`Topology::self_collision_triangle_scales`).
+            let scale = scales.get(i).copied().unwrap_or(1.0);
+            let triangle_params = SelfCollision {
+                thickness: params.thickness * triangle_scales.get(i).copied().unwrap_or(scale),
+                ..params
+            };
             let params = SelfCollision {
-                thickness: params.thickness * scales.get(i).copied().unwrap_or(1.0),
+                thickness: params.thickness * scale,
                 ..params
             };
             let mut sum = Vec3::ZERO;
@@ -1567,7 +1592,7 @@ pub(crate) fn self_collide(
                 };
                 let code = slot & 3;
                 if let Some(da) =
-                    triangle_correction(a, prev_a, plane, tri, read, prev, code, params)
+                    triangle_correction(a, prev_a, plane, tri, read, prev, code, triangle_params)
                 {
                     sum += da;
                     touching += 1;
@@ -1757,7 +1782,15 @@ mod tests {
             friction: 0.0,
         };
         let mut s = candidates(&pos, &[Vec4::ZERO; 3], &rest, &[], params);
-        self_collide(&mut pos, &prev, &[], &[], params, &mut s, &Serial);
+        self_collide(
+            &mut pos,
+            &prev,
+            &[],
+            Scales::default(),
+            params,
+            &mut s,
+            &Serial,
+        );
         assert!((pos[0].xyz().distance(pos[1].xyz()) - 0.1).abs() < 1e-6);
         assert_eq!(pos[2], prev[2]);
         // Equal masses: symmetric push.
@@ -1777,7 +1810,15 @@ mod tests {
             friction: 0.0,
         };
         let mut s = candidates(&pos, &[Vec4::ZERO; 2], &rest, &[], params);
-        self_collide(&mut pos, &prev, &[], &[], params, &mut s, &Serial);
+        self_collide(
+            &mut pos,
+            &prev,
+            &[],
+            Scales::default(),
+            params,
+            &mut s,
+            &Serial,
+        );
         assert_eq!(pos, prev);
     }
 
@@ -1801,12 +1842,28 @@ mod tests {
         assert_eq!(s.triangles[3 * MAX_SELF_TRIANGLES], SIDE_FRONT);
         // Too close on its side: pushed out along +z, its share half the push (equal masses).
         let mut pos = start.clone();
-        self_collide(&mut pos, &start, &tri, &[], params, &mut s, &Serial);
+        self_collide(
+            &mut pos,
+            &start,
+            &tri,
+            Scales::default(),
+            params,
+            &mut s,
+            &Serial,
+        );
         assert!((pos[3].z - 0.06).abs() < 1e-6, "{}", pos[3]);
         // Went through during the substep: brought back to its side.
         let mut pos = start.clone();
         pos[3].z = -0.05;
-        self_collide(&mut pos, &start, &tri, &[], params, &mut s, &Serial);
+        self_collide(
+            &mut pos,
+            &start,
+            &tri,
+            Scales::default(),
+            params,
+            &mut s,
+            &Serial,
+        );
         assert!((pos[3].z - (-0.05 + 0.075)).abs() < 1e-6, "{}", pos[3]);
         // The triangle's corners are moved by their own lists (they have none here).
         assert_eq!(&pos[..3], &start[..3]);

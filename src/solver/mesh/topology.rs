@@ -9,7 +9,9 @@
 use glam::{Vec2, Vec3};
 
 use super::hinge::{bend_angle, dihedral_weight, hinge_coefficients};
-use crate::solver::limits::{EVEN_EDGE_SPREAD, MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES};
+use crate::solver::limits::{
+    EVEN_EDGE_SPREAD, MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES, SHORT_EDGE_THICKNESS,
+};
 
 /// What a distance edge resists.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -235,6 +237,9 @@ pub struct Topology {
     short_edge: f32,
     /// Per vertex, its self-collision thickness over the cloth's; empty on even edges.
     self_collision_scales: Vec<f32>,
+    /// Per vertex, the thickness it keeps from triangles over the cloth's; empty on even
+    /// edges.
+    self_collision_triangle_scales: Vec<f32>,
     skipped_triangles: usize,
     options: TopologyOptions,
 }
@@ -435,11 +440,12 @@ impl Topology {
 
         let mean_edge = edges.iter().map(|e| e.rest).sum::<f32>() / edges.len().max(1) as f32;
         let (edge_spread, short_edge) = edge_spread(&edges);
-        let self_collision_scales = if edge_spread > EVEN_EDGE_SPREAD {
-            edge_scales(&positions, &triangles)
-        } else {
-            Vec::new()
-        };
+        let (self_collision_scales, self_collision_triangle_scales) =
+            if edge_spread > EVEN_EDGE_SPREAD {
+                edge_scales(&positions, &triangles)
+            } else {
+                (Vec::new(), Vec::new())
+            };
         Self {
             rest_positions: positions,
             uvs,
@@ -451,6 +457,7 @@ impl Topology {
             edge_spread,
             short_edge,
             self_collision_scales,
+            self_collision_triangle_scales,
             skipped_triangles: 0,
             options,
         }
@@ -560,6 +567,20 @@ impl Topology {
     #[must_use]
     pub fn self_collision_scales(&self) -> &[f32] {
         &self.self_collision_scales
+    }
+
+    /// Each vertex's thickness from the cloth's triangles over the cloth's thickness, on a
+    /// mesh whose edges are more uneven than [`EVEN_EDGE_SPREAD`]: its
+    /// [`self_collision_scales`](Self::self_collision_scales), at most
+    /// [`SHORT_EDGE_THICKNESS`](crate::solver::limits::SHORT_EDGE_THICKNESS) times its shortest rest edge over the mean of every
+    /// triangle's edges (and at least a quarter). Where a mesh is finer one way than the other
+    /// (a skirt's tube, finer around than along), a vertex held a whole thickness off the
+    /// triangles one short edge beyond its own would be held farther than its edges reach,
+    /// and the cloth tears itself apart; from other vertices it keeps its whole thickness.
+    /// Empty on even edges. Both backends read these numbers.
+    #[must_use]
+    pub fn self_collision_triangle_scales(&self) -> &[f32] {
+        &self.self_collision_triangle_scales
     }
 
     /// The thickest self-collision this cloth takes:
@@ -682,11 +703,13 @@ impl Topology {
 const MIN_THICKNESS_SCALE: f32 = 0.25;
 const MAX_THICKNESS_SCALE: f32 = 4.0;
 
-/// [`Topology::self_collision_scales`] of an uneven mesh.
-fn edge_scales(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<f32> {
+/// [`Topology::self_collision_scales`] and
+/// [`Topology::self_collision_triangle_scales`] of an uneven mesh.
+fn edge_scales(positions: &[Vec3], triangles: &[[u32; 3]]) -> (Vec<f32>, Vec<f32>) {
     let n = positions.len();
     let mut sum = vec![0.0f64; n];
     let mut count = vec![0u32; n];
+    let mut shortest = vec![f64::INFINITY; n];
     let (mut total, mut incidences) = (0.0f64, 0u64);
     for t in triangles {
         for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
@@ -694,6 +717,7 @@ fn edge_scales(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<f32> {
             for v in [a, b] {
                 sum[v as usize] += l;
                 count[v as usize] += 1;
+                shortest[v as usize] = shortest[v as usize].min(l);
             }
             total += l;
             incidences += 1;
@@ -703,12 +727,16 @@ fn edge_scales(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<f32> {
     (0..n)
         .map(|i| {
             if count[i] == 0 || mean.is_nan() || mean <= 0.0 {
-                return 1.0;
+                return (1.0, 1.0);
             }
             let s = (sum[i] / f64::from(count[i]) / mean) as f32;
-            s.clamp(MIN_THICKNESS_SCALE, MAX_THICKNESS_SCALE)
+            let s = s.clamp(MIN_THICKNESS_SCALE, MAX_THICKNESS_SCALE);
+            // Not `min`: a NaN (a non-finite edge) stays, as in `s`.
+            let short = SHORT_EDGE_THICKNESS * (shortest[i] / mean) as f32;
+            let t = if short < s { short } else { s };
+            (s, t.clamp(MIN_THICKNESS_SCALE, MAX_THICKNESS_SCALE))
         })
-        .collect()
+        .unzip()
 }
 
 /// The 90th over the 10th percentile of `edges`' rest lengths (1 without edges or with a
@@ -800,6 +828,69 @@ mod tests {
                 .all(|s| (MIN_THICKNESS_SCALE..=MAX_THICKNESS_SCALE).contains(s))
         );
         assert_eq!(scales.last(), Some(&1.0));
+    }
+
+    /// A grid of long narrow cells (finer along z than along x, as a skirt's tube is finer
+    /// around than along): each vertex keeps from triangles at most 1.2 of its short edge,
+    /// less than its thickness from vertices (the mean of its edges); where the cells are
+    /// square (the squeezed grid's middle) it keeps the same from both.
+    #[test]
+    fn a_vertex_keeps_at_most_a_short_edge_and_a_fifth_from_triangles() {
+        let (a, b) = (1.0 / 19.0f32, 0.4 / 19.0f32);
+        let grid = Grid::new(20, 20, 1.0, 0.4);
+        let t = Topology::from_triangles(
+            &grid.positions(),
+            None,
+            &grid.indices(),
+            TopologyOptions::default(),
+        )
+        .unwrap();
+        assert!(t.rest_edge_spread() > EVEN_EDGE_SPREAD);
+        let (scales, thin) = (
+            t.self_collision_scales(),
+            t.self_collision_triangle_scales(),
+        );
+        assert_eq!(thin.len(), scales.len());
+        // The mean over every triangle's edges: a side each way and a diagonal.
+        let mean = (a + b + a.hypot(b)) / 3.0;
+        let inner = grid.index(10, 10) as usize;
+        let want = SHORT_EDGE_THICKNESS * b / mean;
+        assert!(
+            (thin[inner] - want).abs() < 1e-4 * want,
+            "{} against {want}",
+            thin[inner]
+        );
+        assert!(scales[inner] > 1.5 * thin[inner], "{}", scales[inner]);
+        assert!(thin.iter().zip(scales).all(|(t, s)| t <= s));
+        // Square cells: the cap (1.2 sides) is over the mean edge (1.14 sides) and binds
+        // nowhere inside; the squeeze of the test above makes its middle cells square.
+        let square = Grid::new(30, 30, 1.0, 1.0);
+        let squeeze = |v: f32| {
+            let u = v + 0.5;
+            u + 0.4 * (core::f32::consts::TAU * u).sin() / core::f32::consts::TAU - 0.5
+        };
+        let squeezed: Vec<Vec3> = square
+            .positions()
+            .iter()
+            .map(|p| Vec3::new(squeeze(p.x), p.y, squeeze(p.z)))
+            .collect();
+        let t = Topology::from_triangles(
+            &squeezed,
+            None,
+            &square.indices(),
+            TopologyOptions::default(),
+        )
+        .unwrap();
+        let middle = square.index(15, 15) as usize;
+        assert_eq!(
+            t.self_collision_triangle_scales()[middle],
+            t.self_collision_scales()[middle]
+        );
+        let corner = square.index(1, 7) as usize;
+        assert!(
+            t.self_collision_triangle_scales()[corner] < t.self_collision_scales()[corner],
+            "long narrow cells where one axis is squeezed and the other stretched"
+        );
     }
 
     #[test]

@@ -38,8 +38,8 @@ use super::params::SolverParams;
 use super::state::ClothState;
 use crate::solver::air::{Aerodynamics, air_velocity_change, vertex_area_vectors};
 use crate::solver::collision::{
-    Collider, ContactImpulse, SelfCollision, SelfCollisionScratch, SubstepPose, collide_vertex,
-    find_self_collision_candidates, self_collide, substep_poses,
+    Collider, ContactImpulse, Scales, SelfCollision, SelfCollisionScratch, SubstepPose,
+    collide_vertex, find_self_collision_candidates, self_collide, substep_poses,
 };
 use crate::solver::constraints::{
     ConstraintBatches, ImplicitBending, Mode, MotionConstraints, Part, Solver, Tethers,
@@ -496,7 +496,10 @@ pub fn step(
                 &mut state.positions,
                 &state.prev,
                 topology.triangles(),
-                topology.self_collision_scales(),
+                Scales {
+                    vertices: topology.self_collision_scales(),
+                    triangles: topology.self_collision_triangle_scales(),
+                },
                 sc,
                 &mut scratch.self_collision,
                 par,
