@@ -311,12 +311,15 @@ pub(super) fn remake(cs: &mut ClothSim, cloth: &Cloth) -> Result<bool, ClothErro
     Ok(true)
 }
 
-/// The self-collision thickness a cloth uses: its own, or the mean rest edge length; at most
+/// The self-collision thickness a cloth uses: its own, or
+/// [`Topology::default_self_collision_thickness`](crate::solver::Topology::default_self_collision_thickness); at most
 /// [`Topology::thickest_self_collision`](crate::solver::Topology::thickest_self_collision) (the
 /// solver refuses more). Also the thickness asked for when it was more than that.
 fn self_collision_thickness(sim: &Simulation, sc: &ClothSelfCollision) -> (f32, Option<f32>) {
     let topology = sim.topology();
-    let asked = sc.thickness.unwrap_or(topology.mean_rest_edge());
+    let asked = sc
+        .thickness
+        .unwrap_or_else(|| topology.default_self_collision_thickness());
     let most = topology.thickest_self_collision();
     // Not `min`: a NaN stays, to be refused with the other values out of range.
     if asked > most {

@@ -160,7 +160,10 @@ impl Default for Cloth {
 #[reflect(Component, Default, Clone, PartialEq)]
 pub struct ClothSelfCollision {
     /// Distance kept between any two vertices; `None` uses the mean rest edge length, which
-    /// stops edges slipping between vertices. At most
+    /// stops edges slipping between vertices, and on a mesh of even edges at most
+    /// [`DEFAULT_SHORT_EDGE_THICKNESS`](crate::solver::DEFAULT_SHORT_EDGE_THICKNESS) short
+    /// edges, so that a cloth swung hard (a running character's cape) does not fold through
+    /// itself ([`Topology::default_self_collision_thickness`](crate::solver::Topology::default_self_collision_thickness)). At most
     /// [`MAX_SELF_COLLISION_EDGES`](crate::solver::MAX_SELF_COLLISION_EDGES) mean rest edge
     /// is used (more is brought down to that, with a warning): layers thicker than an edge
     /// pass through each other where the cloth crumples. For a thicker layer, a coarser mesh.

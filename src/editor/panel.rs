@@ -567,10 +567,10 @@ fn features_section(ui: &mut egui::Ui, world: &mut World, e: Entity) {
                     if let Some(mut sc) = world.get::<ClothSelfCollision>(e).copied() {
                         let mut auto = sc.thickness.is_none();
                         if ui
-                            .checkbox(&mut auto, "thickness: mean edge length")
+                            .checkbox(&mut auto, "thickness: automatic (about an edge)")
                             .changed()
                         {
-                            // Unticked: start from the thickness in use (the mean edge).
+                            // Unticked: start from the thickness in use (the automatic one).
                             let in_use = world
                                 .get::<ClothSim>(e)
                                 .and_then(|s| s.simulation().features().self_collision)

@@ -73,8 +73,8 @@ pub use constraints::{
     default_part_count,
 };
 pub use limits::{
-    EVEN_EDGE_SPREAD, MAX_COORDINATE, MAX_SELF_COLLISION_EDGES, MAX_TRIANGLES, MAX_VERTEX_MASS,
-    MAX_VERTICES, ParamError, SHORT_EDGE_THICKNESS,
+    DEFAULT_SHORT_EDGE_THICKNESS, EVEN_EDGE_SPREAD, MAX_COORDINATE, MAX_SELF_COLLISION_EDGES,
+    MAX_TRIANGLES, MAX_VERTEX_MASS, MAX_VERTICES, ParamError, SHORT_EDGE_THICKNESS,
 };
 pub use mesh::{
     Bend, BendRest, BendingModel, Edge, EdgeKind, Grid, HARD_EDGE_COS, MassDistribution,

@@ -10,7 +10,8 @@ use glam::{Vec2, Vec3};
 
 use super::hinge::{bend_angle, dihedral_weight, hinge_coefficients};
 use crate::solver::limits::{
-    EVEN_EDGE_SPREAD, MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES, SHORT_EDGE_THICKNESS,
+    DEFAULT_SHORT_EDGE_THICKNESS, EVEN_EDGE_SPREAD, MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES,
+    SHORT_EDGE_THICKNESS,
 };
 
 /// What a distance edge resists.
@@ -583,6 +584,22 @@ impl Topology {
         &self.self_collision_triangle_scales
     }
 
+    /// The self-collision thickness the plugin uses when none is set
+    /// (`ClothSelfCollision::thickness` `None`): the mean rest edge, and on a mesh of even
+    /// edges (a spread up to [`EVEN_EDGE_SPREAD`]) at most
+    /// [`DEFAULT_SHORT_EDGE_THICKNESS`](crate::solver::DEFAULT_SHORT_EDGE_THICKNESS)
+    /// short edges. A mesh of uneven edges keeps its mean edge: each vertex scales it
+    /// ([`Self::self_collision_scales`]). 0 without edges.
+    #[must_use]
+    pub fn default_self_collision_thickness(&self) -> f32 {
+        if self.edge_spread > EVEN_EDGE_SPREAD {
+            self.mean_edge
+        } else {
+            self.mean_edge
+                .min(DEFAULT_SHORT_EDGE_THICKNESS * self.short_edge)
+        }
+    }
+
     /// The thickest self-collision this cloth takes:
     /// [`MAX_SELF_COLLISION_EDGES`](crate::solver::limits::MAX_SELF_COLLISION_EDGES) mean rest
     /// edges.
@@ -828,6 +845,45 @@ mod tests {
                 .all(|s| (MIN_THICKNESS_SCALE..=MAX_THICKNESS_SCALE).contains(s))
         );
         assert_eq!(scales.last(), Some(&1.0));
+    }
+
+    /// The default self-collision thickness: the mean edge, at most 1.1 short edges on even
+    /// meshes (the `cape` example's cape: 1.1 × 0.7 m / 15, under its mean edge); a grid of
+    /// equilateral triangles keeps its edge; an uneven mesh keeps its mean edge.
+    #[test]
+    fn the_default_thickness_is_at_most_a_short_edge_and_a_tenth_on_even_meshes() {
+        let of = |positions: &[Vec3], indices: &[u32]| {
+            Topology::from_triangles(positions, None, indices, TopologyOptions::default()).unwrap()
+        };
+        let cape = Grid::new(16, 20, 0.7, 1.0);
+        let t = of(&cape.positions(), &cape.indices());
+        let short = 0.7 / 15.0;
+        assert!(t.rest_edge_spread() <= EVEN_EDGE_SPREAD);
+        assert!(t.mean_rest_edge() > 1.2 * short, "{}", t.mean_rest_edge());
+        let want = DEFAULT_SHORT_EDGE_THICKNESS * short;
+        let got = t.default_self_collision_thickness();
+        assert!((got - want).abs() < 1e-5, "{got} against {want}");
+        // Equal edges: the mean edge is the short edge, under 1.1 of it.
+        let h = 3.0f32.sqrt() / 2.0;
+        let strip: Vec<Vec3> = (0..8)
+            .map(|i| Vec3::new(0.5 * i as f32, if i % 2 == 0 { 0.0 } else { h }, 0.0))
+            .collect();
+        let indices: Vec<u32> = (0..6u32)
+            .flat_map(|i| {
+                if i % 2 == 0 {
+                    [i, i + 1, i + 2]
+                } else {
+                    [i + 1, i, i + 2]
+                }
+            })
+            .collect();
+        let t = of(&strip, &indices);
+        assert!((t.default_self_collision_thickness() - 1.0).abs() < 1e-5);
+        // Uneven: the mean edge (each vertex scales it).
+        let narrow = Grid::new(20, 20, 1.0, 0.4);
+        let t = of(&narrow.positions(), &narrow.indices());
+        assert!(t.rest_edge_spread() > EVEN_EDGE_SPREAD);
+        assert_eq!(t.default_self_collision_thickness(), t.mean_rest_edge());
     }
 
     /// A grid of long narrow cells (finer along z than along x, as a skirt's tube is finer
