@@ -18,7 +18,8 @@
 //! cargo run --release --features animation --example cape -- --headless --frames 600 --fps 30
 //! ```
 //! `--speed M/S` sets the speed along the loop (default 1.4; above 2.5 the character runs);
-//! `--inertia X` gives the cape a `ClothInertia` of `X` relative to the character; `--fps N`
+//! `--inertia X` gives the cape a `ClothInertia` of `X` relative to the character;
+//! `--self-collision` gives the cape and the skirt `ClothSelfCollision::default()`; `--fps N`
 //! (headless) sets the frame rate the app runs at (the cloth and the animation step at 60 Hz
 //! whatever it is); `--per-frame-animation` leaves Bevy's animation once a frame, to compare.
 //! `--walk-in-update` moves the character in `Update`, as many games do, instead of on the
@@ -28,7 +29,10 @@
 //! The JSON line adds `pin_error` (largest distance, over every frame after the first
 //! second, between a pinned vertex and where its bone is drawn), `penetration` (deepest cape
 //! vertex inside a body collider over every step after the first second), `colliders`,
-//! `touching_steps` (steps in which a cloth touched the body), `gait`, and for the skirt
+//! `touching_steps` (steps in which a cloth touched the body), `cape_crossings` (most
+//! edge–triangle pairs of the cape crossing each other after any step after the first
+//! second: the cape passing through itself; 0 with self-collision that holds), `gait`, and
+//! for the skirt
 //! `skirt_over_max_distance` (farthest any skirt vertex got past its max distance from the
 //! skin, after the first second; a collider pushing it counts) and `skirt_penetration`
 //! (deepest skirt vertex inside a body collider after the first second). With `--backend
@@ -47,6 +51,7 @@ use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use bevy::world_serialization::{WorldAssetRoot, WorldInstanceReady};
 use bevy_cloth::prelude::*;
+use bevy_cloth::solver::count_self_crossings;
 use support::Args;
 
 const CHARACTER: &str = "character.gltf";
@@ -61,11 +66,12 @@ struct Walker {
     speed: f32,
 }
 
-/// `--speed`, `--inertia`.
+/// `--speed`, `--inertia`, `--self-collision`.
 #[derive(Resource)]
 struct Options {
     speed: f32,
     inertia: Option<f32>,
+    self_collision: bool,
 }
 
 impl Options {
@@ -88,6 +94,7 @@ struct Measured {
     steps: u32,
     colliders: usize,
     touching_steps: u32,
+    cape_crossings: usize,
     skirt_over: f32,
     skirt_penetration: f32,
     skirt_steps: u32,
@@ -273,6 +280,9 @@ fn dress(
                 },
                 Skirt,
             ));
+            if options.self_collision {
+                commands.entity(e).insert(ClothSelfCollision::default());
+            }
         }
         None => {
             error!("{CHARACTER} has no skinned Skirt: run `cargo run --example make_character`")
@@ -323,6 +333,9 @@ fn dress(
     if let Some(inertia) = options.inertia {
         cape.insert(ClothInertia::new(inertia).relative_to(root));
     }
+    if options.self_collision {
+        cape.insert(ClothSelfCollision::default());
+    }
 }
 
 /// How deep the deepest vertex of `s` is inside any of `colliders` (0 if none is).
@@ -353,6 +366,10 @@ fn measure_step(
         let s = sim.simulation().state();
         if time.elapsed_secs() > 1.0 {
             measured.penetration = measured.penetration.max(deepest(s, &colliders.colliders));
+            let topology = sim.simulation().topology();
+            let edges: Vec<[u32; 2]> = topology.edges().iter().map(|e| e.v).collect();
+            let crossing = count_self_crossings(&s.positions, topology.triangles(), &edges);
+            measured.cape_crossings = measured.cape_crossings.max(crossing);
         }
         measured.steps += 1;
         measured.colliders = colliders.colliders.len();
@@ -404,12 +421,13 @@ fn measure_frame(
 fn report(world: &mut World) -> support::Json {
     let gait = world.resource::<Options>().gait().0;
     let m = world.resource::<Measured>();
-    let (pin_error, penetration, steps, colliders, touching) = (
+    let (pin_error, penetration, steps, colliders, touching, crossings) = (
         m.pin_error,
         m.penetration,
         m.steps,
         m.colliders,
         m.touching_steps,
+        m.cape_crossings,
     );
     let (skirt_over, skirt_penetration, skirt_steps) =
         (m.skirt_over, m.skirt_penetration, m.skirt_steps);
@@ -423,6 +441,7 @@ fn report(world: &mut World) -> support::Json {
         .num("touching_steps", touching)
         .measured("pin_error", pin_error, unread)
         .measured("penetration", penetration, unread)
+        .measured("cape_crossings", crossings as f64, unread)
         .num("skirt_steps", skirt_steps)
         .measured("skirt_over_max_distance", skirt_over, unread)
         .measured("skirt_penetration", skirt_penetration, unread)
@@ -448,6 +467,7 @@ fn main() {
     app.insert_resource(Options {
         speed: args.get("speed", 1.4),
         inertia: args.rest.get("inertia").map(|_| args.get("inertia", 1.0)),
+        self_collision: args.rest.contains_key("self-collision"),
     })
     .init_resource::<Measured>()
     .add_systems(Startup, setup)
