@@ -29,10 +29,11 @@
 //! The JSON line adds `pin_error` (largest distance, over every frame after the first
 //! second, between a pinned vertex and where its bone is drawn), `penetration` (deepest cape
 //! vertex inside a body collider over every step after the first second), `colliders`,
-//! `touching_steps` (steps in which a cloth touched the body), `cape_crossings` (most
-//! edge–triangle pairs of the cape crossing each other after any step after the first
-//! second: the cape passing through itself; 0 with self-collision that holds), `gait`, and
-//! for the skirt
+//! `touching_steps` (steps in which a cloth touched the body), `cape_crossings` and
+//! `skirt_crossings` (most edge–triangle pairs of each cloth crossing each other after any
+//! step after the first second: the cloth passing through itself; 0 with self-collision
+//! that holds), `cape_strain` and `skirt_strain` (largest edge strain after the first
+//! second), `gait`, and for the skirt
 //! `skirt_over_max_distance` (farthest any skirt vertex got past its max distance from the
 //! skin, after the first second; a collider pushing it counts) and `skirt_penetration`
 //! (deepest skirt vertex inside a body collider after the first second). With `--backend
@@ -95,6 +96,9 @@ struct Measured {
     colliders: usize,
     touching_steps: u32,
     cape_crossings: usize,
+    cape_strain: f32,
+    skirt_crossings: usize,
+    skirt_strain: f32,
     skirt_over: f32,
     skirt_penetration: f32,
     skirt_steps: u32,
@@ -349,6 +353,14 @@ fn deepest(s: &bevy_cloth::solver::ClothState, colliders: &[bevy_cloth::solver::
         .fold(0.0, f32::max)
 }
 
+/// How many edge–triangle pairs of `sim`'s cloth cross each other (0 for a cloth that has
+/// not passed through itself).
+fn crossings(sim: &ClothSim) -> usize {
+    let s = sim.simulation();
+    let edges: Vec<[u32; 2]> = s.topology().edges().iter().map(|e| e.v).collect();
+    count_self_crossings(&s.state().positions, s.topology().triangles(), &edges)
+}
+
 /// Every fixed step, after the cloth stepped: how deep the cape is inside the body, how far
 /// the skirt is past its max distances and how deep in the body.
 fn measure_step(
@@ -366,10 +378,8 @@ fn measure_step(
         let s = sim.simulation().state();
         if time.elapsed_secs() > 1.0 {
             measured.penetration = measured.penetration.max(deepest(s, &colliders.colliders));
-            let topology = sim.simulation().topology();
-            let edges: Vec<[u32; 2]> = topology.edges().iter().map(|e| e.v).collect();
-            let crossing = count_self_crossings(&s.positions, topology.triangles(), &edges);
-            measured.cape_crossings = measured.cape_crossings.max(crossing);
+            measured.cape_crossings = measured.cape_crossings.max(crossings(sim));
+            measured.cape_strain = measured.cape_strain.max(sim.max_strain());
         }
         measured.steps += 1;
         measured.colliders = colliders.colliders.len();
@@ -387,6 +397,8 @@ fn measure_step(
             measured.skirt_penetration = measured
                 .skirt_penetration
                 .max(deepest(s, &colliders.colliders));
+            measured.skirt_crossings = measured.skirt_crossings.max(crossings(sim));
+            measured.skirt_strain = measured.skirt_strain.max(sim.max_strain());
             measured.skirt_steps += 1;
         }
     }
@@ -421,13 +433,18 @@ fn measure_frame(
 fn report(world: &mut World) -> support::Json {
     let gait = world.resource::<Options>().gait().0;
     let m = world.resource::<Measured>();
-    let (pin_error, penetration, steps, colliders, touching, crossings) = (
+    let (pin_error, penetration, steps, colliders, touching) = (
         m.pin_error,
         m.penetration,
         m.steps,
         m.colliders,
         m.touching_steps,
+    );
+    let (cape_crossings, cape_strain, skirt_crossings, skirt_strain) = (
         m.cape_crossings,
+        m.cape_strain,
+        m.skirt_crossings,
+        m.skirt_strain,
     );
     let (skirt_over, skirt_penetration, skirt_steps) =
         (m.skirt_over, m.skirt_penetration, m.skirt_steps);
@@ -441,7 +458,10 @@ fn report(world: &mut World) -> support::Json {
         .num("touching_steps", touching)
         .measured("pin_error", pin_error, unread)
         .measured("penetration", penetration, unread)
-        .measured("cape_crossings", crossings as f64, unread)
+        .measured("cape_crossings", cape_crossings as f64, unread)
+        .measured("cape_strain", cape_strain, unread)
+        .measured("skirt_crossings", skirt_crossings as f64, unread)
+        .measured("skirt_strain", skirt_strain, unread)
         .num("skirt_steps", skirt_steps)
         .measured("skirt_over_max_distance", skirt_over, unread)
         .measured("skirt_penetration", skirt_penetration, unread)
