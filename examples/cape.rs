@@ -52,7 +52,6 @@ use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use bevy::world_serialization::{WorldAssetRoot, WorldInstanceReady};
 use bevy_cloth::prelude::*;
-use bevy_cloth::solver::count_self_crossings;
 use support::Args;
 
 const CHARACTER: &str = "character.gltf";
@@ -353,14 +352,6 @@ fn deepest(s: &bevy_cloth::solver::ClothState, colliders: &[bevy_cloth::solver::
         .fold(0.0, f32::max)
 }
 
-/// How many edge–triangle pairs of `sim`'s cloth cross each other (0 for a cloth that has
-/// not passed through itself).
-fn crossings(sim: &ClothSim) -> usize {
-    let s = sim.simulation();
-    let edges: Vec<[u32; 2]> = s.topology().edges().iter().map(|e| e.v).collect();
-    count_self_crossings(&s.state().positions, s.topology().triangles(), &edges)
-}
-
 /// Every fixed step, after the cloth stepped: how deep the cape is inside the body, how far
 /// the skirt is past its max distances and how deep in the body.
 fn measure_step(
@@ -378,7 +369,9 @@ fn measure_step(
         let s = sim.simulation().state();
         if time.elapsed_secs() > 1.0 {
             measured.penetration = measured.penetration.max(deepest(s, &colliders.colliders));
-            measured.cape_crossings = measured.cape_crossings.max(crossings(sim));
+            measured.cape_crossings = measured
+                .cape_crossings
+                .max(sim.simulation().self_crossings());
             measured.cape_strain = measured.cape_strain.max(sim.max_strain());
         }
         measured.steps += 1;
@@ -397,7 +390,9 @@ fn measure_step(
             measured.skirt_penetration = measured
                 .skirt_penetration
                 .max(deepest(s, &colliders.colliders));
-            measured.skirt_crossings = measured.skirt_crossings.max(crossings(sim));
+            measured.skirt_crossings = measured
+                .skirt_crossings
+                .max(sim.simulation().self_crossings());
             measured.skirt_strain = measured.skirt_strain.max(sim.max_strain());
             measured.skirt_steps += 1;
         }

@@ -14,7 +14,6 @@ mod support;
 
 use bevy::prelude::*;
 use bevy_cloth::prelude::*;
-use bevy_cloth::solver::count_self_crossings;
 use support::Args;
 
 #[derive(Resource, Default)]
@@ -72,9 +71,7 @@ fn setup(
 
 fn measure(cloths: Query<&ClothSim>, mut c: ResMut<Crossings>) {
     for sim in &cloths {
-        let s = sim.simulation();
-        let edges: Vec<[u32; 2]> = s.topology().edges().iter().map(|e| e.v).collect();
-        c.now = count_self_crossings(&s.state().positions, s.topology().triangles(), &edges);
+        c.now = sim.simulation().self_crossings();
         c.max = c.max.max(c.now);
     }
 }

@@ -1576,10 +1576,11 @@ struct Runner {
     speed: f32,
 }
 
-/// A limb of a [`Runner`]: swings about its hip (or shoulder) at a run's stride.
+/// A limb of a [`Runner`]: swings about its hip (a leg) or shoulder (an arm) at a run's
+/// stride.
 #[derive(Component)]
-struct Leg {
-    hip: Vec3,
+struct Limb {
+    joint: Vec3,
     phase: f32,
     amplitude: f32,
     length: f32,
@@ -1587,8 +1588,8 @@ struct Leg {
 
 fn run_loop(
     time: Res<Time>,
-    mut runners: Query<(&Runner, &mut Transform), Without<Leg>>,
-    mut legs: Query<(&Leg, &mut Transform), Without<Runner>>,
+    mut runners: Query<(&Runner, &mut Transform), Without<Limb>>,
+    mut limbs: Query<(&Limb, &mut Transform), Without<Runner>>,
 ) {
     let t = time.elapsed_secs();
     // A stride of 0.6 s; the body bobs 5 cm twice a stride and leans forward 0.25 rad.
@@ -1599,10 +1600,10 @@ fn run_loop(
             .looking_to(Vec3::new(s, 0.0, -c), Vec3::Y)
             * Transform::from_rotation(Quat::from_rotation_x(0.25));
     }
-    for (leg, mut at) in &mut legs {
-        let swing = leg.amplitude * (stride + leg.phase).sin();
+    for (limb, mut at) in &mut limbs {
+        let swing = limb.amplitude * (stride + limb.phase).sin();
         let turn = Quat::from_rotation_x(swing);
-        *at = Transform::from_translation(leg.hip + turn * Vec3::new(0.0, -leg.length, 0.0))
+        *at = Transform::from_translation(limb.joint + turn * Vec3::new(0.0, -limb.length, 0.0))
             .with_rotation(turn);
     }
 }
@@ -1620,20 +1621,13 @@ fn record_tangle(time: Res<Time>, cloths: Query<&ClothSim>, mut out: ResMut<Tang
         return;
     }
     for c in &cloths {
-        let s = c.simulation();
-        let edges: Vec<[u32; 2]> = s.topology().edges().iter().map(|e| e.v).collect();
-        let crossings = bevy_cloth::solver::count_self_crossings(
-            &s.state().positions,
-            s.topology().triangles(),
-            &edges,
-        );
-        out.crossings = out.crossings.max(crossings);
+        out.crossings = out.crossings.max(c.simulation().self_crossings());
         out.strain = out.strain.max(c.max_strain());
     }
 }
 
 /// The `cape` example's cape (16 × 20 vertices, 0.7 × 1 m, pinned to the shoulders) on a
-/// character running a 3 m loop at 4.5 m/s, its legs swinging up through the cape, with
+/// character running a 3 m loop at `speed` m/s, its legs swinging up through the cape, with
 /// self-collision at `thickness` (`None`: the default): the most pairs crossing and the
 /// largest strain after the first second, over `seconds`.
 fn running_cape(thickness: Option<f32>, speed: f32, seconds: f32) -> Tangle {
@@ -1669,12 +1663,12 @@ fn running_cape(thickness: Option<f32>, speed: f32, seconds: f32) -> Tangle {
         (Vec3::new(0.26, 1.45, 0.0), pi, 1.0, 0.3, 0.05, 0.5),
         (Vec3::new(-0.26, 1.45, 0.0), 0.0, 1.0, 0.3, 0.05, 0.5),
     ];
-    for (hip, phase, amplitude, length, radius, long) in limbs {
-        let leg = app
+    for (joint, phase, amplitude, length, radius, long) in limbs {
+        let limb = app
             .world_mut()
             .spawn((
-                Leg {
-                    hip,
+                Limb {
+                    joint,
                     phase,
                     amplitude,
                     length,
@@ -1683,7 +1677,7 @@ fn running_cape(thickness: Option<f32>, speed: f32, seconds: f32) -> Tangle {
                 ClothCollider::capsule(radius, long).with_thickness(0.015),
             ))
             .id();
-        app.world_mut().entity_mut(runner).add_child(leg);
+        app.world_mut().entity_mut(runner).add_child(limb);
     }
     let grid = Grid::new(16, 20, 0.7, 1.0);
     let mesh = add_mesh(&mut app, grid_mesh(&grid));

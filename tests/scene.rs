@@ -6,8 +6,7 @@ use std::sync::Arc;
 use bevy_cloth::solver::{
     Aerodynamics, ClothState, Collider, Environment, Features, Grid, HangingCloth,
     MassDistribution, Pin, Pose, SdfGrid, SelfCollision, Serial, Shape, Simulation, Solver,
-    SolverParams, TetherParams, TopologyOptions, WindField, WindParams, count_self_crossings,
-    position_distance,
+    SolverParams, TetherParams, TopologyOptions, WindField, WindParams, position_distance,
 };
 use glam::{Quat, Vec3};
 
@@ -320,12 +319,7 @@ fn self_collision_stops_a_strip_passing_through_itself() {
         let mut worst = 0;
         for _ in 0..150 {
             sim.step_in(1.0 / 60.0, &env, &Serial);
-            let edges: Vec<[u32; 2]> = sim.topology().edges().iter().map(|e| e.v).collect();
-            worst = worst.max(count_self_crossings(
-                &sim.state().positions,
-                sim.topology().triangles(),
-                &edges,
-            ));
+            worst = worst.max(sim.self_crossings());
         }
         // It did pile up: the strip's top came down to the floor.
         let top = (0..8)

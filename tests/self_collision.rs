@@ -5,7 +5,7 @@ use bevy::math::{Quat, Vec3, Vec4Swizzles};
 use bevy_cloth::solver::{
     Collider, EVEN_EDGE_SPREAD, Environment, Features, Grid, HangingCloth, MassDistribution,
     Parallel, Pin, Pose, SelfCollision, Serial, Shape, Simulation, SolverParams, Topology,
-    TopologyOptions, Workers, count_self_crossings,
+    TopologyOptions, Workers,
 };
 
 /// A free cloth (no pins) on `grid` with self-collision one edge thick.
@@ -25,11 +25,6 @@ fn free_cloth(grid: Grid, friction: f32) -> Simulation {
     scene.build().expect("a valid cloth")
 }
 
-fn crossings(sim: &Simulation) -> usize {
-    let edges: Vec<[u32; 2]> = sim.topology().edges().iter().map(|e| e.v).collect();
-    count_self_crossings(&sim.state().positions, sim.topology().triangles(), &edges)
-}
-
 /// Steps `sim` among `colliders` for `steps` steps; returns the crossings at the end and the
 /// most seen after any step.
 fn run(
@@ -46,13 +41,13 @@ fn run(
             time: k as f64 / 60.0,
         };
         sim.step_in(1.0 / 60.0, &env, par);
-        most = most.max(crossings(sim));
+        most = most.max(sim.self_crossings());
     }
     assert!(
         sim.state().positions.iter().all(|p| p.is_finite()),
         "positions stay finite"
     );
-    (crossings(sim), most)
+    (sim.self_crossings(), most)
 }
 
 fn floor() -> Collider {
@@ -130,7 +125,7 @@ fn folded_over_a_bar() -> (Simulation, Collider) {
 /// Asserts that `sim` starts and, stepped among `colliders` for `steps` steps on one thread,
 /// ends without a crossing pair (`label` names the scene in the output).
 fn ends_apart(label: &str, sim: &mut Simulation, colliders: &[Collider], steps: usize) {
-    assert_eq!(crossings(sim), 0, "{label}: starts clean");
+    assert_eq!(sim.self_crossings(), 0, "{label}: starts clean");
     let (end, most) = run(sim, colliders, steps, &Workers::new(1));
     println!("{label}: {end} crossings at the end, at most {most}");
     assert_eq!(
@@ -320,7 +315,7 @@ fn a_skirt_hung_by_its_waist_keeps_its_shape_at_the_default_thickness() {
     for _ in 0..300 {
         sim.step(1.0 / 60.0, &Serial);
         stretched = stretched.max(sim.strain().max);
-        most = most.max(crossings(&sim));
+        most = most.max(sim.self_crossings());
     }
     println!(
         "skirt, {thickness} m thick: stretched {:.1} % at most, {most} crossing pairs at most",

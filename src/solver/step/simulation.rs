@@ -795,6 +795,19 @@ impl Simulation {
     pub fn strain(&self) -> StrainStats {
         edge_strain(&self.state.positions, self.topology.edges())
     }
+
+    /// How many (edge, triangle) pairs of the cloth cross each other now
+    /// ([`count_self_crossings`](crate::solver::count_self_crossings)): 0 for a cloth that has
+    /// not passed through itself.
+    #[must_use]
+    pub fn self_crossings(&self) -> usize {
+        let edges: Vec<[u32; 2]> = self.topology.edges().iter().map(|e| e.v).collect();
+        crate::solver::count_self_crossings(
+            &self.state.positions,
+            self.topology.triangles(),
+            &edges,
+        )
+    }
 }
 
 /// Edges of `before` that are not in `after` (both sorted by vertex pair, as topologies keep
