@@ -10,7 +10,7 @@ use super::state::{ClothState, StateError};
 use super::substeps::{StepInput, StepScratch, step};
 use super::tear::overstretched_edges;
 use crate::solver::air::{AirGrid, WindField};
-use crate::solver::collision::{Collider, ContactImpulse};
+use crate::solver::collision::{Collider, ContactImpulse, count_self_crossings};
 use crate::solver::constraints::{
     ConstraintBatches, ImplicitBending, MotionConstraints, Solver, Tethers, default_part_count,
 };
@@ -797,16 +797,11 @@ impl Simulation {
     }
 
     /// How many (edge, triangle) pairs of the cloth cross each other now
-    /// ([`count_self_crossings`](crate::solver::count_self_crossings)): 0 for a cloth that has
-    /// not passed through itself.
+    /// ([`count_self_crossings`]): 0 for a cloth that has not passed through itself.
     #[must_use]
     pub fn self_crossings(&self) -> usize {
         let edges: Vec<[u32; 2]> = self.topology.edges().iter().map(|e| e.v).collect();
-        crate::solver::count_self_crossings(
-            &self.state.positions,
-            self.topology.triangles(),
-            &edges,
-        )
+        count_self_crossings(&self.state.positions, self.topology.triangles(), &edges)
     }
 }
 
