@@ -378,6 +378,10 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
     atomicStore(&scratch[P.tcount_at + i], tcount);
 }
 
+// `self_collision::DEPENETRATION`: of an overlap a contact began the substep with, the
+// thicknesses it undoes in one substep (all of what the pair closed within the substep besides).
+const SC_DEPENETRATION: f32 = 0.35;
+
 // `self_collision::pair_correction`: vertex a's share; w = 0 when the pair does not touch.
 fn sc_pair(a: vec4<f32>, prev_a: vec3<f32>, b: vec4<f32>, prev_b: vec3<f32>, thickness: f32, friction: f32) -> vec4<f32> {
     let limit = thickness;
@@ -393,7 +397,8 @@ fn sc_pair(a: vec4<f32>, prev_a: vec3<f32>, b: vec4<f32>, prev_b: vec3<f32>, thi
         return vec4<f32>(0.0);
     }
     let nrm = d / len;
-    let push = limit - len;
+    let approach = dot(nrm, prev_a - prev_b) - len;
+    let push = min(limit - len, max(approach, 0.0) + SC_DEPENETRATION * limit);
     var da = nrm * (push * wa / w);
     let db = -nrm * (push * wb / w);
     let slide = (a.xyz + da - prev_a) - (b.xyz + db - prev_b);
@@ -431,10 +436,11 @@ fn sc_triangle(a: vec4<f32>, prev_a: vec3<f32>, x0: vec4<f32>, x1: vec4<f32>, x2
     let bary = r.bary;
     let wt = bary.x * x0.w + bary.y * x1.w + bary.z * x2.w;
     let share = wa / (wa + wt);
-    let push = thickness - ds;
-    var da = r.n * (side * push * share);
     let q = x0.xyz * bary.x + x1.xyz * bary.y + x2.xyz * bary.z;
     let q_prev = p0 * bary.x + p1 * bary.y + p2 * bary.z;
+    let approach = side * dot(r.n, (prev_a - q_prev) - (a.xyz - q));
+    let push = min(thickness - ds, max(approach, 0.0) + SC_DEPENETRATION * thickness);
+    var da = r.n * (side * push * share);
     let slide = (a.xyz + da - prev_a) - (q - q_prev);
     let tangential = slide - r.n * dot(r.n, slide);
     let t_len = length(tangential);
