@@ -1835,51 +1835,23 @@ mod tests {
         };
         let step = DEPENETRATION * params.thickness;
         let mut s = candidates(&start, &[Vec4::ZERO; 2], &rest, &[], params);
-        let apart = |p: &[Vec4]| p[0].xyz().distance(p[1].xyz());
+        // One pass from `prev`; how far apart the two are after it.
+        let mut pass = |pos: &mut Vec<Vec4>, prev: &[Vec4]| {
+            self_collide(pos, prev, &[], Scales::default(), params, &mut s, &Serial);
+            pos[0].xyz().distance(pos[1].xyz())
+        };
         let mut pos = start.clone();
-        self_collide(
-            &mut pos,
-            &start,
-            &[],
-            Scales::default(),
-            params,
-            &mut s,
-            &Serial,
-        );
-        assert!(
-            (apart(&pos) - (0.01 + step)).abs() < 1e-6,
-            "{}",
-            apart(&pos)
-        );
+        let apart = pass(&mut pos, &start);
+        assert!((apart - (0.01 + step)).abs() < 1e-6, "{apart}");
         // Closing 0.02 within the next substep: that is undone, and another share.
         let prev = pos.clone();
         pos[1].y -= 0.02;
-        self_collide(
-            &mut pos,
-            &prev,
-            &[],
-            Scales::default(),
-            params,
-            &mut s,
-            &Serial,
-        );
-        assert!(
-            (apart(&pos) - (0.01 + 2.0 * step)).abs() < 1e-6,
-            "{}",
-            apart(&pos)
-        );
+        let apart = pass(&mut pos, &prev);
+        assert!((apart - (0.01 + 2.0 * step)).abs() < 1e-6, "{apart}");
         // What is left (0.02) is less than a share: apart to the thickness.
         let prev = pos.clone();
-        self_collide(
-            &mut pos,
-            &prev,
-            &[],
-            Scales::default(),
-            params,
-            &mut s,
-            &Serial,
-        );
-        assert!((apart(&pos) - 0.1).abs() < 1e-6, "{}", apart(&pos));
+        let apart = pass(&mut pos, &prev);
+        assert!((apart - 0.1).abs() < 1e-6, "{apart}");
     }
 
     #[test]
