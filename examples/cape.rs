@@ -87,7 +87,7 @@ impl Options {
 }
 
 /// What the run measured, every fixed step.
-#[derive(Resource, Default)]
+#[derive(Resource, Default, Clone)]
 struct Measured {
     pin_error: f32,
     penetration: f32,
@@ -427,39 +427,24 @@ fn measure_frame(
 
 fn report(world: &mut World) -> support::Json {
     let gait = world.resource::<Options>().gait().0;
-    let m = world.resource::<Measured>();
-    let (pin_error, penetration, steps, colliders, touching) = (
-        m.pin_error,
-        m.penetration,
-        m.steps,
-        m.colliders,
-        m.touching_steps,
-    );
-    let (cape_crossings, cape_strain, skirt_crossings, skirt_strain) = (
-        m.cape_crossings,
-        m.cape_strain,
-        m.skirt_crossings,
-        m.skirt_strain,
-    );
-    let (skirt_over, skirt_penetration, skirt_steps) =
-        (m.skirt_over, m.skirt_penetration, m.skirt_steps);
+    let m = world.resource::<Measured>().clone();
     // A GPU cloth in a window reads nothing back: its measured figures become `null`.
     let unread = support::gpu_state_unread(world);
     support::cloth_report(world)
         .str("example", "cape")
         .str("gait", gait)
-        .num("measured_steps", steps)
-        .num("colliders", colliders as f64)
-        .num("touching_steps", touching)
-        .measured("pin_error", pin_error, unread)
-        .measured("penetration", penetration, unread)
-        .measured("cape_crossings", cape_crossings as f64, unread)
-        .measured("cape_strain", cape_strain, unread)
-        .measured("skirt_crossings", skirt_crossings as f64, unread)
-        .measured("skirt_strain", skirt_strain, unread)
-        .num("skirt_steps", skirt_steps)
-        .measured("skirt_over_max_distance", skirt_over, unread)
-        .measured("skirt_penetration", skirt_penetration, unread)
+        .num("measured_steps", m.steps)
+        .num("colliders", m.colliders as f64)
+        .num("touching_steps", m.touching_steps)
+        .measured("pin_error", m.pin_error, unread)
+        .measured("penetration", m.penetration, unread)
+        .measured("cape_crossings", m.cape_crossings as f64, unread)
+        .measured("cape_strain", m.cape_strain, unread)
+        .measured("skirt_crossings", m.skirt_crossings as f64, unread)
+        .measured("skirt_strain", m.skirt_strain, unread)
+        .num("skirt_steps", m.skirt_steps)
+        .measured("skirt_over_max_distance", m.skirt_over, unread)
+        .measured("skirt_penetration", m.skirt_penetration, unread)
 }
 
 fn main() {
