@@ -382,6 +382,12 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
 // thicknesses it undoes in one substep (all of what the pair closed within the substep besides).
 const SC_DEPENETRATION: f32 = 0.35;
 
+// `self_collision::limited_push`: the overlap, but of it at most what the pair closed within
+// the substep plus SC_DEPENETRATION thicknesses.
+fn sc_limited_push(overlap: f32, approach: f32, thickness: f32) -> f32 {
+    return min(overlap, max(approach, 0.0) + SC_DEPENETRATION * thickness);
+}
+
 // `self_collision::pair_correction`: vertex a's share; w = 0 when the pair does not touch.
 fn sc_pair(a: vec4<f32>, prev_a: vec3<f32>, b: vec4<f32>, prev_b: vec3<f32>, thickness: f32, friction: f32) -> vec4<f32> {
     let limit = thickness;
@@ -398,7 +404,7 @@ fn sc_pair(a: vec4<f32>, prev_a: vec3<f32>, b: vec4<f32>, prev_b: vec3<f32>, thi
     }
     let nrm = d / len;
     let approach = dot(nrm, prev_a - prev_b) - len;
-    let push = min(limit - len, max(approach, 0.0) + SC_DEPENETRATION * limit);
+    let push = sc_limited_push(limit - len, approach, limit);
     var da = nrm * (push * wa / w);
     let db = -nrm * (push * wb / w);
     let slide = (a.xyz + da - prev_a) - (b.xyz + db - prev_b);
@@ -439,7 +445,7 @@ fn sc_triangle(a: vec4<f32>, prev_a: vec3<f32>, x0: vec4<f32>, x1: vec4<f32>, x2
     let q = x0.xyz * bary.x + x1.xyz * bary.y + x2.xyz * bary.z;
     let q_prev = p0 * bary.x + p1 * bary.y + p2 * bary.z;
     let approach = side * dot(r.n, (prev_a - q_prev) - (a.xyz - q));
-    let push = min(thickness - ds, max(approach, 0.0) + SC_DEPENETRATION * thickness);
+    let push = sc_limited_push(thickness - ds, approach, thickness);
     var da = r.n * (side * push * share);
     let slide = (a.xyz + da - prev_a) - (q - q_prev);
     let tangential = slide - r.n * dot(r.n, slide);

@@ -1413,6 +1413,14 @@ fn motion_margin(vel: &[Vec4], params: SelfCollision, dt: f32, par: &impl Parall
     Some(2.0 * fastest * dt)
 }
 
+/// How far a contact pushes its pair apart: the `overlap` with the contact's thickness
+/// (`thickness - distance`), but of it at most what the pair closed within the substep
+/// (`approach`, along the contact's normal) plus [`DEPENETRATION`] thicknesses.
+#[inline]
+fn limited_push(overlap: f32, approach: f32, thickness: f32) -> f32 {
+    overlap.min(approach.max(0.0) + DEPENETRATION * thickness)
+}
+
 /// Coulomb friction on a contact pushed `push` along `n`: the tangential part of `slide` and
 /// the share of it to take back (at most all of it); `None` when nothing slides.
 #[inline]
@@ -1446,9 +1454,8 @@ fn pair_correction(
         return None;
     }
     let n = d / len;
-    // All of what the pair closed within the substep, and a share of the overlap before it.
     let approach = n.dot(prev_a.xyz() - prev_b.xyz()) - len;
-    let push = (limit - len).min(approach.max(0.0) + DEPENETRATION * limit);
+    let push = limited_push(limit - len, approach, limit);
     let mut da = n * (push * wa / w);
     let db = -n * (push * wb / w);
     // Friction on the relative sliding of the pair during the substep.
@@ -1509,10 +1516,10 @@ fn triangle_correction(
     let share = wa / (wa + wt);
     let q = x[0].xyz() * bary.x + x[1].xyz() * bary.y + x[2].xyz() * bary.z;
     let q_prev = prev_x[0].xyz() * bary.x + prev_x[1].xyz() * bary.y + prev_x[2].xyz() * bary.z;
-    // All of what the vertex closed on the triangle's point under it within the substep (or
-    // went through by), and a share of the overlap before it.
+    // What the vertex closed on the triangle's point under it within the substep (or went
+    // through by).
     let approach = side * n.dot((prev_a.xyz() - q_prev) - (a.xyz() - q));
-    let push = (thickness - ds).min(approach.max(0.0) + DEPENETRATION * thickness);
+    let push = limited_push(thickness - ds, approach, thickness);
     let mut da = n * (side * push * share);
     let slide = (a.xyz() + da - prev_a.xyz()) - (q - q_prev);
     if let Some((tangential, keep)) = sliding(slide, n, push, params.friction) {
