@@ -47,8 +47,8 @@ fn setup(
         },
     ));
     if !off.0 {
-        // Without friction between its layers (the default) the pile settles within a few
-        // seconds; with it (0.2 here before) parts of it kept writhing for about ten.
+        // Without friction between its layers (the default) this strip settles within a
+        // few seconds; with it (0.2 here before) parts of it kept moving for about ten.
         strip.insert(ClothSelfCollision::default());
     }
     if let Some(mut m) = materials {

@@ -173,10 +173,9 @@ pub struct ClothSelfCollision {
     /// is used (more is brought down to that, with a warning): layers thicker than an edge
     /// pass through each other where the cloth crumples. For a thicker layer, a coarser mesh.
     pub thickness: Option<f32>,
-    /// Friction between touching parts of the cloth (Coulomb, 0 by default). With friction a
-    /// cloth piled on itself does not quite come to rest: a crumpled 30 × 30 cloth at 0.3 still
-    /// had 2–40 of its 900 vertices moving faster than 0.2 m/s after 15 s, while at 0 none
-    /// was after 5–7 s. Leave it at 0 for cloth that should settle (and sleep).
+    /// Friction between touching parts of the cloth (Coulomb, 0 by default). A cloth piled on
+    /// itself keeps creeping with or without it (README *Limits*); the `self_collision`
+    /// example's strip settles within three seconds at 0 and moved for about ten at 0.2.
     pub friction: f32,
 }
 
