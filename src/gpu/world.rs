@@ -129,8 +129,9 @@ pub(crate) struct WorldUniform {
     settle_edges_at: u32,
     settle_edges: u32,
     sc_triangle_scale_at: u32,
+    react_at: u32,
     // The uniform's size a multiple of 16 bytes.
-    pad: [u32; 3],
+    pad: [u32; 2],
 }
 
 #[repr(C)]
@@ -395,6 +396,7 @@ struct ScratchRegions {
     nlist: u32,
     tcount: u32,
     tlist: u32,
+    react: u32,
     torn: u32,
     dead: u32,
     settle_speed: u32,
@@ -619,7 +621,8 @@ impl GpuWorld {
             s.nlist = s.ncount + n;
             s.tcount = s.nlist + n * MAX_SELF_NEIGHBOURS as u32;
             s.tlist = s.tcount + n;
-            words = s.tlist + n * MAX_SELF_TRIANGLES as u32;
+            s.react = s.tlist + n * MAX_SELF_TRIANGLES as u32;
+            words = s.react + 4 * n;
         }
         if layout.any_tearing {
             s.torn = words;
@@ -1034,6 +1037,7 @@ impl GpuWorld {
             cloth_step_at,
             tcount_at: s.tcount,
             tlist_at: s.tlist,
+            react_at: s.react,
             first_tri_at: l.first_tri_at,
             torn_at: s.torn,
             edge_tris_at: l.edge_tris_at,
@@ -1043,7 +1047,7 @@ impl GpuWorld {
             settle_edges_at: l.settle_edges_at,
             settle_edges: l.settle_edges,
             sc_triangle_scale_at: l.sc_triangle_scale_at,
-            pad: [0; 3],
+            pad: [0; 2],
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         // The per-frame words of every cloth's record: gravity·h and the damping factor (the

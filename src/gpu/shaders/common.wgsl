@@ -93,7 +93,9 @@ struct World {
     settle_edges_at: u32,
     settle_edges: u32,
     sc_triangle_scale_at: u32,
-    pad0: u32,
+    // Per vertex, four atomics: the reactions of the self-collision contacts it is a corner
+    // of (x, y, z in SC_REACTION_UNITS, and their number).
+    react_at: u32,
     pad1: u32,
     pad2: u32,
 }

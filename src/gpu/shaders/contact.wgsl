@@ -507,20 +507,73 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
         let k0 = topo[tb];
         let k1 = topo[tb + 1u];
         let k2 = topo[tb + 2u];
+        let x0 = sc_read(k0, tethers);
+        let x1 = sc_read(k1, tethers);
+        let x2 = sc_read(k2, tethers);
         let r = sc_triangle(
-            a, prev_a,
-            sc_read(k0, tethers), sc_read(k1, tethers), sc_read(k2, tethers),
+            a, prev_a, x0, x1, x2,
             state[P.prev_at + k0].xyz, state[P.prev_at + k1].xyz, state[P.prev_at + k2].xyz,
             slot & 3u, triangle_thickness, cl.sc_friction,
         );
         sum += r.xyz;
         touching += r.w;
+        // A triangle the vertex was over when the step began takes the reaction at its
+        // corners (`self_collision::self_collide`).
+        if r.w > 0.0 && (slot & BESIDE) == 0u {
+            let bary = sc_project(a.xyz, x0.xyz, x1.xyz, x2.xyz).bary;
+            sc_react(k0, x0.w, bary.x, r.xyz, a.w);
+            sc_react(k1, x1.w, bary.y, r.xyz, a.w);
+            sc_react(k2, x2.w, bary.z, r.xyz, a.w);
+        }
     }
-    var corr = vec3<f32>(0.0);
-    if touching > 0.0 {
-        corr = sum / touching;
+    // The sum and the count: `finish_substep` adds the reactions and takes the mean.
+    state[P.corr_at + i] = vec4<f32>(sum, touching);
+}
+
+// `self_collision::REACTION_UNITS`: fixed-point units a metre of the reactions' sums, whose
+// order then does not matter.
+const SC_REACTION_UNITS: f32 = 67108864.0;
+
+// `self_collision::to_fixed`.
+fn sc_fixed(x: f32) -> u32 {
+    return bitcast<u32>(i32(round(clamp(x * SC_REACTION_UNITS, -2.0e9, 2.0e9))));
+}
+
+// Corner `v` (inverse mass `wc`, weight `b` at the point under the vertex) of a triangle that
+// moved a vertex of inverse mass `wa` by `da` takes the reaction (`self_collision::reaction`).
+fn sc_react(v: u32, wc: f32, b: f32, da: vec3<f32>, wa: f32) {
+    let r = -da * (wc * b / wa);
+    if !(wc > 0.0 && b > 0.0 && finite3(r)) {
+        return;
     }
-    state[P.corr_at + i] = vec4<f32>(corr, 0.0);
+    let at = P.react_at + 4u * v;
+    atomicAdd(&scratch[at], sc_fixed(r.x));
+    atomicAdd(&scratch[at + 1u], sc_fixed(r.y));
+    atomicAdd(&scratch[at + 2u], sc_fixed(r.z));
+    atomicAdd(&scratch[at + 3u], 1u);
+}
+
+// Vertex `i`'s self-collision correction: the mean of its own contacts' corrections (summed
+// in `corr_at` by `sc_collide`) and the reactions it took as a corner, which it leaves at zero
+// (`self_collision::Reactions::take`).
+fn sc_correction(i: u32) -> vec3<f32> {
+    let own = state[P.corr_at + i];
+    let at = P.react_at + 4u * i;
+    var sum = own.xyz;
+    var count = own.w;
+    let n = atomicLoad(&scratch[at + 3u]);
+    if n != 0u {
+        let x = bitcast<i32>(atomicExchange(&scratch[at], 0u));
+        let y = bitcast<i32>(atomicExchange(&scratch[at + 1u], 0u));
+        let z = bitcast<i32>(atomicExchange(&scratch[at + 2u], 0u));
+        atomicStore(&scratch[at + 3u], 0u);
+        sum = vec3<f32>(f32(x), f32(y), f32(z)) / SC_REACTION_UNITS + own.xyz;
+        count += f32(n);
+    }
+    if count > 0.0 {
+        return sum / count;
+    }
+    return vec3<f32>(0.0);
 }
 
 // One vertex against one collider (`collide::collide_vertex`'s loop body): the corrected
@@ -632,7 +685,7 @@ fn finish_substep(
                 x = tethered(i, x);
             }
             if (cl.flags & FLAG_SC) != 0u {
-                x = vec4<f32>(x.xyz + state[P.corr_at + i].xyz, x.w);
+                x = vec4<f32>(x.xyz + sc_correction(i), x.w);
             }
             if (u32(frame[cloth_step(c)].w + 0.5) & 8u) != 0u {
                 x = motion_held(i, x);

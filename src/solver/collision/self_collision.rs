@@ -59,15 +59,23 @@
 //! through within the step. Both with friction on the sliding, and both undoing all of what
 //! the pair closed within the substep but at most [`DEPENETRATION`] thicknesses of an overlap
 //! the substep began with (a vertex found deep in or through a layer comes out over a few
-//! substeps instead of jumping out at once). The other party moves by its
-//! own lists (the layers push each other apart symmetrically). A triangle sits in many
+//! substeps instead of jumping out at once). A vertex pair's other vertex moves by its own
+//! list (the pair pushes both apart). A triangle the vertex was over when the step began
+//! takes the reaction at its corners (`−Δa · w_c b_c / wₐ`, `b_c` the corner's weight at the
+//! point under the vertex), so that the contact moves no momentum: without it a pile of cloth
+//! pushed itself along the floor and never came to rest (docs/experiments.md). The reactions
+//! are summed per corner in fixed point ([`REACTION_UNITS`] a metre, atomics on the threads),
+//! so their sum does not depend on the order they arrive in, and count in the corner's mean
+//! like its own contacts. A triangle the vertex came over within the step (beside it when the
+//! lists were made) takes none: with those too, crumpled cloths of uneven edges ended tangled
+//! more often. A triangle sits in many
 //! vertices' lists, so a pass makes the plane of each listed triangle once (the query marks
 //! them in a bitmap as it lists them) and a vertex beside a triangle costs one projection;
 //! the same operations as projecting per vertex, so the same bits as the GPU's, which
 //! projects per vertex. Cost is linear in the vertex count for a given density.
 
 use std::ops::Range;
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicI32, AtomicU32, Ordering};
 
 use glam::{IVec3, Vec3, Vec4, Vec4Swizzles};
 
@@ -101,13 +109,96 @@ pub struct SelfCollisionScratch {
     /// The vertices with something in their lists (a fifth of a crumpled cloth's): the only
     /// ones a pass looks at.
     active: Vec<u32>,
-    /// Per active vertex, its correction in the current pass.
+    /// Per active vertex, the sum of its own contacts' corrections in the current pass and
+    /// their number.
     corrections: Vec<Vec3>,
+    touching: Vec<u32>,
+    /// Per vertex, the reactions of the vertex–triangle contacts it is a corner of.
+    reactions: Reactions,
     /// The triangles in some vertex's list: one bit a triangle, and per word of bits the
     /// number set before it (a listed triangle's place among them, see [`Listed::rank`]).
     listed: Listed,
     /// The listed triangles' [`Plane`]s at the current pass's start, in triangle order.
     pass_planes: Vec<Plane>,
+}
+
+/// Per vertex, the reactions a pass's vertex–triangle contacts give the triangles' corners,
+/// summed in fixed point ([`REACTION_UNITS`] a metre) so that the sum does not depend on the
+/// order the contacts arrive in: `x`, `y`, `z` and the number of reactions, four atomics a
+/// vertex, each left at zero after the pass that reads it.
+#[derive(Default)]
+struct Reactions(Vec<AtomicI32>);
+
+impl Reactions {
+    /// Room for `n` vertices, all zero.
+    fn reset(&mut self, n: usize) {
+        if self.0.len() != 4 * n {
+            self.0 = (0..4 * n).map(|_| AtomicI32::new(0)).collect();
+        }
+    }
+
+    /// Adds `r` to vertex `v`'s reactions (several threads at once).
+    #[inline]
+    fn add(&self, v: usize, r: Vec3) {
+        let at = &self.0[4 * v..4 * v + 4];
+        for (a, x) in at.iter().zip(r.to_array()) {
+            a.fetch_add(to_fixed(x), Ordering::Relaxed);
+        }
+        at[3].fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Vertex `v`'s reactions summed and their number; leaves them at zero.
+    #[inline]
+    fn take(&self, v: usize) -> (Vec3, u32) {
+        let at = &self.0[4 * v..4 * v + 4];
+        // Most vertices have none: a load, not four swaps.
+        if at[3].load(Ordering::Relaxed) == 0 {
+            return (Vec3::ZERO, 0);
+        }
+        let [x, y, z, n] = [0, 1, 2, 3].map(|k| at[k].swap(0, Ordering::Relaxed));
+        (
+            Vec3::new(x as f32, y as f32, z as f32) / REACTION_UNITS,
+            n.cast_unsigned(),
+        )
+    }
+}
+
+impl Clone for Reactions {
+    fn clone(&self) -> Self {
+        Self(
+            self.0
+                .iter()
+                .map(|a| AtomicI32::new(a.load(Ordering::Relaxed)))
+                .collect(),
+        )
+    }
+}
+
+impl PartialEq for Reactions {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.len() == other.0.len()
+            && self
+                .0
+                .iter()
+                .zip(&other.0)
+                .all(|(a, b)| a.load(Ordering::Relaxed) == b.load(Ordering::Relaxed))
+    }
+}
+
+impl core::fmt::Debug for Reactions {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "Reactions({} vertices)", self.0.len() / 4)
+    }
+}
+
+/// Fixed-point units a metre of the reactions' sums ([`Reactions`]; the GPU's
+/// `SC_REACTION_UNITS`): 2²⁶, a range of ±32 m.
+const REACTION_UNITS: f32 = 67_108_864.0;
+
+/// `x` metres in [`REACTION_UNITS`], rounded to even as WGSL's `round` does, within `i32`.
+#[inline]
+fn to_fixed(x: f32) -> i32 {
+    (x * REACTION_UNITS).clamp(-2.0e9, 2.0e9).round_ties_even() as i32
 }
 
 /// A set of triangles as bits, with the rank of each member.
@@ -1472,7 +1563,8 @@ fn pair_correction(
 /// (by less than 2.5 thicknesses), pushed out to `thickness` on its side along the normal (at
 /// most what it closed on the triangle within the substep plus [`DEPENETRATION`] thicknesses), its
 /// share by the inverse masses (the triangle's at the point under `a`), with friction on the
-/// sliding. `None` when it does not touch. (The GPU's `sc_triangle` projects the same way.)
+/// sliding; with the barycentric weights of the point under `a`. `None` when it does not
+/// touch. (The GPU's `sc_triangle` projects the same way.)
 #[inline]
 #[expect(clippy::too_many_arguments)]
 fn triangle_correction(
@@ -1484,7 +1576,7 @@ fn triangle_correction(
     prev: &[Vec4],
     code: u32,
     params: SelfCollision,
-) -> Option<Vec3> {
+) -> Option<(Vec3, Vec3)> {
     let wa = a.w;
     if wa.is_nan() || wa <= 0.0 {
         return None;
@@ -1525,13 +1617,23 @@ fn triangle_correction(
     if let Some((tangential, keep)) = sliding(slide, n, push, params.friction) {
         da -= tangential * (keep * share);
     }
-    da.is_finite().then_some(da)
+    da.is_finite().then_some((da, bary))
 }
 
-/// One parallel work item of a pass: a run of active vertices' corrections.
+/// What a vertex–triangle contact that moved its vertex (inverse mass `wa`) by `da` moves the
+/// triangle's corner of inverse mass `wc` and weight `b` at the point under the vertex by: the
+/// reaction, so that the contact moves no momentum (`Σ Δx / w = 0` over the four). The GPU's
+/// `sc_reaction`.
+#[inline]
+fn reaction(da: Vec3, wa: f32, wc: f32, b: f32) -> Vec3 {
+    -da * (wc * b / wa)
+}
+
+/// One parallel work item of a pass: a run of active vertices' corrections and their counts.
 struct PassChunk<'a> {
     active: &'a [u32],
     corrections: &'a mut [Vec3],
+    touching: &'a mut [u32],
 }
 
 /// Per vertex, the thickness it keeps from other vertices and from triangles over the
@@ -1545,9 +1647,11 @@ pub(crate) struct Scales<'a> {
 }
 
 /// One self-collision pass (Jacobi): every vertex sums its corrections from its touching
-/// neighbours and triangles against the positions before the pass, divided by their number,
-/// and all vertices move at once (`prev`: positions at the substep's start). The vertices run
-/// in parallel; the result does not depend on how they are split.
+/// neighbours and triangles against the positions before the pass; each triangle it is over
+/// (listed so at the step's start) takes the reaction of its correction at its corners
+/// ([`reaction`], summed per corner in [`Reactions`]); every vertex then moves by the mean
+/// of its corrections and reactions, all at once (`prev`: positions at the substep's start).
+/// The vertices run in parallel; the result does not depend on how they are split.
 pub(crate) fn self_collide(
     pos: &mut [Vec4],
     prev: &[Vec4],
@@ -1569,23 +1673,30 @@ pub(crate) fn self_collide(
     scratch
         .listed
         .planes(triangles, read, &mut scratch.pass_planes, par);
+    scratch.reactions.reset(n);
     let listed = &scratch.listed;
     let planes = &scratch.pass_planes;
     let active = &scratch.active;
+    let reactions = &scratch.reactions;
     scratch.corrections.clear();
     scratch.corrections.resize(active.len(), Vec3::ZERO);
+    scratch.touching.clear();
+    scratch.touching.resize(active.len(), 0);
     let (nc, nl) = (&scratch.neighbour_count, &scratch.neighbours);
     let (tc, tl) = (&scratch.triangle_count, &scratch.triangles);
     let mut chunks: Vec<PassChunk> = active
         .chunks(CHUNK)
         .zip(scratch.corrections.chunks_mut(CHUNK))
-        .map(|(active, corrections)| PassChunk {
+        .zip(scratch.touching.chunks_mut(CHUNK))
+        .map(|((active, corrections), touching)| PassChunk {
             active,
             corrections,
+            touching,
         })
         .collect();
     par.for_each_mut(&mut chunks, |c| {
-        for (&i, out) in c.active.iter().zip(c.corrections.iter_mut()) {
+        let outs = c.corrections.iter_mut().zip(c.touching.iter_mut());
+        for (&i, (out, out_touching)) in c.active.iter().zip(outs) {
             let i = i as usize;
             let (a, prev_a) = (read[i], prev[i]);
             // The vertex keeps its own thickness from the others, and from triangles at most
@@ -1618,33 +1729,46 @@ pub(crate) fn self_collide(
                     continue;
                 };
                 let code = slot & 3;
-                if let Some(da) =
+                if let Some((da, bary)) =
                     triangle_correction(a, prev_a, plane, tri, read, prev, code, triangle_params)
                 {
                     sum += da;
                     touching += 1;
+                    // A triangle the vertex was over when the step began pushes back; one it
+                    // came over within the step (beside it then) does not: with those too, the
+                    // uneven crumpled cloth ended crossed in 7 of 12 runs (docs/experiments.md).
+                    if slot & BESIDE == 0 {
+                        for (k, &v) in tri.iter().enumerate() {
+                            let (wc, b) = (read[v as usize].w, bary[k]);
+                            let r = reaction(da, a.w, wc, b);
+                            if wc > 0.0 && b > 0.0 && r.is_finite() {
+                                reactions.add(v as usize, r);
+                            }
+                        }
+                    }
                 }
             }
-            if touching > 0 {
-                *out = sum / touching as f32;
-            }
+            *out = sum;
+            *out_touching = touching;
         }
     });
     drop(chunks);
-    // All move at once, by runs of vertices in parallel (`active` rises); a few on this
-    // thread.
-    let corrections = &scratch.corrections;
-    if active.len() < 4 * CHUNK {
-        for (&i, c) in active.iter().zip(corrections) {
-            pos[i as usize] += c.extend(0.0);
-        }
-        return;
-    }
+    // All move at once, by runs of vertices in parallel (`active` rises): each by the mean of
+    // its own corrections and its reactions.
+    let (corrections, touching) = (&scratch.corrections, &scratch.touching);
     each_run(pos, par, |first, run| {
-        let lo = active.partition_point(|&i| (i as usize) < first);
-        let hi = active.partition_point(|&i| (i as usize) < first + run.len());
-        for (&i, c) in active[lo..hi].iter().zip(&corrections[lo..hi]) {
-            run[i as usize - first] += c.extend(0.0);
+        let mut k = active.partition_point(|&i| (i as usize) < first);
+        for (v, x) in run.iter_mut().enumerate() {
+            let v = first + v;
+            let (mut sum, mut count) = reactions.take(v);
+            if active.get(k).is_some_and(|&i| i as usize == v) {
+                sum += corrections[k];
+                count += touching[k];
+                k += 1;
+            }
+            if count > 0 && x.w > 0.0 {
+                *x += (sum / count as f32).extend(0.0);
+            }
         }
     });
 }
@@ -1945,7 +2069,58 @@ mod tests {
         );
         let push = 0.5 * DEPENETRATION * params.thickness;
         assert!((pos[3].z - (0.02 + push)).abs() < 1e-6, "{}", pos[3]);
-        // The triangle's corners are moved by their own lists (they have none here).
+        // The triangle takes the reaction at its corners, by their weights at the point under
+        // the vertex (0.5, 0.25, 0.25; equal masses): the contact moves no momentum.
+        for (k, b) in [0.5, 0.25, 0.25].into_iter().enumerate() {
+            let moved = pos[k] - start[k];
+            assert!(
+                (moved.z + push * b).abs() < 1e-6 && moved.x == 0.0 && moved.y == 0.0,
+                "corner {k} moved by {moved}"
+            );
+        }
+        let momentum: f32 = pos.iter().zip(&start).map(|(p, s)| (p.z - s.z) / p.w).sum();
+        assert!(momentum.abs() < 1e-6, "{momentum}");
+    }
+
+    /// A vertex that came over a triangle within the step (beside it when the lists were made)
+    /// is stopped by it, but the triangle takes no reaction: with it, crumpled cloths of
+    /// uneven edges ended tangled more often (docs/experiments.md).
+    #[test]
+    fn a_triangle_the_vertex_came_over_within_the_step_takes_no_reaction() {
+        let tri = [[0u32, 1, 2]];
+        let rest = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z * 10.0];
+        let params = SelfCollision {
+            thickness: 0.1,
+            friction: 0.0,
+        };
+        // Beside the triangle when the lists are made, moving over it.
+        let mut start = vec![
+            Vec4::new(0.0, 0.0, 0.0, 1.0),
+            Vec4::new(1.0, 0.0, 0.0, 1.0),
+            Vec4::new(0.0, 1.0, 0.0, 1.0),
+            Vec4::new(-0.05, 0.25, 0.05, 1.0),
+        ];
+        let vel = [
+            Vec4::ZERO,
+            Vec4::ZERO,
+            Vec4::ZERO,
+            Vec4::new(6.0, 0.0, 0.0, 0.0),
+        ];
+        let mut s = candidates(&start, &vel, &rest, &tri, params);
+        assert_eq!(s.triangle_count[3], 1);
+        assert_ne!(s.triangles[3 * MAX_SELF_TRIANGLES] & BESIDE, 0);
+        start[3].x = 0.25;
+        let mut pos = start.clone();
+        self_collide(
+            &mut pos,
+            &start,
+            &tri,
+            Scales::default(),
+            params,
+            &mut s,
+            &Serial,
+        );
+        assert!(pos[3].z > 0.05, "the vertex is pushed off: {}", pos[3]);
         assert_eq!(&pos[..3], &start[..3]);
     }
 
