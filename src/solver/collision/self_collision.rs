@@ -2010,6 +2010,17 @@ mod tests {
         assert_eq!(pos, prev);
     }
 
+    /// One pass of [`self_collide`] on one thread, every vertex at the cloth's thickness.
+    fn pass(
+        pos: &mut [Vec4],
+        prev: &[Vec4],
+        tris: &[[u32; 3]],
+        params: SelfCollision,
+        s: &mut SelfCollisionScratch,
+    ) {
+        self_collide(pos, prev, tris, Scales::default(), params, s, &Serial);
+    }
+
     #[test]
     fn a_vertex_is_kept_on_its_side_of_a_triangle() {
         // A triangle in the XY plane and a vertex over it, far away along the cloth.
@@ -2033,40 +2044,16 @@ mod tests {
         let mut from = start.clone();
         from[3].z = 0.2;
         let mut pos = start.clone();
-        self_collide(
-            &mut pos,
-            &from,
-            &tri,
-            Scales::default(),
-            params,
-            &mut s,
-            &Serial,
-        );
+        pass(&mut pos, &from, &tri, params, &mut s);
         assert!((pos[3].z - 0.06).abs() < 1e-6, "{}", pos[3]);
         // Went through during the substep: brought back to its side.
         let mut pos = start.clone();
         pos[3].z = -0.05;
-        self_collide(
-            &mut pos,
-            &from,
-            &tri,
-            Scales::default(),
-            params,
-            &mut s,
-            &Serial,
-        );
+        pass(&mut pos, &from, &tri, params, &mut s);
         assert!((pos[3].z - (-0.05 + 0.075)).abs() < 1e-6, "{}", pos[3]);
         // Too close since before the substep: pushed out by DEPENETRATION thicknesses.
         let mut pos = start.clone();
-        self_collide(
-            &mut pos,
-            &start,
-            &tri,
-            Scales::default(),
-            params,
-            &mut s,
-            &Serial,
-        );
+        pass(&mut pos, &start, &tri, params, &mut s);
         let push = 0.5 * DEPENETRATION * params.thickness;
         assert!((pos[3].z - (0.02 + push)).abs() < 1e-6, "{}", pos[3]);
         // The triangle takes the reaction at its corners, by their weights at the point under
@@ -2111,15 +2098,7 @@ mod tests {
         assert_ne!(s.triangles[3 * MAX_SELF_TRIANGLES] & BESIDE, 0);
         start[3].x = 0.25;
         let mut pos = start.clone();
-        self_collide(
-            &mut pos,
-            &start,
-            &tri,
-            Scales::default(),
-            params,
-            &mut s,
-            &Serial,
-        );
+        pass(&mut pos, &start, &tri, params, &mut s);
         assert!(pos[3].z > 0.05, "the vertex is pushed off: {}", pos[3]);
         assert_eq!(&pos[..3], &start[..3]);
     }
