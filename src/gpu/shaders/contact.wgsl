@@ -420,16 +420,23 @@ fn sc_pair(a: vec4<f32>, prev_a: vec3<f32>, b: vec4<f32>, prev_b: vec3<f32>, thi
     return vec4<f32>(da, 1.0);
 }
 
+// A vertex–triangle contact: the vertex's correction (w = 1 when it touches, 0 when not)
+// and the weights of the point under it.
+struct ScContact {
+    da: vec4<f32>,
+    bary: vec3<f32>,
+}
+
 // `self_collision::triangle_correction`: vertex a's correction from a triangle it keeps to
-// the side `code` of; w = 0 when it does not touch.
-fn sc_triangle(a: vec4<f32>, prev_a: vec3<f32>, x0: vec4<f32>, x1: vec4<f32>, x2: vec4<f32>, p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, code: u32, thickness: f32, friction: f32) -> vec4<f32> {
+// the side `code` of, with the weights of the point under it.
+fn sc_triangle(a: vec4<f32>, prev_a: vec3<f32>, x0: vec4<f32>, x1: vec4<f32>, x2: vec4<f32>, p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, code: u32, thickness: f32, friction: f32) -> ScContact {
     let wa = a.w;
     if !(wa > 0.0) {
-        return vec4<f32>(0.0);
+        return ScContact(vec4<f32>(0.0), vec3<f32>(0.0));
     }
     let r = sc_project(a.xyz, x0.xyz, x1.xyz, x2.xyz);
     if !r.ok || sc_min3(r.bary) < 0.0 {
-        return vec4<f32>(0.0);
+        return ScContact(vec4<f32>(0.0), vec3<f32>(0.0));
     }
     var side = 1.0;
     if code == SIDE_BACK || (code == SIDE_FREE && !(r.d >= 0.0)) {
@@ -437,7 +444,7 @@ fn sc_triangle(a: vec4<f32>, prev_a: vec3<f32>, x0: vec4<f32>, x1: vec4<f32>, x2
     }
     let ds = side * r.d;
     if ds >= thickness || ds <= -2.5 * thickness {
-        return vec4<f32>(0.0);
+        return ScContact(vec4<f32>(0.0), vec3<f32>(0.0));
     }
     let bary = r.bary;
     let wt = bary.x * x0.w + bary.y * x1.w + bary.z * x2.w;
@@ -455,9 +462,9 @@ fn sc_triangle(a: vec4<f32>, prev_a: vec3<f32>, x0: vec4<f32>, x1: vec4<f32>, x2
         da -= tangential * (keep * share);
     }
     if !finite3(da) {
-        return vec4<f32>(0.0);
+        return ScContact(vec4<f32>(0.0), vec3<f32>(0.0));
     }
-    return vec4<f32>(da, 1.0);
+    return ScContact(vec4<f32>(da, 1.0), bary);
 }
 
 // A vertex as the self-collision pass reads it: tethered first when the cloth has tethers.
@@ -510,20 +517,20 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
         let x0 = sc_read(k0, tethers);
         let x1 = sc_read(k1, tethers);
         let x2 = sc_read(k2, tethers);
-        let r = sc_triangle(
+        let contact = sc_triangle(
             a, prev_a, x0, x1, x2,
             state[P.prev_at + k0].xyz, state[P.prev_at + k1].xyz, state[P.prev_at + k2].xyz,
             slot & 3u, triangle_thickness, cl.sc_friction,
         );
+        let r = contact.da;
         sum += r.xyz;
         touching += r.w;
         // A triangle the vertex was over when the step began takes the reaction at its
         // corners (`self_collision::self_collide`).
         if r.w > 0.0 && (slot & BESIDE) == 0u {
-            let bary = sc_project(a.xyz, x0.xyz, x1.xyz, x2.xyz).bary;
-            sc_react(k0, x0.w, bary.x, r.xyz, a.w);
-            sc_react(k1, x1.w, bary.y, r.xyz, a.w);
-            sc_react(k2, x2.w, bary.z, r.xyz, a.w);
+            sc_react(k0, x0.w, contact.bary.x, r.xyz, a.w);
+            sc_react(k1, x1.w, contact.bary.y, r.xyz, a.w);
+            sc_react(k2, x2.w, contact.bary.z, r.xyz, a.w);
         }
     }
     // The sum and the count: `finish_substep` adds the reactions and takes the mean.

@@ -1623,7 +1623,7 @@ fn triangle_correction(
 /// What a vertex–triangle contact that moved its vertex (inverse mass `wa`) by `da` moves the
 /// triangle's corner of inverse mass `wc` and weight `b` at the point under the vertex by: the
 /// reaction, so that the contact moves no momentum (`Σ Δx / w = 0` over the four). The GPU's
-/// `sc_reaction`.
+/// `sc_react`.
 #[inline]
 fn reaction(da: Vec3, wa: f32, wc: f32, b: f32) -> Vec3 {
     -da * (wc * b / wa)
