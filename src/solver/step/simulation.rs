@@ -422,15 +422,11 @@ impl Simulation {
         let sleep = self.params.sleep;
         if !sleep.enabled() || self.settling > 0 {
             self.sleep.quiet = 0;
+            self.sleep.forget_still();
             return;
         }
         let energy = self.state.kinetic_energy_per_kg();
-        if energy >= sleep.energy {
-            self.sleep.quiet = 0;
-            return;
-        }
-        self.sleep.quiet += 1;
-        if self.sleep.quiet >= sleep.steps {
+        if self.sleep.count(&self.state.positions, energy, sleep, dt) {
             for (v, x) in self.state.velocities.iter_mut().zip(&self.state.positions) {
                 if x.w > 0.0 {
                     *v = Vec4::ZERO;

@@ -3,13 +3,27 @@
 //!
 //! After each step the solver measures the cloth's mean kinetic energy per kilogram,
 //! `½ Σ mᵢ|vᵢ|² / Σ mᵢ` over its free vertices. When it stays below [`Sleep::energy`] for
-//! [`Sleep::steps`] steps in a row, the cloth falls asleep: its velocities are zeroed and
+//! [`Sleep::steps`] steps in a row, or when the cloth stays *still* for as many steps (its
+//! mass-weighted rms distance from where it was when they began no more than the distance
+//! its rms speed at [`Sleep::energy`] covers in [`Sleep::steps`] steps: 1.6 mm at the
+//! defaults and 60 Hz), the cloth falls asleep: its velocities are zeroed and
 //! [`Simulation::step_in`](super::Simulation::step_in) returns at once, leaving positions
-//! exactly as they were. What it remembers when it falls asleep decides when it wakes (in
+//! exactly as they were.
+//!
+//! The second rule is for a pile of cloth with self-collision: where the contacts and the
+//! constraints fight (a fold tighter than the thickness allows), vertices shake by a
+//! millimetre or so from substep to substep and step to step without going anywhere, so
+//! their energy never falls below [`Sleep::energy`]; by the still rule a crumpled pile
+//! sleeps within a few seconds, as it does without self-collision
+//! (docs/experiments.md, *A pile with self-collision never fell asleep*). A cloth that
+//! moves, however slowly, at more than that rms speed leaves the distance and stays awake.
+//! A run of still steps begins only at a step whose energy is under a thousand times
+//! [`Sleep::energy`], so a moving cloth does not copy its positions every step. What it remembers when it falls asleep decides when it wakes (in
 //! the step where the change is seen, before that step is taken):
 //!
 //! - a pin is added, removed, or its target moves by more than [`WAKE_DISTANCE`];
-//! - a collider whose bounding ball reaches the cloth's bounds appears, disappears, moves
+//! - a collider whose bounding ball reaches the cloth's bounds within the step (one that
+//!   flies through them between its start and end poses counts) appears, disappears, moves
 //!   (by more than [`WAKE_DISTANCE`] or turns), or changes shape, thickness or friction;
 //! - the air at the cloth (sampled at the centre and the 8 corners of its bounds) changes by
 //!   more than [`WAKE_AIR_SPEED`], for a cloth that feels the air;
@@ -43,7 +57,10 @@ pub struct Sleep {
     /// `½ v²` of the mass-weighted mean squared speed. The default, `5e-6`, is an rms speed
     /// of about 3 mm/s. `0` never sleeps.
     pub energy: f32,
-    /// Quiet steps in a row after which the cloth sleeps (default 30: half a second at 60 Hz).
+    /// Quiet (or still) steps in a row after which the cloth sleeps (default 30: half a
+    /// second at 60 Hz). A step is *still* when the cloth's rms distance from where it was
+    /// when the run began is at most `√(2·energy) · steps · dt`: a cloth that shakes in place
+    /// (a pile of cloth with self-collision) sleeps too.
     pub steps: u32,
 }
 
@@ -70,11 +87,20 @@ impl Default for Sleep {
     }
 }
 
+/// A run of still steps (see [`Sleep::steps`]) begins only at a step whose kinetic energy is
+/// under this many times [`Sleep::energy`] (an rms speed of about 10 cm/s at the default),
+/// so that a moving cloth does not copy its positions every step for a run that cannot last.
+const STILL_START_ENERGY: f32 = 1000.0;
+
 /// What a sleeping cloth remembers, to notice what would wake it.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct SleepState {
     /// Quiet steps in a row so far.
     pub quiet: u32,
+    /// Where the cloth was when its current run of still steps began (empty: no run).
+    anchor: Vec<Vec4>,
+    /// Still steps in a row so far: the cloth stayed near `anchor`.
+    still: u32,
     pub asleep: bool,
     pins: Vec<Pin>,
     /// The cloth's bounds when it fell asleep.
@@ -83,6 +109,24 @@ pub(crate) struct SleepState {
     colliders: Vec<Collider>,
     /// Air velocity at the bounds' centre and corners (zero where no wind is felt).
     air: [Vec3; 9],
+}
+
+/// The mass-weighted rms distance of the free vertices (`w > 0`) of `positions` from
+/// `anchor` (0 with none free).
+fn rms_distance(positions: &[Vec4], anchor: &[Vec4]) -> f32 {
+    let (mut sum, mut mass) = (0.0f64, 0.0f64);
+    for (p, a) in positions.iter().zip(anchor) {
+        if p.w > 0.0 {
+            let m = 1.0 / f64::from(p.w);
+            sum += m * f64::from(p.xyz().distance_squared(a.xyz()));
+            mass += m;
+        }
+    }
+    if mass > 0.0 {
+        (sum / mass).sqrt() as f32
+    } else {
+        0.0
+    }
 }
 
 fn pose_moved(a: &Pose, b: &Pose) -> bool {
@@ -103,15 +147,16 @@ fn same_collider(a: &Collider, b: &Collider) -> bool {
 }
 
 impl SleepState {
-    /// The colliders of `all` whose bounding ball (at the start or end pose) reaches the box
-    /// `lo..hi`.
+    /// The colliders of `all` whose bounding ball may reach the box `lo..hi` within the step:
+    /// the box around the ball at its start and end poses overlaps it (a collider that flies
+    /// through the cloth within one step, neither end near it, counts).
     fn touching(lo: Vec3, hi: Vec3, all: &[Collider]) -> impl Iterator<Item = &Collider> {
         all.iter().filter(move |c| {
             let r = c.shape.bounding_radius() + c.thickness + WAKE_DISTANCE;
-            [c.start.translation, c.end.translation].iter().any(|p| {
-                let q = p.clamp(lo, hi);
-                !r.is_finite() || q.distance_squared(*p) <= r * r
-            })
+            let (a, b) = (c.start.translation, c.end.translation);
+            let (sweep_lo, sweep_hi) = (a.min(b) - Vec3::splat(r), a.max(b) + Vec3::splat(r));
+            !(r.is_finite() && sweep_lo.is_finite() && sweep_hi.is_finite())
+                || (sweep_lo.cmple(hi).all() && sweep_hi.cmpge(lo).all())
         })
     }
 
@@ -149,6 +194,7 @@ impl SleepState {
         }
         self.asleep = true;
         self.quiet = 0;
+        self.forget_still();
         self.lo = lo;
         self.hi = hi;
         self.pins.clear();
@@ -194,6 +240,41 @@ impl SleepState {
     pub fn wake(&mut self) {
         self.asleep = false;
         self.quiet = 0;
+        self.forget_still();
+    }
+
+    /// Ends any run of still steps.
+    pub fn forget_still(&mut self) {
+        self.anchor.clear();
+        self.still = 0;
+    }
+
+    /// Counts the step just taken (of length `dt`, leaving the cloth at `positions` with
+    /// kinetic energy `energy` J/kg) as quiet or not, and returns whether the cloth has come to
+    /// rest by either rule of [`Sleep`]: `steps` quiet steps in a row (energy under
+    /// [`Sleep::energy`]), or `steps` still steps in a row (the cloth's mass-weighted rms
+    /// distance from where it was when they began at most the distance its rms speed at
+    /// [`Sleep::energy`] covers in `steps` steps).
+    pub fn count(&mut self, positions: &[Vec4], energy: f32, sleep: Sleep, dt: f32) -> bool {
+        self.quiet = if energy < sleep.energy {
+            self.quiet + 1
+        } else {
+            0
+        };
+        if self.anchor.len() == positions.len() {
+            let reach = (2.0 * sleep.energy).sqrt() * sleep.steps as f32 * dt;
+            if rms_distance(positions, &self.anchor) <= reach {
+                self.still += 1;
+            } else {
+                self.forget_still();
+            }
+        } else {
+            self.forget_still();
+        }
+        if self.anchor.is_empty() && energy < STILL_START_ENERGY * sleep.energy {
+            self.anchor.extend_from_slice(positions);
+        }
+        self.quiet >= sleep.steps || self.still >= sleep.steps
     }
 }
 
@@ -394,6 +475,24 @@ mod tests {
         until_asleep(&mut sim, &env_near, 1200);
         assert!(asleep_after_step(&mut sim, &env_near));
         assert!(!asleep_after_step(&mut sim, &env));
+        // A ball flying through it within one step, from well in front of it to well behind
+        // (neither end within reach of its bounds), wakes it too.
+        until_asleep(&mut sim, &env, 1200);
+        let through = [
+            far.clone(),
+            Collider {
+                shape: Shape::Sphere { radius: 0.1 },
+                start: Pose::at(Vec3::new(0.0, -0.3, -3.0)),
+                end: Pose::at(Vec3::new(0.0, -0.3, 3.0)),
+                thickness: 0.01,
+                friction: 0.5,
+            },
+        ];
+        let env_through = Environment {
+            colliders: &through,
+            ..Default::default()
+        };
+        assert!(!asleep_after_step(&mut sim, &env_through));
     }
 
     #[test]
@@ -449,6 +548,72 @@ mod tests {
         until_asleep(&mut sim, &env, 1200);
         sim.wake();
         assert!(!asleep_after_step(&mut sim, &env));
+    }
+
+    /// The still rule: a cloth that shakes in place (energy above the threshold, every step
+    /// within the distance of where it was) sleeps after `steps` steps; one that drifts
+    /// faster than the threshold's speed, or moves too fast for a run to begin, never does.
+    #[test]
+    fn a_cloth_shaking_in_place_sleeps_and_a_drifting_one_does_not() {
+        let sleep = Sleep::default();
+        let reach = (2.0 * sleep.energy).sqrt() * sleep.steps as f32 * DT;
+        let at = |offsets: &[Vec3]| -> Vec<Vec4> {
+            let rest = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE];
+            rest.iter()
+                .zip(offsets.iter().cycle())
+                .map(|(p, o)| (*p + *o).extend(1.0))
+                .collect()
+        };
+        // Shaking: every vertex a little under the reach off, one way then the other, with
+        // ten times the energy of the threshold.
+        let mut state = SleepState::default();
+        let shake = 0.9 * reach;
+        let energy = 10.0 * sleep.energy;
+        let calls: Vec<bool> = (0..=sleep.steps)
+            .map(|k| {
+                let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+                state.count(&at(&[Vec3::X * 0.5 * shake * sign]), energy, sleep, DT)
+            })
+            .collect();
+        assert!(
+            calls[..sleep.steps as usize].iter().all(|&c| !c),
+            "{calls:?}"
+        );
+        assert!(
+            calls[sleep.steps as usize],
+            "asleep after {} still steps",
+            sleep.steps
+        );
+        assert_eq!(state.quiet, 0, "the energy rule counted nothing");
+
+        // Drifting at twice the threshold's speed: never still for `steps` steps.
+        let speed = 2.0 * (2.0 * sleep.energy).sqrt();
+        let mut state = SleepState::default();
+        for k in 0..10 * sleep.steps {
+            let offset = Vec3::Z * speed * DT * k as f32;
+            assert!(
+                !state.count(&at(&[offset]), energy, sleep, DT),
+                "asleep at step {k}"
+            );
+        }
+
+        // Shaking in place but too energetic for a run to begin.
+        let mut state = SleepState::default();
+        for k in 0..10 * sleep.steps {
+            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            let offsets = [Vec3::X * 0.5 * shake * sign];
+            assert!(!state.count(&at(&offsets), STILL_START_ENERGY * sleep.energy, sleep, DT));
+        }
+
+        // Pinned vertices (w = 0) do not count: a cloth whose free vertices stay put is still
+        // while its pins swing.
+        let mut state = SleepState::default();
+        let slept = (0..=sleep.steps).any(|k| {
+            let mut p = at(&[Vec3::ZERO]);
+            p[0] = (Vec3::Y * k as f32).extend(0.0);
+            state.count(&p, energy, sleep, DT)
+        });
+        assert!(slept);
     }
 
     #[test]
