@@ -18,8 +18,10 @@
 //! (docs/experiments.md, *A pile with self-collision never fell asleep*). A cloth that
 //! moves, however slowly, at more than that rms speed leaves the distance and stays awake.
 //! A run of still steps begins only at a step whose energy is under a thousand times
-//! [`Sleep::energy`], so a moving cloth does not copy its positions every step. What it remembers when it falls asleep decides when it wakes (in
-//! the step where the change is seen, before that step is taken):
+//! [`Sleep::energy`], so a moving cloth does not copy its positions every step.
+//!
+//! What it remembers when it falls asleep decides when it wakes (in the step where the
+//! change is seen, before that step is taken):
 //!
 //! - a pin is added, removed, or its target moves by more than [`WAKE_DISTANCE`];
 //! - a collider whose bounding ball reaches the cloth's bounds within the step (one that
