@@ -6,8 +6,9 @@
 //! cargo run --release --example self_collision -- --headless --frames 240
 //! cargo run --release --example self_collision -- --headless --frames 240 --off   # for comparison
 //! ```
-//! The JSON line adds `crossings` (edge–triangle pairs of the strip that cross at the end) and
-//! `max_crossings` over the run.
+//! The JSON line adds `crossings` (edge–triangle pairs of the strip that cross at the end),
+//! `max_crossings` over the run and `asleep_after_steps`, the fixed step at which the pile
+//! came to rest and fell asleep (−1: still awake; a GPU cloth never sleeps).
 
 #[path = "support/mod.rs"]
 mod support;
@@ -20,6 +21,8 @@ use support::Args;
 struct Crossings {
     now: usize,
     max: usize,
+    /// The cloth's step count when it was first seen asleep.
+    asleep_after: Option<u64>,
 }
 
 #[derive(Resource)]
@@ -72,13 +75,16 @@ fn measure(cloths: Query<&ClothSim>, mut c: ResMut<Crossings>) {
     for sim in &cloths {
         c.now = sim.simulation().self_crossings();
         c.max = c.max.max(c.now);
+        if sim.is_sleeping() && c.asleep_after.is_none() {
+            c.asleep_after = Some(sim.steps());
+        }
     }
 }
 
 fn report(world: &mut World) -> support::Json {
-    let (now, max) = {
+    let (now, max, asleep_after) = {
         let c = world.resource::<Crossings>();
-        (c.now, c.max)
+        (c.now, c.max, c.asleep_after)
     };
     let on = !world.resource::<Off>().0;
     let unread = support::gpu_state_unread(world);
@@ -87,6 +93,10 @@ fn report(world: &mut World) -> support::Json {
         .num("self_collision", if on { 1.0 } else { 0.0 })
         .measured("crossings", now as f64, unread)
         .measured("max_crossings", max as f64, unread)
+        .num(
+            "asleep_after_steps",
+            asleep_after.map_or(-1.0, |steps| steps as f64),
+        )
 }
 
 fn main() {
