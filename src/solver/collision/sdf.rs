@@ -12,10 +12,12 @@
 //! signed by the side its triangles face instead (see [`SdfGrid`]).
 
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 
 use glam::{UVec3, Vec3};
 
 use crate::solver::mesh::Weld;
+use crate::solver::parallel::{Parallel, Serial};
 
 /// Why a mesh cannot be baked.
 #[derive(Clone, Debug, PartialEq)]
@@ -75,6 +77,17 @@ const OPEN_DEPTH: f32 = 3.0;
 /// for the mesh's rim (split along UV seams and hard edges, a closed mesh is still closed).
 const WELD_FRACTION: f32 = 1e-5;
 
+/// Samples per tile of the fast sweep, along x, y and z ([`SdfGrid::sweep`]): rows of 16
+/// along x, where samples lie next to each other in memory.
+const TILE: [u32; 3] = [16, 8, 8];
+
+/// The distances and nearest triangles of the samples while the sweeps run: written by the
+/// tile that owns a sample, read by the tiles downwind of it in later wavefronts.
+struct Field {
+    phi: Vec<AtomicU32>,
+    closest: Vec<AtomicU32>,
+}
+
 impl SdfGrid {
     /// Bakes the mesh on a grid whose longest side has `resolution` cells (plus a border of
     /// three cells on every side).
@@ -86,6 +99,21 @@ impl SdfGrid {
         indices: &[u32],
         resolution: u32,
     ) -> Result<Self, SdfError> {
+        Self::from_mesh_on(positions, indices, resolution, &Serial)
+    }
+
+    /// [`SdfGrid::from_mesh`] on `par`'s threads (the plugin bakes on
+    /// [`ClothWorkers`](crate::cloth::ClothWorkers)): the same field, bit for bit, in about
+    /// `1 / threads` of the time.
+    ///
+    /// # Errors
+    /// As [`SdfGrid::from_mesh`].
+    pub fn from_mesh_on(
+        positions: &[Vec3],
+        indices: &[u32],
+        resolution: u32,
+        par: &impl Parallel,
+    ) -> Result<Self, SdfError> {
         if resolution < 4 {
             return Err(SdfError::BadResolution(format!(
                 "{resolution} cells; at least 4 are needed"
@@ -93,7 +121,7 @@ impl SdfGrid {
         }
         let (lo, hi) = bounds(positions, indices)?;
         let cell = (hi - lo).max_element().max(1e-6) / resolution as f32;
-        Self::from_triangles(positions, indices, cell, 3)
+        Self::from_triangles_on(positions, indices, cell, 3, par)
     }
 
     /// Bakes the mesh with cells of `cell` metres and `padding` cells of margin around it.
@@ -108,6 +136,32 @@ impl SdfGrid {
         indices: &[u32],
         cell: f32,
         padding: u32,
+    ) -> Result<Self, SdfError> {
+        Self::from_triangles_on(positions, indices, cell, padding, &Serial)
+    }
+
+    /// [`SdfGrid::from_triangles`] on `par`'s threads: the same field, bit for bit.
+    ///
+    /// # Errors
+    /// As [`SdfGrid::from_triangles`].
+    pub fn from_triangles_on(
+        positions: &[Vec3],
+        indices: &[u32],
+        cell: f32,
+        padding: u32,
+        par: &impl Parallel,
+    ) -> Result<Self, SdfError> {
+        Self::bake_in_tiles(positions, indices, cell, padding, TILE, par)
+    }
+
+    /// [`SdfGrid::from_triangles_on`], sweeping in tiles of `tile` samples.
+    fn bake_in_tiles(
+        positions: &[Vec3],
+        indices: &[u32],
+        cell: f32,
+        padding: u32,
+        tile: [u32; 3],
+        par: &impl Parallel,
     ) -> Result<Self, SdfError> {
         let (lo, hi) = bounds(positions, indices)?;
         if !(cell.is_finite() && cell > 0.0) {
@@ -137,7 +191,7 @@ impl SdfGrid {
             .map(|t| [t[0], t[1], t[2]].map(|i| positions[i as usize]))
             .collect();
         let open = OpenSurface::of(positions, indices, (hi - lo).max_element());
-        grid.bake(&tris, open.as_ref());
+        grid.bake(&tris, open.as_ref(), tile, par);
         Ok(grid)
     }
 
@@ -156,7 +210,14 @@ impl SdfGrid {
         self.origin + Vec3::new(i as f32, j as f32, k as f32) * self.cell
     }
 
-    fn bake(&mut self, tris: &[[Vec3; 3]], open: Option<&OpenSurface>) {
+    /// Bakes the field, sweeping in tiles of `tile` samples on `par`'s threads.
+    fn bake(
+        &mut self,
+        tris: &[[Vec3; 3]],
+        open: Option<&OpenSurface>,
+        tile: [u32; 3],
+        par: &impl Parallel,
+    ) {
         let [nx, ny, nz] = self.dims.to_array();
         let total = (nx * ny * nz) as usize;
         let far = (self.dims.as_vec3() * self.cell).length();
@@ -191,15 +252,33 @@ impl SdfGrid {
                 (c, t.iter().map(|v| v.distance(c)).fold(0.0, f32::max))
             })
             .collect();
+        // (In place: the same sizes, so the vectors keep their allocations.)
+        let field = Field {
+            phi: phi
+                .into_iter()
+                .map(|d| AtomicU32::new(d.to_bits()))
+                .collect(),
+            closest: closest.into_iter().map(AtomicU32::new).collect(),
+        };
         for _ in 0..2 {
             for dk in [1i32, -1] {
                 for dj in [1i32, -1] {
                     for di in [1i32, -1] {
-                        self.sweep(tris, &spheres, &mut phi, &mut closest, [di, dj, dk]);
+                        self.sweep(tris, &spheres, &field, [di, dj, dk], tile, par);
                     }
                 }
             }
         }
+        let mut phi: Vec<f32> = field
+            .phi
+            .into_iter()
+            .map(|d| f32::from_bits(d.into_inner()))
+            .collect();
+        let closest: Vec<u32> = field
+            .closest
+            .into_iter()
+            .map(AtomicU32::into_inner)
+            .collect();
         // 3. Sign: an open surface by the side it faces, a closed mesh by ray parity along +x.
         if let Some(open) = open {
             let depth = OPEN_DEPTH * self.cell;
@@ -251,26 +330,71 @@ impl SdfGrid {
         (a.as_uvec3(), b.as_uvec3())
     }
 
+    /// One fast-sweeping pass in direction `[di, dj, dk]`: every sample takes the nearest of
+    /// its own triangle and those of its seven upwind neighbours (the ones a step against the
+    /// direction away). The grid is cut into tiles of `tile` samples; a tile's samples run
+    /// in the pass's order, and tiles run in parallel in diagonal wavefronts (the tiles whose
+    /// coordinates, counted along the direction, add up to the same number): a tile's
+    /// upwind neighbours are all in earlier wavefronts, so every sample reads exactly what the
+    /// whole grid swept row by row would give it, and the field is the same bit for bit on
+    /// any number of threads.
     fn sweep(
         &self,
         tris: &[[Vec3; 3]],
         spheres: &[(Vec3, f32)],
-        phi: &mut [f32],
-        closest: &mut [u32],
+        field: &Field,
+        dir: [i32; 3],
+        tile: [u32; 3],
+        par: &impl Parallel,
+    ) {
+        let n = self.dims.to_array();
+        let tiles: [u32; 3] = core::array::from_fn(|a| n[a].div_ceil(tile[a]));
+        // A tile's place along the direction.
+        let along = |a: usize, t: u32| if dir[a] > 0 { t } else { tiles[a] - 1 - t };
+        let mut front = Vec::new();
+        for wave in 0..tiles.iter().sum::<u32>() - 2 {
+            front.clear();
+            for tz in 0..tiles[2] {
+                for ty in 0..tiles[1] {
+                    let rest = wave as i64 - i64::from(along(2, tz)) - i64::from(along(1, ty));
+                    if (0..i64::from(tiles[0])).contains(&rest) {
+                        let ax = rest as u32;
+                        let tx = if dir[0] > 0 { ax } else { tiles[0] - 1 - ax };
+                        front.push([tx, ty, tz]);
+                    }
+                }
+            }
+            par.for_each_mut(&mut front, |at| {
+                self.sweep_tile(tris, spheres, field, dir, (*at, tile));
+            });
+        }
+    }
+
+    /// [`SdfGrid::sweep`] over one tile's samples (the tile at `at`, of `size` samples).
+    fn sweep_tile(
+        &self,
+        tris: &[[Vec3; 3]],
+        spheres: &[(Vec3, f32)],
+        field: &Field,
         [di, dj, dk]: [i32; 3],
+        (at, size): ([u32; 3], [u32; 3]),
     ) {
         // Slack on the bound, far above its rounding: a triangle is skipped only when it is
         // surely farther than the nearest one found.
         let slack = 1e-3 * self.cell;
-        let [nx, ny, nz] = self.dims.as_ivec3().to_array();
-        let range = |n: i32, d: i32| -> Vec<i32> {
+        let n = self.dims.as_ivec3().to_array();
+        // The tile's samples along axis `a` in the pass's order, without the first sample of
+        // the grid (it has no upwind neighbour that way).
+        let range = |a: usize, d: i32| -> Vec<i32> {
+            let lo = (at[a] * size[a]) as i32;
+            let hi = (lo + size[a] as i32).min(n[a]);
             if d > 0 {
-                (1..n).collect()
+                (lo.max(1)..hi).collect()
             } else {
-                (0..n - 1).rev().collect()
+                (lo..hi.min(n[a] - 1)).rev().collect()
             }
         };
-        let (ri, rj, rk) = (range(nx, di), range(ny, dj), range(nz, dk));
+        let (ri, rj, rk) = (range(0, di), range(1, dj), range(2, dk));
         let neighbours = [
             (di, 0, 0),
             (0, dj, 0),
@@ -280,29 +404,38 @@ impl SdfGrid {
             (0, dj, dk),
             (di, dj, dk),
         ];
+        let (phi, closest) = (&field.phi, &field.closest);
         for &k in &rk {
             for &j in &rj {
                 for &i in &ri {
                     let idx = self.index(i as u32, j as u32, k as u32);
                     let p = self.point(i as u32, j as u32, k as u32);
+                    let mut best = f32::from_bits(phi[idx].load(Relaxed));
+                    let mut best_t = closest[idx].load(Relaxed);
+                    let mut changed = false;
                     // The triangles already measured here (neighbours often share one).
                     let mut seen = [u32::MAX; 7];
                     for (m, (a, b, c)) in neighbours.into_iter().enumerate() {
                         let n = self.index((i - a) as u32, (j - b) as u32, (k - c) as u32);
-                        let t = closest[n];
-                        if t == u32::MAX || t == closest[idx] || seen[..m].contains(&t) {
+                        let t = closest[n].load(Relaxed);
+                        if t == u32::MAX || t == best_t || seen[..m].contains(&t) {
                             continue;
                         }
                         seen[m] = t;
                         let (centre, radius) = spheres[t as usize];
-                        if p.distance(centre) - radius > phi[idx] + slack {
+                        if p.distance(centre) - radius > best + slack {
                             continue;
                         }
                         let d = point_triangle_distance(p, &tris[t as usize]);
-                        if d < phi[idx] {
-                            phi[idx] = d;
-                            closest[idx] = t;
+                        if d < best {
+                            best = d;
+                            best_t = t;
+                            changed = true;
                         }
+                    }
+                    if changed {
+                        phi[idx].store(best.to_bits(), Relaxed);
+                        closest[idx].store(best_t, Relaxed);
                     }
                 }
             }
@@ -715,6 +848,36 @@ mod tests {
     fn lcg(seed: &mut u32) -> f32 {
         *seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
         (*seed >> 8) as f32 / (1u32 << 24) as f32
+    }
+
+    #[test]
+    fn the_sweep_in_tiles_on_four_threads_gives_the_field_swept_row_by_row() {
+        let workers = crate::solver::Workers::new(3);
+        let (sphere, sphere_idx) = uv_sphere(1.0, 24, 48);
+        let (cube_p, cube_idx) = cube(Vec3::new(0.7, 0.3, 0.45));
+        let (land, land_idx) = terrain(24, hills);
+        let open_cube = idx_without_top(&cube_p, &cube_idx);
+        let cases = [
+            ("sphere", &sphere, &sphere_idx, 0.05),
+            ("box", &cube_p, &cube_idx, 0.037),
+            ("terrain", &land, &land_idx, 0.09),
+            ("open box", &cube_p, &open_cube, 0.041),
+        ];
+        for (name, p, idx, cell) in cases {
+            // One tile as big as the grid: the sweep row by row, as it was written first.
+            let rows = SdfGrid::bake_in_tiles(p, idx, cell, 3, [1 << 20; 3], &Serial).unwrap();
+            let dims = rows.dims();
+            assert!(
+                (0..3).all(|a| dims[a] > 2 * TILE[a]),
+                "{name}: {dims} samples, too few for several tiles a side"
+            );
+            let bits = |g: &SdfGrid| g.values().iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+            let serial = SdfGrid::from_triangles(p, idx, cell, 3).unwrap();
+            let threads = SdfGrid::from_triangles_on(p, idx, cell, 3, &workers).unwrap();
+            assert_eq!(bits(&serial), bits(&rows), "{name}: tiles in turn");
+            assert_eq!(bits(&threads), bits(&rows), "{name}: tiles on four threads");
+            assert_eq!(threads.is_open(), rows.is_open());
+        }
     }
 
     #[test]
