@@ -23,9 +23,9 @@ mod plugin;
 mod sim;
 mod skinning;
 mod systems;
-mod workers;
 mod writeback;
 
+pub use crate::foundation::{ClothWorkers, TaskPoolParallel};
 pub use build::{ClothParts, check_cloth};
 pub use components::{
     Cloth, ClothConfig, ClothInertia, ClothPin, ClothPins, ClothSelfCollision, ClothSmoothing,
@@ -36,4 +36,3 @@ pub use pin_rule::{ClothPinRule, ColorChannel, PinRuleError, VertexSelection};
 pub use plugin::ClothPlugin;
 pub use sim::{ClothPick, ClothSim, ClothSource, OVERSTRETCH, OVERSTRETCH_SECONDS};
 pub use skinning::{ClothBackstop, ClothSkinning, MaxDistance};
-pub use workers::{ClothWorkers, TaskPoolParallel};

@@ -44,6 +44,7 @@ pub use super::NoClothCollision;
 use super::bridge::{self, EngineCollider, Mirroring, Settings};
 use super::{ClothContactImpulse, ColliderShape};
 use crate::foundation::ClothSystems;
+use crate::solver::Workers;
 
 /// Mirrors avian colliders into cloth colliders and couples cloth to avian bodies.
 ///
@@ -128,20 +129,25 @@ fn schedule_bridge(app: &mut App, schedule: Interned<dyn ScheduleLabel>) {
         );
 }
 
-fn bake(vertices: &[Vec3], indices: &[[u32; 3]], resolution: u32) -> Option<ColliderShape> {
-    bridge::bake(Collider::ENGINE, vertices, indices, resolution)
+fn bake(
+    vertices: &[Vec3],
+    indices: &[[u32; 3]],
+    resolution: u32,
+    par: &Workers,
+) -> Option<ColliderShape> {
+    bridge::bake(Collider::ENGINE, vertices, indices, resolution, par)
 }
 
 impl EngineCollider for Collider {
     const ENGINE: &'static str = "avian";
 
-    fn cloth_shape(&self, resolution: u32) -> Option<ColliderShape> {
-        shape_of(self, resolution)
+    fn cloth_shape(&self, resolution: u32, par: &Workers) -> Option<ColliderShape> {
+        shape_of(self, resolution, par)
     }
 }
 
 /// The cloth shape of an avian collider (unscaled: the entity's transform scales both).
-fn shape_of(collider: &Collider, resolution: u32) -> Option<ColliderShape> {
+fn shape_of(collider: &Collider, resolution: u32, par: &Workers) -> Option<ColliderShape> {
     Some(match collider.shape().as_typed_shape() {
         TypedShape::Ball(b) => ColliderShape::Sphere { radius: b.radius },
         TypedShape::Cuboid(c) => ColliderShape::Cuboid {
@@ -156,27 +162,27 @@ fn shape_of(collider: &Collider, resolution: u32) -> Option<ColliderShape> {
                 }
             } else {
                 let (v, i) = c.to_trimesh(16, 8);
-                return bake(&v, &i, resolution);
+                return bake(&v, &i, resolution, par);
             }
         }
         TypedShape::HalfSpace(h) if h.normal.abs_diff_eq(Vec3::Y, 1e-5) => ColliderShape::Plane,
-        TypedShape::TriMesh(t) => return bake(t.vertices(), t.indices(), resolution),
+        TypedShape::TriMesh(t) => return bake(t.vertices(), t.indices(), resolution, par),
         TypedShape::ConvexPolyhedron(c) => {
             let (v, i) = c.to_trimesh();
-            return bake(&v, &i, resolution);
+            return bake(&v, &i, resolution, par);
         }
         TypedShape::Cylinder(c) => {
             let (v, i) = c.to_trimesh(24);
-            return bake(&v, &i, resolution);
+            return bake(&v, &i, resolution, par);
         }
         TypedShape::Cone(c) => {
             let (v, i) = c.to_trimesh(24);
-            return bake(&v, &i, resolution);
+            return bake(&v, &i, resolution, par);
         }
         // An open surface: cloth is kept on the side it faces (up).
         TypedShape::HeightField(h) => {
             let (v, i) = h.to_trimesh();
-            return bake(&v, &i, resolution);
+            return bake(&v, &i, resolution, par);
         }
         _ => return None,
     })

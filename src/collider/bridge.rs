@@ -13,7 +13,8 @@ use std::sync::Arc;
 use bevy::prelude::*;
 
 use super::{ClothCollider, ColliderMesh, ColliderShape};
-use crate::solver::SdfGrid;
+use crate::foundation::ClothWorkers;
+use crate::solver::{SdfGrid, Workers};
 
 /// On a physics-engine collider (rapier or avian): cloth ignores it.
 #[derive(Component, Clone, Copy, Debug, Default)]
@@ -57,9 +58,10 @@ pub(crate) fn bake(
     vertices: &[Vec3],
     indices: &[[u32; 3]],
     resolution: u32,
+    par: &Workers,
 ) -> Option<ColliderShape> {
     let flat: Vec<u32> = indices.iter().flatten().copied().collect();
-    match SdfGrid::from_mesh(vertices, &flat, resolution) {
+    match SdfGrid::from_mesh_on(vertices, &flat, resolution, par) {
         Ok(grid) => Some(ColliderShape::Mesh(ColliderMesh::Baked(Arc::new(grid)))),
         Err(e) => {
             warn!("{engine} collider: cannot bake its triangles into an SDF: {e}");
@@ -74,7 +76,7 @@ pub(crate) trait EngineCollider: Component {
     const ENGINE: &'static str;
     /// Its cloth shape, unscaled (the entity's transform scales both); `None` for a shape
     /// cloth does not collide with.
-    fn cloth_shape(&self, resolution: u32) -> Option<ColliderShape>;
+    fn cloth_shape(&self, resolution: u32, par: &Workers) -> Option<ColliderShape>;
 }
 
 /// The settings of the bridge whose mirrors are marked `M`.
@@ -96,17 +98,27 @@ pub(crate) fn install<C: EngineCollider, M: Component>(app: &mut App, m: Mirrori
 pub(crate) fn mirror_colliders<C: EngineCollider, M: Component + Default>(
     mut commands: Commands,
     settings: Res<Settings<M>>,
+    workers: Option<Res<ClothWorkers>>,
     changed: Query<
         (Entity, &C, Has<ClothCollider>, Has<M>),
         (Without<NoClothCollision>, Changed<C>),
     >,
 ) {
     let m = settings.0;
+    // Meshes baked on the cloth plugins' threads (the field is the same on any number).
+    let serial;
+    let par = match workers.as_deref() {
+        Some(w) => &w.0,
+        None => {
+            serial = Workers::new(0);
+            &serial
+        }
+    };
     for (entity, collider, has_cloth_collider, mirrored) in &changed {
         if has_cloth_collider && !mirrored {
             continue; // the user's own cloth collider wins
         }
-        match collider.cloth_shape(m.resolution) {
+        match collider.cloth_shape(m.resolution, par) {
             Some(shape) => {
                 commands.entity(entity).insert((
                     ClothCollider {

@@ -33,11 +33,12 @@ use bevy::prelude::*;
 use bevy::reflect::{TypePath, impl_reflect_opaque};
 
 use crate::foundation::{
-    ClothSchedule, ClothSystems, EntityName, FixedPoses, SimulatedCloth, mesh_fingerprint,
-    modified_meshes, read_mesh,
+    ClothSchedule, ClothSystems, ClothWorkers, EntityName, FixedPoses, SimulatedCloth,
+    mesh_fingerprint, modified_meshes, read_mesh,
 };
 use crate::solver::{
-    Collider, ContactImpulse, DEFAULT_TELEPORT_DISTANCE, Pose, SdfGrid, Shape, is_teleport, limits,
+    Collider, ContactImpulse, DEFAULT_TELEPORT_DISTANCE, Pose, SdfGrid, Shape, Workers,
+    is_teleport, limits,
 };
 
 /// What a mesh collider is made from.
@@ -341,8 +342,18 @@ type BakeQueryData = (
 fn bake_mesh_colliders(
     mut commands: Commands,
     meshes: Option<Res<Assets<Mesh>>>,
+    workers: Option<Res<ClothWorkers>>,
     mut colliders: Query<BakeQueryData>,
 ) {
+    // On the cloth plugins' threads (the field is the same on any number of them).
+    let serial;
+    let par = match workers.as_deref() {
+        Some(w) => &w.0,
+        None => {
+            serial = Workers::new(0);
+            &serial
+        }
+    };
     for ((entity, name), collider, mesh3d, runtime, skinned, cloth) in &mut colliders {
         let who = EntityName::new(entity, name);
         let ColliderShape::Mesh(ColliderMesh::Asset { mesh, resolution }) = &collider.shape else {
@@ -397,7 +408,7 @@ fn bake_mesh_colliders(
             .map_err(|e| e.to_string())
             .and_then(|()| read_mesh(source).map_err(|e| e.to_string()))
             .and_then(|data| {
-                SdfGrid::from_mesh(&data.positions, &data.indices, *resolution)
+                SdfGrid::from_mesh_on(&data.positions, &data.indices, *resolution, par)
                     .map_err(|e| e.to_string())
             });
         let mut rt = ColliderRuntime {

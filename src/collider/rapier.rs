@@ -33,6 +33,7 @@ pub use super::NoClothCollision;
 use super::bridge::{self, EngineCollider, Mirroring, Settings};
 use super::{ClothContactImpulse, ColliderShape};
 use crate::foundation::ClothSystems;
+use crate::solver::Workers;
 
 /// Mirrors rapier colliders into cloth colliders and couples cloth to rapier bodies.
 #[derive(Clone, Copy, Debug)]
@@ -99,20 +100,25 @@ fn schedule_bridge(app: &mut App, schedule: Interned<dyn ScheduleLabel>) {
     );
 }
 
-fn bake(vertices: &[Vec3], indices: &[[u32; 3]], resolution: u32) -> Option<ColliderShape> {
-    bridge::bake(Collider::ENGINE, vertices, indices, resolution)
+fn bake(
+    vertices: &[Vec3],
+    indices: &[[u32; 3]],
+    resolution: u32,
+    par: &Workers,
+) -> Option<ColliderShape> {
+    bridge::bake(Collider::ENGINE, vertices, indices, resolution, par)
 }
 
 impl EngineCollider for Collider {
     const ENGINE: &'static str = "rapier";
 
-    fn cloth_shape(&self, resolution: u32) -> Option<ColliderShape> {
-        shape_of(self, resolution)
+    fn cloth_shape(&self, resolution: u32, par: &Workers) -> Option<ColliderShape> {
+        shape_of(self, resolution, par)
     }
 }
 
 /// The cloth shape of a rapier collider (unscaled: the entity's transform scales both).
-fn shape_of(collider: &Collider, resolution: u32) -> Option<ColliderShape> {
+fn shape_of(collider: &Collider, resolution: u32, par: &Workers) -> Option<ColliderShape> {
     Some(match collider.as_unscaled_typed_shape() {
         ColliderView::Ball(b) => ColliderShape::Sphere { radius: b.radius() },
         ColliderView::Cuboid(c) => ColliderShape::Cuboid {
@@ -127,30 +133,30 @@ fn shape_of(collider: &Collider, resolution: u32) -> Option<ColliderShape> {
                 }
             } else {
                 let (v, i) = c.raw.to_trimesh(16, 8);
-                return bake(&to_vec3(&v), &i, resolution);
+                return bake(&to_vec3(&v), &i, resolution, par);
             }
         }
         ColliderView::HalfSpace(h) if h.normal().abs_diff_eq(Vec3::Y, 1e-5) => ColliderShape::Plane,
         ColliderView::TriMesh(t) => {
             let v: Vec<Vec3> = t.vertices().collect();
-            return bake(&v, t.indices(), resolution);
+            return bake(&v, t.indices(), resolution, par);
         }
         ColliderView::ConvexPolyhedron(c) => {
             let (v, i) = c.raw.to_trimesh();
-            return bake(&to_vec3(&v), &i, resolution);
+            return bake(&to_vec3(&v), &i, resolution, par);
         }
         ColliderView::Cylinder(c) => {
             let (v, i) = c.raw.to_trimesh(24);
-            return bake(&to_vec3(&v), &i, resolution);
+            return bake(&to_vec3(&v), &i, resolution, par);
         }
         ColliderView::Cone(c) => {
             let (v, i) = c.raw.to_trimesh(24);
-            return bake(&to_vec3(&v), &i, resolution);
+            return bake(&to_vec3(&v), &i, resolution, par);
         }
         // An open surface: cloth is kept on the side it faces (up).
         ColliderView::HeightField(h) => {
             let (v, i) = h.raw.to_trimesh();
-            return bake(&to_vec3(&v), &i, resolution);
+            return bake(&to_vec3(&v), &i, resolution, par);
         }
         _ => return None,
     })

@@ -11,6 +11,7 @@
 mod animation;
 mod mesh;
 mod pose;
+mod workers;
 
 #[cfg(feature = "animation")]
 pub use animation::ClothAnimationPlugin;
@@ -18,6 +19,7 @@ pub use animation::ClothAnimationPlugin;
 pub use mesh::{MeshData, MeshError, grid_mesh, read_mesh, strip_triangles, try_grid_mesh};
 pub(crate) use mesh::{finite_bounds, mesh_fingerprint, modified_meshes};
 pub use pose::FixedPoses;
+pub use workers::{ClothWorkers, TaskPoolParallel};
 
 use bevy::asset::AssetEventSystems;
 use bevy::ecs::schedule::{InternedScheduleLabel, ScheduleLabel};

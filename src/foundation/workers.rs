@@ -1,5 +1,5 @@
-//! The threads CPU cloths step on: [`ClothWorkers`] (the plugin's own pool) or Bevy's
-//! `ComputeTaskPool` through [`TaskPoolParallel`].
+//! The threads CPU cloths step on, and mesh colliders bake on: [`ClothWorkers`] (the cloth
+//! plugin's own pool) or Bevy's `ComputeTaskPool` through [`TaskPoolParallel`].
 
 use bevy::prelude::*;
 use bevy::tasks::TaskPool;
@@ -7,7 +7,7 @@ use bevy::tasks::TaskPool;
 use crate::solver::{Parallel, Workers};
 
 /// The worker threads the plugin steps CPU cloths on ([`Workers::per_core`]: one helper per
-/// core besides the thread running the system). They spin for a moment after each parallel
+/// core besides the thread running the system), and bakes mesh colliders on. They spin for a moment after each parallel
 /// region and then sleep, so an idle app pays nothing for them. Remove the resource to step
 /// on Bevy's `ComputeTaskPool` instead (slower for one cloth: waking its threads takes about
 /// as long as a substep's work at 64 × 64), or insert `ClothWorkers(Workers::new(0))` to step
