@@ -129,15 +129,6 @@ fn schedule_bridge(app: &mut App, schedule: Interned<dyn ScheduleLabel>) {
         );
 }
 
-fn bake(
-    vertices: &[Vec3],
-    indices: &[[u32; 3]],
-    resolution: u32,
-    par: &Workers,
-) -> Option<ColliderShape> {
-    bridge::bake(Collider::ENGINE, vertices, indices, resolution, par)
-}
-
 impl EngineCollider for Collider {
     const ENGINE: &'static str = "avian";
 
@@ -162,27 +153,29 @@ fn shape_of(collider: &Collider, resolution: u32, par: &Workers) -> Option<Colli
                 }
             } else {
                 let (v, i) = c.to_trimesh(16, 8);
-                return bake(&v, &i, resolution, par);
+                return bridge::bake::<Collider>(&v, &i, resolution, par);
             }
         }
         TypedShape::HalfSpace(h) if h.normal.abs_diff_eq(Vec3::Y, 1e-5) => ColliderShape::Plane,
-        TypedShape::TriMesh(t) => return bake(t.vertices(), t.indices(), resolution, par),
+        TypedShape::TriMesh(t) => {
+            return bridge::bake::<Collider>(t.vertices(), t.indices(), resolution, par);
+        }
         TypedShape::ConvexPolyhedron(c) => {
             let (v, i) = c.to_trimesh();
-            return bake(&v, &i, resolution, par);
+            return bridge::bake::<Collider>(&v, &i, resolution, par);
         }
         TypedShape::Cylinder(c) => {
             let (v, i) = c.to_trimesh(24);
-            return bake(&v, &i, resolution, par);
+            return bridge::bake::<Collider>(&v, &i, resolution, par);
         }
         TypedShape::Cone(c) => {
             let (v, i) = c.to_trimesh(24);
-            return bake(&v, &i, resolution, par);
+            return bridge::bake::<Collider>(&v, &i, resolution, par);
         }
         // An open surface: cloth is kept on the side it faces (up).
         TypedShape::HeightField(h) => {
             let (v, i) = h.to_trimesh();
-            return bake(&v, &i, resolution, par);
+            return bridge::bake::<Collider>(&v, &i, resolution, par);
         }
         _ => return None,
     })

@@ -51,10 +51,9 @@ pub(crate) fn reaction_share(j: Vec3, mass: f32, velocity: Vec3, max_push_speed:
     (allowed / len).clamp(0.0, 1.0)
 }
 
-/// Bakes an engine shape's triangles into an SDF collider shape; `None` (with a warning naming
-/// `engine`) when they cannot be baked.
-pub(crate) fn bake(
-    engine: &str,
+/// Bakes an engine `C`'s shape's triangles into an SDF collider shape on `par`; `None` (with a
+/// warning naming the engine) when they cannot be baked.
+pub(crate) fn bake<C: EngineCollider>(
     vertices: &[Vec3],
     indices: &[[u32; 3]],
     resolution: u32,
@@ -64,7 +63,10 @@ pub(crate) fn bake(
     match SdfGrid::from_mesh_on(vertices, &flat, resolution, par) {
         Ok(grid) => Some(ColliderShape::Mesh(ColliderMesh::Baked(Arc::new(grid)))),
         Err(e) => {
-            warn!("{engine} collider: cannot bake its triangles into an SDF: {e}");
+            warn!(
+                "{} collider: cannot bake its triangles into an SDF: {e}",
+                C::ENGINE
+            );
             None
         }
     }
@@ -105,15 +107,9 @@ pub(crate) fn mirror_colliders<C: EngineCollider, M: Component + Default>(
     >,
 ) {
     let m = settings.0;
-    // Meshes baked on the cloth plugins' threads (the field is the same on any number).
-    let serial;
-    let par = match workers.as_deref() {
-        Some(w) => &w.0,
-        None => {
-            serial = Workers::new(0);
-            &serial
-        }
-    };
+    // Baked on the cloth plugins' threads: the field is the same on any number of them.
+    let mut serial = None;
+    let par = ClothWorkers::or_serial(workers.as_deref(), &mut serial);
     for (entity, collider, has_cloth_collider, mirrored) in &changed {
         if has_cloth_collider && !mirrored {
             continue; // the user's own cloth collider wins

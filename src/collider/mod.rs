@@ -37,8 +37,7 @@ use crate::foundation::{
     mesh_fingerprint, modified_meshes, read_mesh,
 };
 use crate::solver::{
-    Collider, ContactImpulse, DEFAULT_TELEPORT_DISTANCE, Pose, SdfGrid, Shape, Workers,
-    is_teleport, limits,
+    Collider, ContactImpulse, DEFAULT_TELEPORT_DISTANCE, Pose, SdfGrid, Shape, is_teleport, limits,
 };
 
 /// What a mesh collider is made from.
@@ -345,15 +344,9 @@ fn bake_mesh_colliders(
     workers: Option<Res<ClothWorkers>>,
     mut colliders: Query<BakeQueryData>,
 ) {
-    // On the cloth plugins' threads (the field is the same on any number of them).
-    let serial;
-    let par = match workers.as_deref() {
-        Some(w) => &w.0,
-        None => {
-            serial = Workers::new(0);
-            &serial
-        }
-    };
+    // Baked on the cloth plugins' threads: the field is the same on any number of them.
+    let mut serial = None;
+    let par = ClothWorkers::or_serial(workers.as_deref(), &mut serial);
     for ((entity, name), collider, mesh3d, runtime, skinned, cloth) in &mut colliders {
         let who = EntityName::new(entity, name);
         let ColliderShape::Mesh(ColliderMesh::Asset { mesh, resolution }) = &collider.shape else {

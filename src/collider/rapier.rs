@@ -100,15 +100,6 @@ fn schedule_bridge(app: &mut App, schedule: Interned<dyn ScheduleLabel>) {
     );
 }
 
-fn bake(
-    vertices: &[Vec3],
-    indices: &[[u32; 3]],
-    resolution: u32,
-    par: &Workers,
-) -> Option<ColliderShape> {
-    bridge::bake(Collider::ENGINE, vertices, indices, resolution, par)
-}
-
 impl EngineCollider for Collider {
     const ENGINE: &'static str = "rapier";
 
@@ -133,30 +124,30 @@ fn shape_of(collider: &Collider, resolution: u32, par: &Workers) -> Option<Colli
                 }
             } else {
                 let (v, i) = c.raw.to_trimesh(16, 8);
-                return bake(&to_vec3(&v), &i, resolution, par);
+                return bridge::bake::<Collider>(&to_vec3(&v), &i, resolution, par);
             }
         }
         ColliderView::HalfSpace(h) if h.normal().abs_diff_eq(Vec3::Y, 1e-5) => ColliderShape::Plane,
         ColliderView::TriMesh(t) => {
             let v: Vec<Vec3> = t.vertices().collect();
-            return bake(&v, t.indices(), resolution, par);
+            return bridge::bake::<Collider>(&v, t.indices(), resolution, par);
         }
         ColliderView::ConvexPolyhedron(c) => {
             let (v, i) = c.raw.to_trimesh();
-            return bake(&to_vec3(&v), &i, resolution, par);
+            return bridge::bake::<Collider>(&to_vec3(&v), &i, resolution, par);
         }
         ColliderView::Cylinder(c) => {
             let (v, i) = c.raw.to_trimesh(24);
-            return bake(&to_vec3(&v), &i, resolution, par);
+            return bridge::bake::<Collider>(&to_vec3(&v), &i, resolution, par);
         }
         ColliderView::Cone(c) => {
             let (v, i) = c.raw.to_trimesh(24);
-            return bake(&to_vec3(&v), &i, resolution, par);
+            return bridge::bake::<Collider>(&to_vec3(&v), &i, resolution, par);
         }
         // An open surface: cloth is kept on the side it faces (up).
         ColliderView::HeightField(h) => {
             let (v, i) = h.raw.to_trimesh();
-            return bake(&to_vec3(&v), &i, resolution, par);
+            return bridge::bake::<Collider>(&to_vec3(&v), &i, resolution, par);
         }
         _ => return None,
     })

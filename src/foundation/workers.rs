@@ -15,6 +15,21 @@ use crate::solver::{Parallel, Workers};
 #[derive(Resource, Debug)]
 pub struct ClothWorkers(pub Workers);
 
+impl ClothWorkers {
+    /// The pool of `workers`, or else a pool of no helpers put in `serial` (work on the
+    /// calling thread alone): for work whose result does not depend on the threads, such as a
+    /// mesh collider's bake.
+    pub(crate) fn or_serial<'a>(
+        workers: Option<&'a Self>,
+        serial: &'a mut Option<Workers>,
+    ) -> &'a Workers {
+        match workers {
+            Some(w) => &w.0,
+            None => serial.insert(Workers::new(0)),
+        }
+    }
+}
+
 impl Default for ClothWorkers {
     fn default() -> Self {
         Self(Workers::per_core())
