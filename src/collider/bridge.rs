@@ -108,8 +108,7 @@ pub(crate) fn mirror_colliders<C: EngineCollider, M: Component + Default>(
 ) {
     let m = settings.0;
     // Baked on the cloth plugins' threads: the field is the same on any number of them.
-    let mut serial = None;
-    let par = ClothWorkers::or_serial(workers.as_deref(), &mut serial);
+    let par = ClothWorkers::or_serial(workers.as_deref());
     for (entity, collider, has_cloth_collider, mirrored) in &changed {
         if has_cloth_collider && !mirrored {
             continue; // the user's own cloth collider wins

@@ -345,8 +345,7 @@ fn bake_mesh_colliders(
     mut colliders: Query<BakeQueryData>,
 ) {
     // Baked on the cloth plugins' threads: the field is the same on any number of them.
-    let mut serial = None;
-    let par = ClothWorkers::or_serial(workers.as_deref(), &mut serial);
+    let par = ClothWorkers::or_serial(workers.as_deref());
     for ((entity, name), collider, mesh3d, runtime, skinned, cloth) in &mut colliders {
         let who = EntityName::new(entity, name);
         let ColliderShape::Mesh(ColliderMesh::Asset { mesh, resolution }) = &collider.shape else {

@@ -16,17 +16,12 @@ use crate::solver::{Parallel, Workers};
 pub struct ClothWorkers(pub Workers);
 
 impl ClothWorkers {
-    /// The pool of `workers`, or else a pool of no helpers put in `serial` (work on the
-    /// calling thread alone): for work whose result does not depend on the threads, such as a
-    /// mesh collider's bake.
-    pub(crate) fn or_serial<'a>(
-        workers: Option<&'a Self>,
-        serial: &'a mut Option<Workers>,
-    ) -> &'a Workers {
-        match workers {
-            Some(w) => &w.0,
-            None => serial.insert(Workers::new(0)),
-        }
+    /// The pool of `workers`, or else one of no helpers (work on the calling thread alone,
+    /// made once for the process): for work whose result does not depend on the threads,
+    /// such as a mesh collider's bake.
+    pub(crate) fn or_serial(workers: Option<&Self>) -> &Workers {
+        static SERIAL: std::sync::OnceLock<Workers> = std::sync::OnceLock::new();
+        workers.map_or_else(|| SERIAL.get_or_init(|| Workers::new(0)), |w| &w.0)
     }
 }
 
