@@ -1712,7 +1712,8 @@ fn running_cape(self_collision: Option<ClothSelfCollision>, speed: f32, seconds:
 /// 6 m/s (measured: at most 2 pairs crossing, 3 summed over the speeds, and 45 % strain);
 /// without self-collision the limbs swinging up through it make it cross itself, so the scene
 /// can fail. (Before overlaps were undone over several substeps, `DEPENETRATION` in
-/// `self_collision.rs`, it crossed in up to 13 pairs, 23 summed, and stretched 68 %.)
+/// `solver/collision/self_collision/mod.rs`, it crossed in up to 13 pairs, 23 summed, and
+/// stretched 68 %.)
 #[test]
 fn a_running_characters_cape_keeps_its_layers_apart_at_the_default_thickness() {
     let speeds = [3.5, 3.75, 4.0, 4.25, 4.5, 4.75, 5.0, 5.25, 5.5, 6.0];

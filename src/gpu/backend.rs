@@ -30,7 +30,7 @@ use crate::wind::ClothWindField;
 
 /// Which solver steps a cloth.
 ///
-/// Put it on a [`Cloth`](crate::cloth::Cloth) entity; without it the cloth uses
+/// Put it on a [`Cloth`] entity; without it the cloth uses
 /// [`ClothGpuPlugin::default_backend`](super::ClothGpuPlugin::default_backend). Which one a cloth actually runs on, and why, is in
 /// [`ClothBackendInUse`].
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -132,7 +132,7 @@ pub(crate) struct GpuResult {
 }
 
 /// GPU cloths' impulses on colliders, waiting for the next fixed step's
-/// [`ClothContactImpulse`](crate::collider::ClothContactImpulse)s.
+/// [`ClothContactImpulse`]s.
 #[derive(Resource, Default)]
 pub(crate) struct GpuImpulses(pub Vec<(Entity, ContactImpulse)>);
 

@@ -9,7 +9,7 @@
 //!   tethers, [`ConstraintBatches`];
 //! - `collision`: [`Shape`], [`Collider`], signed distance fields, self-collision, ray queries;
 //! - `air`: [`Aerodynamics`] and [`WindField`];
-//! - `step`: [`SolverParams`], [`ClothState`], [`step`], [`Simulation`], sleeping, tearing,
+//! - `step`: [`SolverParams`], [`ClothState`], [`step()`], [`Simulation`], sleeping, tearing,
 //!   teleports, [`step_many`];
 //! - `metrics` (strain and distances), `scene` ([`HangingCloth`], the scene benchmarks and
 //!   tests are built on) and `fuzz` (the fuzz target) use them.
@@ -18,7 +18,7 @@
 //!
 //! Data enters as a triangle mesh or a [`Grid`] → [`Topology`] (edges, bending pairs) →
 //! [`ConstraintBatches`] (partitioned, coloured) plus a [`ClothState`] (positions, velocities,
-//! pins). [`step`] advances them by a time step with the chosen [`Solver`]; [`MeshShading`]
+//! pins). [`step()`] advances them by a time step with the chosen [`Solver`]; [`MeshShading`]
 //! produces shading data for the user's mesh; [`edge_strain`] measures accuracy. Everything
 //! a step needs is passed in explicitly, so the same code runs in the Bevy plugin, in tests
 //! and in the benchmark, and every GPU kernel has its reference here.

@@ -57,7 +57,7 @@ impl WindParams {
 
     /// Checks that the wind can be sampled: a finite velocity no faster than
     /// [`Self::MAX_SPEED`], gust amplitude, frequency, turbulence and eddy size within their
-    /// [`limits`](crate::solver::limits).
+    /// [`limits`].
     ///
     /// # Errors
     /// A [`ParamError`] naming the first field out of range.

@@ -46,7 +46,7 @@ impl Collider {
     }
 
     /// Checks that the collider can be collided with: thickness, friction and sizes within
-    /// their [`limits`](crate::solver::limits), poses finite and within range, scale positive.
+    /// their [`limits`], poses finite and within range, scale positive.
     ///
     /// # Errors
     /// What is wrong, in words (the step itself drops any push that lands out of range, so an

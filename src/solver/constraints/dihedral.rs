@@ -26,7 +26,7 @@
 //!
 //! The report's PBD update `Δp_i = −w_i √(1−d²)(arccos d − φ0)/Σ_j w_j|q_j|² · q_i` is the
 //! `α̃ = 0` case. Each hinge's compliance is divided by its geometric weight
-//! ([`dihedral_weight`]), so a compliance `1/B` means the same flexural rigidity `B` at any
+//! ([`dihedral_weight`](crate::solver::mesh::dihedral_weight)), so a compliance `1/B` means the same flexural rigidity `B` at any
 //! resolution, as for the [isometric](super::isometric) model.
 
 use super::lanes::{Real, V3};

@@ -1,6 +1,6 @@
 //! Implicit isometric bending: stiff bending that holds at any resolution.
 //!
-//! The isometric bending energy (see [`hinge_coefficients`](super::hinge_coefficients)) is
+//! The isometric bending energy (see [`hinge_coefficients`](crate::solver::mesh::hinge_coefficients)) is
 //! quadratic in the positions, `E = ½ x·K x` with a constant matrix
 //! `K = B Σ_hinges a aᵀ` (one scalar per vertex pair, the same for x, y and z). Projecting
 //! it hinge by hinge (XPBD) enforces it only while a substep can carry the stiffness:

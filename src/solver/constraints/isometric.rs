@@ -22,7 +22,7 @@
 //! ```
 //!
 //! with `α̃ = α/h²`, `α = 1/B`. `Σ a_i = 0`, so the correction never moves the centre of mass.
-//! The weights `a_i` are computed once from the rest shape ([`hinge_coefficients`]); they make
+//! The weights `a_i` are computed once from the rest shape ([`hinge_coefficients`](crate::solver::mesh::hinge_coefficients)); they make
 //! the stiffness a material constant, the same at any mesh resolution (where one projection per
 //! substep cannot carry it, the step solves the same energy implicitly: see `implicit.rs`).
 

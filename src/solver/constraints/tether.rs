@@ -206,7 +206,7 @@ impl Tethers {
         self.project_range(0..n, &mut pos[..n], &anchors);
     }
 
-    /// [`Self::project`] for the vertices of `range` only, whose positions are `pos`
+    /// The tethers' projection for the vertices of `range` only, whose positions are `pos`
     /// (`pos[0]` is vertex `range.start`), with the pins at `anchors` (one per slot of
     /// [`Self::anchors`]). Ranges that do not overlap may be projected in parallel. Each
     /// vertex's tethers apply nearest pin first; eight vertices go at once in SIMD lanes

@@ -1,6 +1,6 @@
 //! Cloth topology: rest geometry, distance edges, bending pairs, triangles.
 //!
-//! Built once from a rectangular grid ([`Grid`]) or from any indexed triangle mesh
+//! Built once from a rectangular grid ([`Grid`](super::Grid)) or from any indexed triangle mesh
 //! ([`Topology::from_triangles`]). Edges are the unique triangle edges, classified as
 //! *stretch* (warp and weft, aligned with a UV axis) or *shear* (diagonal in UV space); on a
 //! grid this gives the report's six edges per interior vertex. Every interior edge shared by
@@ -42,15 +42,15 @@ pub struct Bend {
     pub v: [u32; 4],
     /// Signed rest bend angle ψ0 in radians: 0 for a flat pair (the report's φ0 = π), the
     /// modelled fold with its direction for [`BendRest::RestShape`] (see
-    /// [`bend_angle`](super::bend_angle)).
+    /// [`bend_angle`]).
     pub rest_angle: f32,
     /// Index of the shared edge in [`Topology::edges`].
     pub edge: u32,
     /// Isometric bending weights `a_i` from the rest shape (see
-    /// [`hinge_coefficients`](super::hinge_coefficients)).
+    /// [`hinge_coefficients`]).
     pub coeffs: [f32; 4],
     /// Dihedral bending weight from the rest shape (see
-    /// [`dihedral_weight`](super::dihedral_weight)).
+    /// [`dihedral_weight`]).
     pub weight: f32,
 }
 
@@ -545,7 +545,7 @@ impl Topology {
     /// How uneven the edges are: the 90th percentile of their rest lengths over the 10th (1 for
     /// equal edges, √2 for a grid of squares with a diagonal each, 1 without edges). Self-
     /// collision keeps one thickness for the whole cloth up to
-    /// [`EVEN_EDGE_SPREAD`](crate::solver::limits::EVEN_EDGE_SPREAD), and a thickness per
+    /// [`EVEN_EDGE_SPREAD`], and a thickness per
     /// vertex above ([`Topology::self_collision_scales`]).
     #[must_use]
     pub fn rest_edge_spread(&self) -> f32 {
@@ -573,7 +573,7 @@ impl Topology {
     /// Each vertex's thickness from the cloth's triangles over the cloth's thickness, on a
     /// mesh whose edges are more uneven than [`EVEN_EDGE_SPREAD`]: its
     /// [`self_collision_scales`](Self::self_collision_scales), at most
-    /// [`SHORT_EDGE_THICKNESS`](crate::solver::limits::SHORT_EDGE_THICKNESS) times its shortest rest edge over the mean of every
+    /// [`SHORT_EDGE_THICKNESS`] times its shortest rest edge over the mean of every
     /// triangle's edges (and at least a quarter). Where a mesh is finer one way than the other
     /// (a skirt's tube, finer around than along), a vertex held a whole thickness off the
     /// triangles one short edge beyond its own would be held farther than its edges reach,
@@ -587,7 +587,7 @@ impl Topology {
     /// The self-collision thickness the plugin uses when none is set
     /// (`ClothSelfCollision::thickness` `None`): the mean rest edge, and on a mesh of even
     /// edges (a spread up to [`EVEN_EDGE_SPREAD`]) at most
-    /// [`DEFAULT_SHORT_EDGE_THICKNESS`](crate::solver::DEFAULT_SHORT_EDGE_THICKNESS)
+    /// [`DEFAULT_SHORT_EDGE_THICKNESS`]
     /// short edges. A mesh of uneven edges keeps its mean edge: each vertex scales it
     /// ([`Self::self_collision_scales`]). 0 without edges.
     #[must_use]

@@ -7,8 +7,8 @@
 //!
 //! Data flow: mesh positions (+ source normals) → [`Weld`] (particle of each mesh vertex,
 //! normal group of each mesh vertex) → particle positions and particle triangles
-//! ([`Weld::particle_positions`], [`Weld::particle_triangles`]) for the
-//! [`Topology`](super::Topology). After each step, [`MeshShading`] turns particle positions
+//! ([`Weld::gather`], [`Weld::particle_triangles`]) for the
+//! [`Topology`]. After each step, [`MeshShading`] turns particle positions
 //! back into per-mesh-vertex normals and tangents; positions are read through
 //! [`Weld::particle`].
 //!

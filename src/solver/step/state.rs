@@ -44,7 +44,7 @@ pub enum StateError {
         masses: usize,
     },
     /// A mass is zero, negative, NaN, infinite, so small that its inverse is infinite, or
-    /// heavier than [`MAX_VERTEX_MASS`](crate::solver::MAX_VERTEX_MASS).
+    /// heavier than [`MAX_VERTEX_MASS`].
     BadMass {
         /// Vertex index.
         vertex: usize,
@@ -52,7 +52,7 @@ pub enum StateError {
         mass: f32,
     },
     /// A position is NaN, infinite or farther than
-    /// [`MAX_COORDINATE`](crate::solver::MAX_COORDINATE) from the origin along an axis.
+    /// [`MAX_COORDINATE`] from the origin along an axis.
     NonFinitePosition {
         /// Vertex index.
         vertex: usize,
@@ -65,7 +65,7 @@ pub enum StateError {
         vertex_count: usize,
     },
     /// A pin target is NaN, infinite or farther than
-    /// [`MAX_COORDINATE`](crate::solver::MAX_COORDINATE) from the origin along an axis.
+    /// [`MAX_COORDINATE`] from the origin along an axis.
     NonFinitePinTarget {
         /// The pin's vertex index.
         vertex: u32,
@@ -78,7 +78,7 @@ pub enum StateError {
         vertex_count: usize,
     },
     /// A motion target or backstop normal is NaN, infinite or farther than
-    /// [`MAX_COORDINATE`](crate::solver::MAX_COORDINATE) from the origin along an axis, or
+    /// [`MAX_COORDINATE`] from the origin along an axis, or
     /// the backstop radius is not finite.
     NonFiniteMotionTarget {
         /// Vertex index.
@@ -141,7 +141,7 @@ impl ClothState {
     ///
     /// # Errors
     /// [`StateError`] if the lengths differ, a mass is not finite and positive or is over
-    /// [`MAX_VERTEX_MASS`](crate::solver::MAX_VERTEX_MASS), or a position is not finite.
+    /// [`MAX_VERTEX_MASS`], or a position is not finite.
     pub fn new(positions: &[Vec3], masses: &[f32]) -> Result<Self, StateError> {
         if positions.len() != masses.len() {
             return Err(StateError::LengthMismatch {

@@ -6,7 +6,7 @@
 //! 2. every unpinned vertex: `x_prev ← x`, `v ← v/(1 + damping·h) + g·h`, then the air's
 //!    velocity change for this substep's velocity against the air's (see
 //!    [`air_velocity_change`]), then `x ← x + v·h`;
-//!    If bending is solved implicitly (see [`BendingSolve`](super::BendingSolve)), one banded
+//!    If bending is solved implicitly (see [`BendingSolve`](crate::solver::BendingSolve)), one banded
 //!    solve `(M + h²K) δ = −h²K x̃` follows, and the projections below skip bending;
 //! 3. `iterations` times: each part's constraints (in parallel), then the seams' (in
 //!    parallel; where neighbouring seams overlap, the even ones, then the odd ones), then the

@@ -1,7 +1,7 @@
 //! Tearing: edges stretched past `threshold × rest length` break.
 //!
 //! After a step, [`overstretched_edges`] lists the edges to break; the cloth's topology is then
-//! rebuilt without them ([`Topology::without_edges`](super::Topology::without_edges)): the
+//! rebuilt without them ([`Topology::without_edges`](crate::solver::Topology::without_edges)): the
 //! triangles that used a torn edge disappear (from the constraints and from the rendered index
 //! buffer), and so do the edges and bending pairs no remaining triangle supports. Normals are
 //! recomputed from the remaining triangles, so they stay right along the tear.
