@@ -15,62 +15,95 @@ pub fn count_self_crossings(
         return 0;
     }
     let p = |i: u32| positions[i as usize].xyz();
-    // Uniform grid over triangle bounding boxes, cells of about the mean edge length.
+    // Uniform grid over triangle bounding boxes, cells of about the mean edge length, its
+    // buckets laid out one after another (counted, then filled).
     let mean_edge =
         edges.iter().map(|e| p(e[0]).distance(p(e[1]))).sum::<f32>() / edges.len() as f32;
     let cell = mean_edge.max(1e-6) * 2.0;
     let inv = 1.0 / cell;
     let size = triangles.len() * 4;
-    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); size];
-    for (t, tri) in triangles.iter().enumerate() {
+    let cells_of = |tri: &[u32; 3]| {
         let [a, b, c] = tri.map(p);
-        if !(a.is_finite() && b.is_finite() && c.is_finite()) {
-            continue;
-        }
-        let lo = cell_of(a.min(b).min(c), inv);
-        let hi = cell_of(a.max(b).max(c), inv);
+        (a.is_finite() && b.is_finite() && c.is_finite())
+            .then(|| (cell_of(a.min(b).min(c), inv), cell_of(a.max(b).max(c), inv)))
+    };
+    let each_cell = |(lo, hi): (IVec3, IVec3), f: &mut dyn FnMut(usize)| {
         for z in lo.z..=hi.z {
             for y in lo.y..=hi.y {
                 for x in lo.x..=hi.x {
-                    buckets[hash(IVec3::new(x, y, z), size)].push(t as u32);
+                    f(hash(IVec3::new(x, y, z), size));
                 }
             }
         }
+    };
+    let boxes: Vec<Option<(IVec3, IVec3)>> = triangles.iter().map(cells_of).collect();
+    // Each triangle's bounding box, padded past what rounding could move a crossing by: an
+    // edge whose box misses it cannot cross it (most of those in a pile's buckets).
+    let padded = |lo: Vec3, hi: Vec3| {
+        let pad = 1e-4 * cell + 1e-6 * lo.abs().max(hi.abs()).max_element();
+        (lo - Vec3::splat(pad), hi + Vec3::splat(pad))
+    };
+    let bounds: Vec<(Vec3, Vec3)> = triangles
+        .iter()
+        .map(|tri| {
+            let [a, b, c] = tri.map(p);
+            padded(a.min(b).min(c), a.max(b).max(c))
+        })
+        .collect();
+    let mut start = vec![0usize; size + 1];
+    for b in boxes.iter().flatten() {
+        each_cell(*b, &mut |k| start[k + 1] += 1);
     }
+    for k in 0..size {
+        start[k + 1] += start[k];
+    }
+    let mut fill = start.clone();
+    let mut items = vec![0u32; start[size]];
+    for (t, b) in boxes.iter().enumerate() {
+        if let Some(b) = b {
+            each_cell(*b, &mut |k| {
+                items[fill[k]] = t as u32;
+                fill[k] += 1;
+            });
+        }
+    }
+    // Each edge tests each triangle in the buckets its box covers once: `seen[t]` holds the
+    // last edge (plus one) that tested triangle `t`.
+    let mut seen = vec![0u32; triangles.len()];
     let mut count = 0;
-    let mut seen = Vec::new();
-    for e in edges {
+    for (k, e) in edges.iter().enumerate() {
         let (a, b) = (p(e[0]), p(e[1]));
         if !(a.is_finite() && b.is_finite()) {
             continue;
         }
-        let lo = cell_of(a.min(b), inv);
-        let hi = cell_of(a.max(b), inv);
-        seen.clear();
-        for z in lo.z..=hi.z {
-            for y in lo.y..=hi.y {
-                for x in lo.x..=hi.x {
-                    seen.extend_from_slice(&buckets[hash(IVec3::new(x, y, z), size)]);
+        let stamp = k as u32 + 1;
+        each_cell(
+            (cell_of(a.min(b), inv), cell_of(a.max(b), inv)),
+            &mut |bucket| {
+                for &t in &items[start[bucket]..start[bucket + 1]] {
+                    if seen[t as usize] == stamp {
+                        continue;
+                    }
+                    seen[t as usize] = stamp;
+                    let (lo, hi) = bounds[t as usize];
+                    if lo.cmpgt(a.max(b)).any() || hi.cmplt(a.min(b)).any() {
+                        continue;
+                    }
+                    let tri = triangles[t as usize];
+                    if !(tri.contains(&e[0]) || tri.contains(&e[1]))
+                        && segment_crosses_triangle(a, b, tri.map(p))
+                    {
+                        count += 1;
+                    }
                 }
-            }
-        }
-        seen.sort_unstable();
-        seen.dedup();
-        for &t in &seen {
-            let tri = triangles[t as usize];
-            if tri.contains(&e[0]) || tri.contains(&e[1]) {
-                continue;
-            }
-            if segment_crosses_triangle(a, b, tri.map(p)) {
-                count += 1;
-            }
-        }
+            },
+        );
     }
     count
 }
 
 /// Möller–Trumbore segment–triangle intersection (strictly inside both).
-fn segment_crosses_triangle(a: Vec3, b: Vec3, [v0, v1, v2]: [Vec3; 3]) -> bool {
+pub(super) fn segment_crosses_triangle(a: Vec3, b: Vec3, [v0, v1, v2]: [Vec3; 3]) -> bool {
     let dir = b - a;
     let (e1, e2) = (v1 - v0, v2 - v0);
     let h = dir.cross(e2);

@@ -548,3 +548,81 @@ fn crossings_are_counted() {
     // Edges touching the triangle's own vertices never count.
     assert_eq!(count_self_crossings(&pos, &tris, &[[0, 4]]), 0);
 }
+
+/// The grid's count against every edge tested with every triangle, on crumpled sheets and
+/// triangle soups (some with coincident and far-off vertices): the same number each time,
+/// and crossings in most of them (so the comparison has something to count).
+#[test]
+fn crossings_counted_through_the_grid_are_all_the_crossing_pairs() {
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut with_crossings = 0;
+    for case in 0..24 {
+        let (pos, tris): (Vec<Vec4>, Vec<[u32; 3]>) = if case % 2 == 0 {
+            // A 12 × 12 sheet, each vertex moved at random by up to `amp` edges along every
+            // axis: folds through itself from about half an edge on.
+            let amp = 0.2 + case as f32 * 0.06;
+            let grid = crate::solver::Grid::new(12, 12, 1.0, 1.0);
+            let mut jitter = || (next() - 0.5) * amp / 11.0;
+            let pos = grid
+                .positions()
+                .iter()
+                .map(|p| (*p + Vec3::new(jitter(), jitter(), jitter())).extend(1.0))
+                .collect();
+            let tris = grid
+                .indices()
+                .chunks(3)
+                .map(|t| [t[0], t[1], t[2]])
+                .collect();
+            (pos, tris)
+        } else {
+            // 80 small triangles (corners within 0.25 of a centre) in a 3 m box, every
+            // fourth sharing a corner with the one before.
+            let mut pos: Vec<Vec4> = Vec::new();
+            let mut tris = Vec::new();
+            for t in 0..80u32 {
+                let c = Vec3::new(next(), next(), next()) * 3.0;
+                let mut corner = || {
+                    pos.push((c + (Vec3::new(next(), next(), next()) - 0.5) * 0.5).extend(1.0));
+                    pos.len() as u32 - 1
+                };
+                let (a, b, d) = (corner(), corner(), corner());
+                let a = if t % 4 == 3 { a - 3 } else { a };
+                tris.push([a, b, d]);
+            }
+            (pos, tris)
+        };
+        let mut edges: Vec<[u32; 2]> = tris
+            .iter()
+            .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
+            .map(|[a, b]| [a.min(b), a.max(b)])
+            .collect();
+        edges.sort_unstable();
+        edges.dedup();
+        let p = |i: u32| pos[i as usize].xyz();
+        let brute = edges
+            .iter()
+            .map(|e| {
+                tris.iter()
+                    .filter(|t| !(t.contains(&e[0]) || t.contains(&e[1])))
+                    .filter(|t| crossings::segment_crosses_triangle(p(e[0]), p(e[1]), t.map(p)))
+                    .count()
+            })
+            .sum::<usize>();
+        assert_eq!(
+            count_self_crossings(&pos, &tris, &edges),
+            brute,
+            "case {case}"
+        );
+        with_crossings += usize::from(brute > 0);
+    }
+    assert!(
+        with_crossings >= 12,
+        "only {with_crossings} of 24 cases cross"
+    );
+}
