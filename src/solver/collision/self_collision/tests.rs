@@ -567,7 +567,7 @@ fn crossings_counted_through_the_grid_are_all_the_crossing_pairs() {
             // A 12 × 12 sheet, each vertex moved at random by up to `amp` edges along every
             // axis: folds through itself from about half an edge on.
             let amp = 0.2 + case as f32 * 0.06;
-            let grid = crate::solver::Grid::new(12, 12, 1.0, 1.0);
+            let grid = crate::solver::mesh::Grid::new(12, 12, 1.0, 1.0);
             let mut jitter = || (next() - 0.5) * amp / 11.0;
             let pos = grid
                 .positions()
