@@ -22,12 +22,21 @@ pub fn count_self_crossings(
     let cell = mean_edge.max(1e-6) * 2.0;
     let inv = 1.0 / cell;
     let size = triangles.len() * 4;
-    let cells_of = |tri: &[u32; 3]| {
-        let [a, b, c] = tri.map(p);
-        (a.is_finite() && b.is_finite() && c.is_finite())
-            .then(|| (cell_of(a.min(b).min(c), inv), cell_of(a.max(b).max(c), inv)))
-    };
-    let each_cell = |(lo, hi): (IVec3, IVec3), f: &mut dyn FnMut(usize)| {
+    // Each triangle's bounding box, padded past what rounding could move a crossing by: an
+    // edge whose box misses it cannot cross it (most of those in a pile's buckets).
+    let boxes: Vec<Option<(Vec3, Vec3)>> = triangles
+        .iter()
+        .map(|tri| {
+            let [a, b, c] = tri.map(p);
+            (a.is_finite() && b.is_finite() && c.is_finite()).then(|| {
+                let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+                let pad = 1e-4 * cell + 1e-6 * lo.abs().max(hi.abs()).max_element();
+                (lo - Vec3::splat(pad), hi + Vec3::splat(pad))
+            })
+        })
+        .collect();
+    let each_cell = |(lo, hi): (Vec3, Vec3), f: &mut dyn FnMut(usize)| {
+        let (lo, hi) = (cell_of(lo, inv), cell_of(hi, inv));
         for z in lo.z..=hi.z {
             for y in lo.y..=hi.y {
                 for x in lo.x..=hi.x {
@@ -36,20 +45,6 @@ pub fn count_self_crossings(
             }
         }
     };
-    let boxes: Vec<Option<(IVec3, IVec3)>> = triangles.iter().map(cells_of).collect();
-    // Each triangle's bounding box, padded past what rounding could move a crossing by: an
-    // edge whose box misses it cannot cross it (most of those in a pile's buckets).
-    let padded = |lo: Vec3, hi: Vec3| {
-        let pad = 1e-4 * cell + 1e-6 * lo.abs().max(hi.abs()).max_element();
-        (lo - Vec3::splat(pad), hi + Vec3::splat(pad))
-    };
-    let bounds: Vec<(Vec3, Vec3)> = triangles
-        .iter()
-        .map(|tri| {
-            let [a, b, c] = tri.map(p);
-            padded(a.min(b).min(c), a.max(b).max(c))
-        })
-        .collect();
     let mut start = vec![0usize; size + 1];
     for b in boxes.iter().flatten() {
         each_cell(*b, &mut |k| start[k + 1] += 1);
@@ -77,27 +72,26 @@ pub fn count_self_crossings(
             continue;
         }
         let stamp = k as u32 + 1;
-        each_cell(
-            (cell_of(a.min(b), inv), cell_of(a.max(b), inv)),
-            &mut |bucket| {
-                for &t in &items[start[bucket]..start[bucket + 1]] {
-                    if seen[t as usize] == stamp {
-                        continue;
-                    }
-                    seen[t as usize] = stamp;
-                    let (lo, hi) = bounds[t as usize];
-                    if lo.cmpgt(a.max(b)).any() || hi.cmplt(a.min(b)).any() {
-                        continue;
-                    }
-                    let tri = triangles[t as usize];
-                    if !(tri.contains(&e[0]) || tri.contains(&e[1]))
-                        && segment_crosses_triangle(a, b, tri.map(p))
-                    {
-                        count += 1;
-                    }
+        each_cell((a.min(b), a.max(b)), &mut |bucket| {
+            for &t in &items[start[bucket]..start[bucket + 1]] {
+                if seen[t as usize] == stamp {
+                    continue;
                 }
-            },
-        );
+                seen[t as usize] = stamp;
+                let Some((lo, hi)) = boxes[t as usize] else {
+                    continue;
+                };
+                if lo.cmpgt(a.max(b)).any() || hi.cmplt(a.min(b)).any() {
+                    continue;
+                }
+                let tri = triangles[t as usize];
+                if !(tri.contains(&e[0]) || tri.contains(&e[1]))
+                    && segment_crosses_triangle(a, b, tri.map(p))
+                {
+                    count += 1;
+                }
+            }
+        });
     }
     count
 }
