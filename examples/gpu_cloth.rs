@@ -10,6 +10,12 @@
 //! `--backend gpu|cpu|auto` (default gpu); `--headless` runs with a renderer but no window
 //! when the backend is not the CPU. The JSON line says which backend ran (`"backend"`).
 //!
+//! On a software renderer (Mesa's llvmpipe, where there is no GPU) the kernels run on the CPU's
+//! cores 30–70 times slower than the CPU solver: without `--size` the cloth is then 64² (a 256²
+//! step takes over a second there), and a window's frame runs at most two fixed steps (the
+//! cloth falls behind the clock instead of every frame taking longer than the last). `auto`
+//! runs it on the CPU there.
+//!
 //! `--no-self-collision` leaves self-collision out. Both backends run the same model: each
 //! substep, every vertex moves by the mean of its contacts' corrections.
 
@@ -17,11 +23,37 @@
 mod support;
 
 use bevy::prelude::*;
+use bevy_cloth::gpu::ClothGpuSupport;
 use bevy_cloth::prelude::*;
 use support::Args;
 
 #[derive(Resource)]
 struct Size(u32);
+
+/// The size to use on a software renderer (no `--size` given and the GPU asked for).
+#[derive(Resource)]
+struct SoftwareSize(Option<u32>);
+
+/// On a software renderer, with no size given: a 64² cloth, and at most two fixed steps a
+/// frame. Before `setup`, which builds the cloth at `Size`.
+fn fit_to_a_software_renderer(
+    support: Option<Res<ClothGpuSupport>>,
+    software_size: Res<SoftwareSize>,
+    mut size: ResMut<Size>,
+    mut time: ResMut<Time<Virtual>>,
+) {
+    let name = support.and_then(|s| s.software_adapter.clone());
+    if let (Some(name), Some(small)) = (name, software_size.0) {
+        info!(
+            "the GPU is a software renderer ({name}): a {small}² cloth instead of {}² \
+             (--size N to choose, --backend cpu for the CPU solver)",
+            size.0
+        );
+        size.0 = small;
+        // At most 1.5 fixed steps of virtual time a frame: one step or two.
+        time.set_max_delta(core::time::Duration::from_secs_f64(1.5 / 60.0));
+    }
+}
 
 #[derive(Resource)]
 struct SelfCollisionOn(bool);
@@ -124,15 +156,18 @@ fn main() {
         .entry("backend".into())
         .or_insert_with(|| "gpu".into());
     let size: u32 = args.get("size", 256);
+    let software_size =
+        (!args.rest.contains_key("size") && args.backend() == ClothBackend::Gpu).then_some(64);
     if !(2..=1024).contains(&size) {
         eprintln!("--size must be in 2..=1024, got {size}");
         std::process::exit(2);
     }
     let mut app = support::app(&args, "bevy_cloth: GPU cloth", 1.0 / 60.0);
     app.insert_resource(Size(size))
+        .insert_resource(SoftwareSize(software_size))
         .insert_resource(SelfCollisionOn(
             !args.rest.contains_key("no-self-collision"),
         ))
-        .add_systems(Startup, setup);
+        .add_systems(Startup, (fit_to_a_software_renderer, setup).chain());
     support::run(app, &args, report);
 }

@@ -168,10 +168,24 @@ fn with_a_renderer_gpu_cloths_leave_the_cpu_and_the_rest_say_why() {
         .resource::<bevy_cloth::gpu::ClothGpuSupport>()
         .clone();
     assert_eq!(support.unavailable, None, "llvmpipe runs the kernels");
+    // A software renderer (llvmpipe here, none on a real GPU) is named, and `Auto` keeps its
+    // cloths on the CPU there.
+    let adapter = app
+        .world()
+        .resource::<bevy::render::renderer::RenderAdapterInfo>();
+    let software = adapter.device_type == wgpu::DeviceType::Cpu;
+    assert_eq!(
+        support.software_adapter.as_deref(),
+        software.then_some(adapter.name.as_str()),
+        "{} ({:?})",
+        adapter.name,
+        adapter.device_type
+    );
     let cpu = spawn(&mut app, None, false);
     let gpu = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    let auto = spawn(&mut app, Some(ClothBackend::Auto), false);
     // Implicit bending, asked for by name, has no GPU twin.
-    let torn = spawn(&mut app, Some(ClothBackend::Auto), false);
+    let torn = spawn(&mut app, Some(ClothBackend::Gpu), false);
     app.world_mut().entity_mut(torn).insert(ClothConfig {
         solver: bevy_cloth::solver::Solver::Xpbd {
             stretch: 0.0,
@@ -183,6 +197,11 @@ fn with_a_renderer_gpu_cloths_leave_the_cpu_and_the_rest_say_why() {
     });
     common::run(&mut app, 12);
     assert!(in_use(&app, gpu).gpu);
+    if software {
+        on_the_cpu_because(&app, auto, "software renderer", 5);
+    } else {
+        assert!(in_use(&app, auto).gpu, "{:?}", in_use(&app, auto));
+    }
     let u = in_use(&app, cpu);
     assert!(!u.gpu && u.reason.is_none(), "{u:?}");
     let u = in_use(&app, torn);

@@ -42,7 +42,9 @@ pub enum ClothBackend {
     /// The GPU kernels in the render graph; the CPU (with a warning) where the GPU cannot
     /// run this cloth.
     Gpu,
-    /// The GPU where it can run this cloth, else the CPU (with an info line saying why).
+    /// The GPU where it can run this cloth, else the CPU (with an info line saying why). A
+    /// software renderer (llvmpipe) counts as none: the CPU solver is faster there (see
+    /// [`ClothGpuSupport::software_adapter`]).
     #[default]
     Auto,
 }
@@ -62,6 +64,12 @@ pub struct ClothBackendInUse {
 pub struct ClothGpuSupport {
     /// `None` when available; otherwise why not.
     pub unavailable: Option<String>,
+    /// The adapter's name when it is a software renderer (wgpu's `DeviceType::Cpu`: Mesa's
+    /// llvmpipe, SwiftShader, WARP). The kernels run there, but on the same CPU cores and
+    /// 30–70 times slower than the CPU solver (docs/performance.md, *On llvmpipe*), so
+    /// [`ClothBackend::Auto`] runs cloths on the CPU; [`ClothBackend::Gpu`] still runs them
+    /// on it (tests, correctness runs).
+    pub software_adapter: Option<String>,
 }
 
 #[derive(Resource, Clone, Copy)]
@@ -287,9 +295,18 @@ pub(crate) fn choose_backends(
             continue;
         }
         let wanted = backend.copied().unwrap_or(default.0);
-        let verdict: Result<(), String> = match wanted {
-            ClothBackend::Cpu => Err(String::new()),
-            ClothBackend::Gpu | ClothBackend::Auto => support
+        // A software renderer (when the GPU backend is available at all).
+        let software = support
+            .as_deref()
+            .filter(|s| s.unavailable.is_none())
+            .and_then(|s| s.software_adapter.as_deref());
+        let verdict: Result<(), String> = match (wanted, software) {
+            (ClothBackend::Cpu, _) => Err(String::new()),
+            (ClothBackend::Auto, Some(name)) => Err(format!(
+                "the GPU is a software renderer ({name}), slower than the CPU solver; \
+                     ClothBackend::Gpu runs the cloth there anyway"
+            )),
+            (ClothBackend::Gpu | ClothBackend::Auto, _) => support
                 .as_deref()
                 .map_or(Some("ClothGpuPlugin is not added".to_owned()), |s| {
                     s.unavailable.clone()

@@ -8,7 +8,7 @@ use std::sync::{Mutex, OnceLock};
 use bevy::core_pipeline::schedule::camera_driver;
 use bevy::prelude::*;
 use bevy::render::mesh::allocator::MeshAllocatorSettings;
-use bevy::render::renderer::{RenderDevice, RenderGraph, RenderInstance};
+use bevy::render::renderer::{RenderAdapterInfo, RenderDevice, RenderGraph, RenderInstance};
 use bevy::render::{ExtractSchedule, Render, RenderApp, RenderSystems};
 
 use super::backend::{
@@ -116,6 +116,7 @@ impl Plugin for ClothGpuPlugin {
                 }
                 .to_owned(),
             ),
+            software_adapter: None,
         });
         let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
             return;
@@ -186,7 +187,15 @@ impl Plugin for ClothGpuPlugin {
         if let Some(why) = &unavailable {
             debug!("bevy_cloth: GPU backend unavailable: {why}");
         }
-        app.insert_resource(ClothGpuSupport { unavailable });
+        let software_adapter = app
+            .get_sub_app(RenderApp)
+            .and_then(|r| r.world().get_resource::<RenderAdapterInfo>())
+            .filter(|info| info.device_type == wgpu::DeviceType::Cpu)
+            .map(|info| info.name.clone());
+        app.insert_resource(ClothGpuSupport {
+            unavailable,
+            software_adapter,
+        });
         keep_graphics_driver_loaded(app);
     }
 
