@@ -586,3 +586,67 @@ fn a_self_collision_thicker_than_an_edge_is_refused() {
     assert!(err.reason.contains("1.0 times"), "{err}");
     assert_eq!(sim.features().self_collision.unwrap().thickness, thick);
 }
+
+/// [`Threads`], remembering the most items one call was given.
+#[derive(Default)]
+struct Recording {
+    most: std::sync::atomic::AtomicUsize,
+}
+
+impl Parallel for Recording {
+    fn for_each_mut<T: Send, F: Fn(&mut T) + Sync>(&self, items: &mut [T], f: F) {
+        self.most
+            .fetch_max(items.len(), std::sync::atomic::Ordering::Relaxed);
+        Threads.for_each_mut(items, f);
+    }
+
+    fn threads(&self) -> usize {
+        Threads.threads()
+    }
+}
+
+/// A cloth too small to be cut into parts, stepped alone by `step_many`, hands its
+/// self-collision to the threads in chunks of vertices (it was stepped with `Serial`: one
+/// core busy), and comes out as stepped on one thread, bit for bit.
+#[test]
+fn a_lone_self_colliding_cloth_spreads_its_self_collision_over_the_threads() {
+    let mut scene = HangingCloth::on(Grid::new(24, 24, 1.0, 1.0));
+    scene.pins.truncate(1);
+    scene.features = Features {
+        self_collision: Some(SelfCollision {
+            thickness: 0.03,
+            friction: 0.3,
+        }),
+        ..Features::default()
+    };
+    let mut together = [scene.build().unwrap()];
+    assert_eq!(together[0].batches().part_count(), 1);
+    let mut alone = together[0].clone();
+    // A floor under the pinned corner's height: the cloth swings down and piles on it.
+    let floor = [Collider::fixed(
+        Shape::Plane,
+        Pose::at(Vec3::new(0.0, -0.6, 0.0)),
+        0.01,
+        0.5,
+    )];
+    let env = Environment {
+        colliders: &floor,
+        ..Default::default()
+    };
+    let par = Recording::default();
+    for _ in 0..90 {
+        step_many(&mut ManyItem::each(&mut together), 1.0 / 60.0, &env, &par);
+        alone.step_in(1.0 / 60.0, &env, &Serial);
+    }
+    assert_eq!(together[0].state().positions, alone.state().positions);
+    let most = par.most.load(std::sync::atomic::Ordering::Relaxed);
+    assert!(most >= 4, "at most {most} items a call");
+    // It piled up: some of it lies on the floor, folded over itself.
+    let low = alone
+        .state()
+        .positions
+        .iter()
+        .filter(|p| p.y < -0.5)
+        .count();
+    assert!(low > 100, "{low} vertices near the floor");
+}

@@ -352,5 +352,22 @@ fn bits(mut mask: u32) -> impl Iterator<Item = usize> {
     })
 }
 
-/// Vertices handled by one parallel work item.
+/// Vertices handled by one parallel work item (at most: see [`chunk_for`]).
 const CHUNK: usize = 512;
+
+/// The fewest vertices a work item of the query or the pass gets.
+const MIN_CHUNK: usize = 64;
+
+/// Vertices per work item of the query and the pass for `n` vertices on `threads` threads:
+/// [`CHUNK`], or on several threads about a quarter of a thread's share where that is less
+/// (at least [`MIN_CHUNK`]), so that a cloth of a few hundred or thousand vertices, whose
+/// self-collision is most of its step, is spread over the threads too. Each vertex's lists
+/// and correction are its own and the reactions are summed in fixed point, so the split
+/// changes nothing in the results.
+fn chunk_for(n: usize, threads: usize) -> usize {
+    if threads <= 1 {
+        CHUNK
+    } else {
+        n.div_ceil(4 * threads).clamp(MIN_CHUNK, CHUNK)
+    }
+}

@@ -262,10 +262,11 @@ pub(crate) fn self_collide(
     scratch.touching.resize(active.len(), 0);
     let (nc, nl) = (&scratch.neighbour_count, &scratch.neighbours);
     let (tc, tl) = (&scratch.triangle_count, &scratch.triangles);
+    let chunk = chunk_for(active.len(), par.threads());
     let mut chunks: Vec<PassChunk> = active
-        .chunks(CHUNK)
-        .zip(scratch.corrections.chunks_mut(CHUNK))
-        .zip(scratch.touching.chunks_mut(CHUNK))
+        .chunks(chunk)
+        .zip(scratch.corrections.chunks_mut(chunk))
+        .zip(scratch.touching.chunks_mut(chunk))
         .map(|((active, corrections), touching)| PassChunk {
             active,
             corrections,

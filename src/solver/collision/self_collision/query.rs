@@ -716,15 +716,16 @@ impl SelfCollisionScratch {
             radius,
             skip: SKIP * thickness,
         };
+        let chunk = chunk_for(n, par.threads());
         let mut chunks: Vec<QueryChunk> = self
             .neighbour_count
-            .chunks_mut(CHUNK)
-            .zip(self.neighbours.chunks_mut(CHUNK * MAX_SELF_NEIGHBOURS))
-            .zip(self.triangle_count.chunks_mut(CHUNK))
-            .zip(self.triangles.chunks_mut(CHUNK * MAX_SELF_TRIANGLES))
+            .chunks_mut(chunk)
+            .zip(self.neighbours.chunks_mut(chunk * MAX_SELF_NEIGHBOURS))
+            .zip(self.triangle_count.chunks_mut(chunk))
+            .zip(self.triangles.chunks_mut(chunk * MAX_SELF_TRIANGLES))
             .enumerate()
             .map(|(k, (((nc, nl), tc), tl))| QueryChunk {
-                first: k * CHUNK,
+                first: k * chunk,
                 neighbour_count: nc,
                 neighbours: nl,
                 triangle_count: tc,
