@@ -605,9 +605,10 @@ impl Parallel for Recording {
     }
 }
 
-/// A cloth too small to be cut into parts, stepped alone by `step_many`, hands its
-/// self-collision to the threads in chunks of vertices (it was stepped with `Serial`: one
-/// core busy), and comes out as stepped on one thread, bit for bit.
+/// A cloth too small to be cut into parts, with self-collision and far more work than the
+/// two small cloths beside it, is stepped first by `step_many` and hands its self-collision
+/// to the threads in chunks of vertices (it was stepped with `Serial` beside the others: one
+/// core busy); every cloth comes out as stepped alone on one thread, bit for bit.
 #[test]
 fn a_lone_self_colliding_cloth_spreads_its_self_collision_over_the_threads() {
     let mut scene = HangingCloth::on(Grid::new(24, 24, 1.0, 1.0));
@@ -619,9 +620,10 @@ fn a_lone_self_colliding_cloth_spreads_its_self_collision_over_the_threads() {
         }),
         ..Features::default()
     };
-    let mut together = [scene.build().unwrap()];
+    let small = |n| HangingCloth::on(Grid::new(n, n, 0.3, 0.3)).build().unwrap();
+    let mut together = [scene.build().unwrap(), small(6), small(8)];
     assert_eq!(together[0].batches().part_count(), 1);
-    let mut alone = together[0].clone();
+    let mut alone = together.clone();
     // A floor under the pinned corner's height: the cloth swings down and piles on it.
     let floor = [Collider::fixed(
         Shape::Plane,
@@ -636,13 +638,18 @@ fn a_lone_self_colliding_cloth_spreads_its_self_collision_over_the_threads() {
     let par = Recording::default();
     for _ in 0..90 {
         step_many(&mut ManyItem::each(&mut together), 1.0 / 60.0, &env, &par);
-        alone.step_in(1.0 / 60.0, &env, &Serial);
+        for sim in &mut alone {
+            sim.step_in(1.0 / 60.0, &env, &Serial);
+        }
     }
-    assert_eq!(together[0].state().positions, alone.state().positions);
+    for (a, b) in together.iter().zip(&alone) {
+        assert_eq!(a.state().positions, b.state().positions);
+    }
+    // Stepped beside the two others, the calls had at most three items (the three cloths).
     let most = par.most.load(std::sync::atomic::Ordering::Relaxed);
     assert!(most >= 4, "at most {most} items a call");
     // It piled up: some of it lies on the floor, folded over itself.
-    let low = alone
+    let low = alone[0]
         .state()
         .positions
         .iter()
