@@ -626,3 +626,35 @@ fn crossings_counted_through_the_grid_are_all_the_crossing_pairs() {
         "only {with_crossings} of 24 cases cross"
     );
 }
+
+/// The query's and the pass's chunks: 512 vertices on one thread; on several, enough chunks
+/// for every thread to take about four (within 64 to 512 vertices a chunk), so a cloth of a
+/// few hundred vertices is shared out and a big one is cut as before.
+#[test]
+fn self_collision_chunks_follow_the_threads_within_64_to_512_vertices() {
+    for n in [1, 63, 100, 576, 1089, 4096, 9216, 65_536, 1 << 20] {
+        assert_eq!(chunk_for(n, 1), CHUNK, "{n} vertices on one thread");
+        for threads in [2, 3, 8, 16, 64] {
+            let chunk = chunk_for(n, threads);
+            assert!(
+                (MIN_CHUNK..=CHUNK).contains(&chunk),
+                "{n} on {threads}: {chunk}"
+            );
+            let chunks = n.div_ceil(chunk);
+            // Four a thread where the bounds allow it (rounding up the chunk's size can leave
+            // up to three fewer when there are 64 threads).
+            if chunk > MIN_CHUNK && chunk < CHUNK {
+                assert!(
+                    (4 * threads - 3..=4 * threads).contains(&chunks),
+                    "{n} on {threads}: {chunks} chunks of {chunk}"
+                );
+            }
+            if chunk == CHUNK {
+                assert!(n >= 4 * threads * (CHUNK - 1), "{n} on {threads}: {chunks}");
+            }
+            if chunk == MIN_CHUNK {
+                assert!(n <= 4 * threads * MIN_CHUNK, "{n} on {threads}: {chunks}");
+            }
+        }
+    }
+}
