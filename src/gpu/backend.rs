@@ -287,6 +287,11 @@ pub(crate) fn choose_backends(
 ) {
     let dt = fixed.timestep().as_secs_f32();
     let mut seen = std::collections::HashSet::new();
+    // A software renderer (when the GPU backend is available at all).
+    let software = support
+        .as_deref()
+        .filter(|s| s.unavailable.is_none())
+        .and_then(|s| s.software_adapter.as_deref());
     for ((entity, name), mut cloth, backend, in_use, on_gpu, leaving, readback) in &mut cloths {
         let who = EntityName::new(entity, name);
         seen.insert(entity);
@@ -295,16 +300,11 @@ pub(crate) fn choose_backends(
             continue;
         }
         let wanted = backend.copied().unwrap_or(default.0);
-        // A software renderer (when the GPU backend is available at all).
-        let software = support
-            .as_deref()
-            .filter(|s| s.unavailable.is_none())
-            .and_then(|s| s.software_adapter.as_deref());
         let verdict: Result<(), String> = match (wanted, software) {
             (ClothBackend::Cpu, _) => Err(String::new()),
             (ClothBackend::Auto, Some(name)) => Err(format!(
                 "the GPU is a software renderer ({name}), slower than the CPU solver; \
-                     ClothBackend::Gpu runs the cloth there anyway"
+                 ClothBackend::Gpu runs the cloth there anyway"
             )),
             (ClothBackend::Gpu | ClothBackend::Auto, _) => support
                 .as_deref()

@@ -82,9 +82,11 @@ pub fn step_many(items: &mut [ManyItem<'_>], dt: f32, env: &Environment<'_>, par
     // rest are shared out. (Stepped with `Serial`, a 1 089-vertex banner draped with
     // self-collision kept one core of two busy, 13 ms a step.)
     let mut first = 0;
+    let mut after: usize = rest.iter().map(|i| weight(i.sim)).sum();
     while first < rest.len() {
-        let after: usize = rest[first + 1..].iter().map(|i| weight(i.sim)).sum();
         let item = &mut rest[first];
+        // The weight of those after this one.
+        after -= weight(item.sim);
         let alone = after == 0
             || (item.sim.features().self_collision.is_some() && weight(item.sim) >= 2 * after);
         if !alone {
