@@ -31,6 +31,10 @@ pub(crate) const FLAG_ACCUMULATE: u32 = 8;
 pub(crate) const FLAG_SC: u32 = 16;
 pub(crate) const FLAG_TETHERS: u32 = 32;
 pub(crate) const FLAG_TEARING: u32 = 64;
+/// The distances are swept forward and back ([`ConstraintBatches::symmetric_sweeps`]).
+///
+/// [`ConstraintBatches::symmetric_sweeps`]: crate::solver::ConstraintBatches::symmetric_sweeps
+pub(crate) const FLAG_SYMMETRIC: u32 = 128;
 
 /// The part count the GPU projects `sim` with: parts of at most [`TILE`] vertices (one
 /// workgroup each, in workgroup memory), fewer when the mesh's vertex order would leave
@@ -357,6 +361,9 @@ impl WorldLayout {
             let batches = choose_batches(sim);
             if batches.bending && !batches.boundary.bending.iso {
                 flags |= FLAG_DIHEDRAL;
+            }
+            if batches.symmetric_sweeps() && !key.lab {
+                flags |= FLAG_SYMMETRIC;
             }
             if let Some(tp) = features.tethers.filter(|_| !key.lab) {
                 let pinned: Vec<u32> = pins.iter().map(|p| p.vertex).collect();

@@ -69,8 +69,8 @@ pub use collision::{
 pub use constraints::{
     BendingSolve, ConstraintBatches, DEFAULT_BENDING_COMPLIANCE, IMPLICIT_BENDING_AUTO_WORK,
     IMPLICIT_BENDING_GRAVITY_NUMBER, IMPLICIT_BENDING_MAX_SATURATION, IMPLICIT_BENDING_MAX_WORK,
-    IMPLICIT_BENDING_SATURATION, LAB_WEIGHT, MotionConstraints, Solver, TetherParams, Tethers,
-    default_part_count,
+    IMPLICIT_BENDING_SATURATION, LAB_WEIGHT, MotionConstraints, SYMMETRIC_SWEEP_DEGREE, Solver,
+    TetherParams, Tethers, default_part_count,
 };
 pub use limits::{
     DEFAULT_SHORT_EDGE_THICKNESS, EVEN_EDGE_SPREAD, MAX_COORDINATE, MAX_SELF_COLLISION_EDGES,

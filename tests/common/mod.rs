@@ -720,3 +720,26 @@ pub fn hung_grid(app: &mut App, n: u32, top_edge: bool, extra: impl Bundle) -> E
         ))
         .id()
 }
+
+/// A closed cylinder of `sides` sides, `radius` and `height`, one segment high, its caps
+/// fanned from their first rim vertex as Bevy's `Cylinder` mesh writes them (vertex 0, on the
+/// top rim, joins every other top-rim vertex): positions and indices, outward-facing.
+pub fn fanned_cylinder(sides: u32, radius: f32, height: f32) -> (Vec<Vec3>, Vec<u32>) {
+    let ring = |y: f32| {
+        (0..sides).map(move |i| {
+            let a = i as f32 / sides as f32 * core::f32::consts::TAU;
+            Vec3::new(radius * a.cos(), y, radius * a.sin())
+        })
+    };
+    let positions: Vec<Vec3> = ring(height / 2.0).chain(ring(-height / 2.0)).collect();
+    let n = sides;
+    let mut indices: Vec<u32> = (0..n)
+        .flat_map(|i| {
+            let j = (i + 1) % n;
+            [i, j, n + i, j, n + j, n + i]
+        })
+        .collect();
+    indices.extend((1..n - 1).flat_map(|i| [0, i + 1, i]));
+    indices.extend((1..n - 1).flat_map(|i| [n, n + i, n + i + 1]));
+    (positions, indices)
+}

@@ -183,6 +183,7 @@ const FLAG_ACCUMULATE: u32 = 8u;
 const FLAG_SC: u32 = 16u;
 const FLAG_TETHERS: u32 = 32u;
 const FLAG_TEARING: u32 = 64u;
+const FLAG_SYMMETRIC: u32 = 128u;
 
 // Whether triangle `t` (global) of a cloth with record `flags` lost an edge to a tear
 // (`tear_check` flags it dead): until the host's tear removes it from the topology it counts

@@ -267,6 +267,26 @@ fn solve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index)
         }
         solve_barrier(shared_mem);
     }
+    // A cloth with a hub (`SYMMETRIC_SWEEP_DEGREE`): the same constraints back, the
+    // leftovers last to first, then the colours last to first (as `DistanceSet::project`).
+    if (flags & FLAG_SYMMETRIC) != 0u {
+        if hdr[8] > 0u {
+            if li == 0u {
+                for (var i = hdr[7] + hdr[8]; i > hdr[7]; i--) {
+                    project_distance(i - 1u, base, shared_mem, flags, first_iteration);
+                }
+            }
+            solve_barrier(shared_mem);
+        }
+        for (var col = hdr[5]; col > 0u; col--) {
+            let first = topo[hdr[6] + col - 1u];
+            let end = topo[hdr[6] + col];
+            for (var i = first + li; i < end; i += SOLVE_GROUP) {
+                project_distance(i, base, shared_mem, flags, first_iteration);
+            }
+            solve_barrier(shared_mem);
+        }
+    }
     for (var col = 0u; col < hdr[10]; col++) {
         let first = topo[hdr[11] + col];
         let end = topo[hdr[11] + col + 1u];

@@ -16,7 +16,9 @@
 //! 2. **Colouring.** Inside each part (and the boundary), constraints are greedily coloured so
 //!    that no two of one colour share a vertex. A colour is projected four constraints at a
 //!    time with SIMD lanes; the GPU backend projects a colour per workgroup barrier. Constraints
-//!    that find no free colour among 128 go to a last batch projected one by one.
+//!    that find no free colour among 128 go to a last batch projected one by one. A mesh with
+//!    a hub (a vertex in more than [`SYMMETRIC_SWEEP_DEGREE`] distances) has its distances
+//!    swept back too, the leftovers and then the colours in reverse, every projection.
 //! 3. **Layout.** Each set stores its constraints colour by colour in parallel arrays
 //!    (indices, rest values, material parameter, XPBD multiplier λ).
 //!
@@ -42,6 +44,19 @@ use wide::f32x4;
 use super::lanes::{Real, V3, add1, idx, lanes, load1};
 use super::solver::Solver;
 use crate::solver::mesh::{BendingModel, EdgeKind, Topology};
+
+/// Most distance constraints a vertex may have before its cloth's distances are swept forward
+/// and back (symmetric Gauss–Seidel) at each projection instead of forward only.
+///
+/// One forward sweep a substep is unstable on a stiff closed shape with a hub: Bevy's capped
+/// `Cylinder` (its caps fanned from one rim vertex, which joins 13 to 33 others at 12 to 32
+/// sides) and its `Cone` and `ConicalFrustum` shook themselves apart at 35–100 m/s within a
+/// second, in free fall, as did a textbook Gauss–Seidel loop on the same mesh; the sweep's
+/// matrix is not symmetric, and its complex eigenvalues feed the velocity update. Forward
+/// then back makes it symmetric, and those shapes fall and settle like any other. The
+/// backward sweep doubles the distance work, so only cloths with such a hub pay it: grids
+/// (6 a vertex) and the meshes modelling tools make (mostly 4 to 8) do not.
+pub const SYMMETRIC_SWEEP_DEGREE: usize = 8;
 
 /// Largest `α̃` used: keeps `α̃·λ` finite for absurd compliances.
 const MAX_ALPHA_TILDE: f32 = 1e30;
@@ -167,6 +182,8 @@ pub(crate) struct DistanceSet {
     /// Index into [`Topology::edges`].
     pub edge: Vec<u32>,
     pub colours: Colours,
+    /// Sweep back after the forward sweep ([`SYMMETRIC_SWEEP_DEGREE`]).
+    pub symmetric: bool,
 }
 
 /// Bending constraints of one part or of the boundary, in one of the two models.
@@ -242,31 +259,48 @@ impl DistanceSet {
             "positions shorter than the constraints' range"
         );
         for c in 0..self.colours.independent.len() {
-            let r = self.colours.independent[c].clone();
-            let simd_end = r.start + r.len() / 4 * 4;
-            let chunks = self.a[r.start..simd_end]
-                .chunks_exact(4)
-                .zip(self.b[r.start..simd_end].chunks_exact(4))
-                .zip(self.rest[r.start..simd_end].chunks_exact(4))
-                .zip(self.param[r.start..simd_end].chunks_exact(4))
-                .zip(self.lambda[r.start..simd_end].chunks_exact_mut(4));
-            for ((((a, b), rest), param), lambda) in chunks {
-                let (ia, ib) = (idx(a), idx(b));
-                // SAFETY (all four here): indices < `self.bound` <= `pos.len()`.
-                let (xa, wa) = unsafe { load4(pos, ia) };
-                let (xb, wb) = unsafe { load4(pos, ib) };
-                let (alpha, k) = mode.lanes(lanes(param));
-                let l = if ACC { lanes(lambda) } else { f32x4::ZERO };
-                let (da, db, dl) = distance_correction(xa, wa, xb, wb, lanes(rest), alpha, k, l);
-                unsafe { add4(pos, ia, da) };
-                unsafe { add4(pos, ib, db) };
-                if ACC {
-                    lambda.copy_from_slice(&(l + dl).to_array());
-                }
-            }
-            self.project_one_by_one::<ACC>(pos, mode, simd_end..r.end);
+            self.project_colour::<ACC>(pos, mode, c);
         }
         self.project_one_by_one::<ACC>(pos, mode, self.colours.sequential.clone());
+        if self.symmetric {
+            // The same constraints in the opposite order: the leftovers last to first, then
+            // the colours (within a colour no two share a vertex, so their order is moot).
+            for i in self.colours.sequential.clone().rev() {
+                self.project_one_by_one::<ACC>(pos, mode, i..i + 1);
+            }
+            for c in (0..self.colours.independent.len()).rev() {
+                self.project_colour::<ACC>(pos, mode, c);
+            }
+        }
+    }
+
+    /// Projects colour `c`, four constraints at a time. Only [`Self::project`] calls it,
+    /// after checking that `pos` covers the set's `bound`.
+    fn project_colour<const ACC: bool>(&mut self, pos: &mut [Vec4], mode: Mode, c: usize) {
+        let r = self.colours.independent[c].clone();
+        let simd_end = r.start + r.len() / 4 * 4;
+        let chunks = self.a[r.start..simd_end]
+            .chunks_exact(4)
+            .zip(self.b[r.start..simd_end].chunks_exact(4))
+            .zip(self.rest[r.start..simd_end].chunks_exact(4))
+            .zip(self.param[r.start..simd_end].chunks_exact(4))
+            .zip(self.lambda[r.start..simd_end].chunks_exact_mut(4));
+        for ((((a, b), rest), param), lambda) in chunks {
+            let (ia, ib) = (idx(a), idx(b));
+            // SAFETY (all four here): indices < `self.bound` <= `pos.len()` (checked by
+            // `project`, the only caller).
+            let (xa, wa) = unsafe { load4(pos, ia) };
+            let (xb, wb) = unsafe { load4(pos, ib) };
+            let (alpha, k) = mode.lanes(lanes(param));
+            let l = if ACC { lanes(lambda) } else { f32x4::ZERO };
+            let (da, db, dl) = distance_correction(xa, wa, xb, wb, lanes(rest), alpha, k, l);
+            unsafe { add4(pos, ia, da) };
+            unsafe { add4(pos, ib, db) };
+            if ACC {
+                lambda.copy_from_slice(&(l + dl).to_array());
+            }
+        }
+        self.project_one_by_one::<ACC>(pos, mode, simd_end..r.end);
     }
 
     fn project_one_by_one<const ACC: bool>(
@@ -566,6 +600,15 @@ impl Part {
         for r in d.colours.independent.clone() {
             d.project_one_by_one::<false>(pos, mode, r);
         }
+        d.project_one_by_one::<false>(pos, mode, d.colours.sequential.clone());
+        if d.symmetric {
+            for i in d.colours.sequential.clone().rev() {
+                d.project_one_by_one::<false>(pos, mode, i..i + 1);
+            }
+            for r in d.colours.independent.clone().into_iter().rev() {
+                d.project_one_by_one::<false>(pos, mode, r);
+            }
+        }
         if bending {
             let b = &mut self.bending;
             for r in b.colours.independent.clone() {
@@ -715,6 +758,7 @@ impl ConstraintBatches {
             seams[list].push(build(r, k + s));
         }
         let boundary = build(0..n, 2 * k - 1);
+        let symmetric = topology.max_vertex_degree() > SYMMETRIC_SWEEP_DEGREE;
         let mut batches = Self {
             parts,
             seams,
@@ -722,8 +766,18 @@ impl ConstraintBatches {
             bending: false,
             mode_is_xpbd: false,
         };
+        for part in batches.all_parts_mut() {
+            part.distance.symmetric = symmetric;
+        }
         batches.set_solver(topology, solver);
         batches
+    }
+
+    /// Whether the distances are swept forward and back at each projection: the mesh has a
+    /// vertex with more than [`SYMMETRIC_SWEEP_DEGREE`] of them.
+    #[must_use]
+    pub fn symmetric_sweeps(&self) -> bool {
+        self.boundary.distance.symmetric
     }
 
     /// Loads the material of `solver` (stiffness or compliance per constraint). Cheap: no

@@ -13,7 +13,7 @@ mod motion;
 mod solver;
 mod tether;
 
-pub use batches::{ConstraintBatches, default_part_count};
+pub use batches::{ConstraintBatches, SYMMETRIC_SWEEP_DEGREE, default_part_count};
 pub(crate) use batches::{Mode, Part};
 pub(crate) use implicit::ImplicitBending;
 pub use implicit::{

@@ -614,6 +614,18 @@ impl Topology {
         &self.edges
     }
 
+    /// The most edges any one vertex has (6 inside a [`Grid`](crate::solver::Grid); the
+    /// sides' count at the tip of a cone or the hub of a fan-triangulated cap).
+    #[must_use]
+    pub fn max_vertex_degree(&self) -> usize {
+        let mut degree = vec![0usize; self.vertex_count()];
+        for e in &self.edges {
+            degree[e.v[0] as usize] += 1;
+            degree[e.v[1] as usize] += 1;
+        }
+        degree.into_iter().max().unwrap_or(0)
+    }
+
     /// The pieces of the mesh (vertices joined by edges) that hold none of the `pinned`
     /// vertices, when one is pinned at all: their count and their vertices'. Such a piece falls
     /// on its own (a glTF curtain's separate hooks, a cape's loose clasp). Vertices in no
