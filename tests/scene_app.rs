@@ -138,7 +138,7 @@ fn bevy_solids_bake_closed_and_bevy_sheets_open() {
 /// caps fanned from one rim vertex; the `Cone`, its tip and base) as cloths, tilted and
 /// dropped 1.5 m onto a ground plane: after five seconds each lies still on the ground in one
 /// piece. Swept forward only (before `SYMMETRIC_SWEEP_DEGREE`), each shook itself apart in
-/// the air at 35–100 m/s, its edges two to three times their length.
+/// the air at 35–100 m/s, its edges two to six times their length.
 #[test]
 fn bevy_solids_with_a_hub_fall_and_rest_in_one_piece() {
     let solids: [(&str, Mesh); 3] = [

@@ -756,7 +756,7 @@ fn fastest_relative(sim: &Simulation) -> f32 {
 /// A closed cylinder with its caps fanned from one rim vertex (Bevy's `Cylinder` mesh: that
 /// vertex joins 33 others) falling freely under XPBD at the default settings and under PBD's
 /// distances. Swept forward only, a textbook Gauss–Seidel loop shakes it apart within a second
-/// (35–100 m/s between its vertices, edges at two to three times their length, measured);
+/// (35–100 m/s between its vertices, edges at two to six times their length, measured);
 /// swept forward and back it falls as one piece. A grid keeps the one forward sweep.
 #[test]
 fn a_closed_cylinder_with_a_hub_falls_in_one_piece() {
