@@ -26,6 +26,13 @@ impl<'a> ManyItem<'a> {
             })
             .collect()
     }
+
+    /// Steps the cloth with `par`, keeping its report and the seconds it took.
+    fn step_timed(&mut self, dt: f32, env: &Environment<'_>, par: &impl Parallel) {
+        let start = std::time::Instant::now();
+        self.report = self.sim.step_in(dt, env, par);
+        self.seconds = start.elapsed().as_secs_f32();
+    }
 }
 
 /// How many times its vertices, substeps and iterations a self-colliding cloth's work counts
@@ -66,9 +73,7 @@ pub fn step_many(items: &mut [ManyItem<'_>], dt: f32, env: &Environment<'_>, par
     let mut rest: Vec<&mut ManyItem<'_>> = Vec::with_capacity(items.len());
     for item in items.iter_mut() {
         if item.sim.batches().part_count() > 1 && work(item.sim) > share {
-            let start = std::time::Instant::now();
-            item.report = item.sim.step_in(dt, env, par);
-            item.seconds = start.elapsed().as_secs_f32();
+            item.step_timed(dt, env, par);
         } else {
             rest.push(item);
         }
@@ -92,15 +97,11 @@ pub fn step_many(items: &mut [ManyItem<'_>], dt: f32, env: &Environment<'_>, par
         if !alone {
             break;
         }
-        let start = std::time::Instant::now();
-        item.report = item.sim.step_in(dt, env, par);
-        item.seconds = start.elapsed().as_secs_f32();
+        item.step_timed(dt, env, par);
         first += 1;
     }
     let rest = &mut rest[first..];
     par.for_each_mut(rest, |item| {
-        let start = std::time::Instant::now();
-        item.report = item.sim.step_in(dt, env, &Serial);
-        item.seconds = start.elapsed().as_secs_f32();
+        item.step_timed(dt, env, &Serial);
     });
 }
