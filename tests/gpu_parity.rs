@@ -1105,6 +1105,60 @@ fn layered_contacts(pos: &[Vec4], rest: &[Vec3], tris: &[[u32; 3]], thickness: f
         .count()
 }
 
+/// A closed cube (8 × 8 quads a face) at its default thickness (1.1 of its spacing, farther
+/// than its edges let a vertex get from the triangles through its neighbours), dropped tilted
+/// onto the ground: on landing its faces crease, and the thickness kept near a vertex is
+/// capped at `NEAR_CORNER_THICKNESS` of its rest distance from the triangle's nearest corner
+/// (a closed cloth's rule), against the CPU twin's; compared as the thickest cloth is (frames
+/// that rounding alone splits on the CPU bit for bit on llvmpipe only).
+#[test]
+fn self_collision_of_a_closed_cloth_caps_its_thickness_as_on_the_cpu() {
+    let Some(g) = gpu("self_collision_of_a_closed_cloth_caps_its_thickness_as_on_the_cpu") else {
+        return;
+    };
+    let (positions, indices) = common::subdivided_cube(8, 0.4, Vec3::ZERO);
+    let placed: Vec<Vec3> = positions
+        .iter()
+        .map(|p| Quat::from_rotation_z(0.3) * Quat::from_rotation_x(0.2) * *p + Vec3::Y * 0.32)
+        .collect();
+    let t = Topology::from_triangles(&placed, None, &indices, TopologyOptions::default()).unwrap();
+    assert!(t.is_closed());
+    let thickness = t.default_self_collision_thickness();
+    // The cap binds: the neighbours rest closer than the thickness over the cap.
+    assert!(bevy_cloth::solver::NEAR_CORNER_THICKNESS * t.short_rest_edge() < thickness);
+    let masses = vec![0.5 / placed.len() as f32; placed.len()];
+    let mut s = Simulation::new(t, &masses, SolverParams::default()).unwrap();
+    s.set_features(Features {
+        self_collision: Some(SelfCollision {
+            thickness,
+            friction: 0.3,
+        }),
+        tethers: None,
+        tear_threshold: None,
+    })
+    .unwrap();
+    let ground = vec![Collider::fixed(
+        Shape::Plane,
+        Pose::at(Vec3::ZERO),
+        0.005,
+        0.6,
+    )];
+    let mut case = Case::new(s);
+    case.ensemble = 4;
+    let out = compare(&g, &[case], FOLDED_FRAMES, 1, |_| ground.clone(), true);
+    check(&g, "closed cube", &out, true);
+    let split = &out.split[0];
+    println!(
+        "closed cube: {} of {FOLDED_FRAMES} frames split by rounding alone: {split:?}",
+        split.len()
+    );
+    assert!(
+        FOLDED_FRAMES - split.len() >= 30,
+        "only {} frames compared",
+        FOLDED_FRAMES - split.len()
+    );
+}
+
 /// A closed cylinder whose caps are fanned from one rim vertex (as Bevy's `Cylinder` writes
 /// them: that vertex joins 33 others), so its distances are swept forward and back
 /// (`SYMMETRIC_SWEEP_DEGREE`), hung from that vertex on a sliding anchor and swinging: the

@@ -35,6 +35,11 @@ pub(crate) const FLAG_TEARING: u32 = 64;
 ///
 /// [`ConstraintBatches::symmetric_sweeps`]: crate::solver::ConstraintBatches::symmetric_sweeps
 pub(crate) const FLAG_SYMMETRIC: u32 = 128;
+/// The cloth is closed: self-collision caps the thickness near a vertex
+/// ([`Topology::is_closed`], [`NEAR_CORNER_THICKNESS`]).
+///
+/// [`NEAR_CORNER_THICKNESS`]: crate::solver::NEAR_CORNER_THICKNESS
+pub(crate) const FLAG_CLOSED: u32 = 256;
 
 /// The part count the GPU projects `sim` with: parts of at most [`TILE`] vertices (one
 /// workgroup each, in workgroup memory), fewer when the mesh's vertex order would leave
@@ -357,6 +362,9 @@ impl WorldLayout {
             let sc = features.self_collision.filter(|_| !key.lab);
             if sc.is_some() {
                 flags |= FLAG_SC;
+                if sim.topology().is_closed() {
+                    flags |= FLAG_CLOSED;
+                }
             }
             let batches = choose_batches(sim);
             if batches.bending && !batches.boundary.bending.iso {

@@ -62,8 +62,8 @@ pub use air::{
     vertex_area_vectors,
 };
 pub use collision::{
-    Collider, ContactImpulse, MAX_SELF_NEIGHBOURS, MAX_SELF_TRIANGLES, Pose, RayHit, SdfError,
-    SdfGrid, SelfCollision, SelfCollisionScratch, Shape, count_self_crossings,
+    Collider, ContactImpulse, MAX_SELF_NEIGHBOURS, MAX_SELF_TRIANGLES, NEAR_CORNER_THICKNESS, Pose,
+    RayHit, SdfError, SdfGrid, SelfCollision, SelfCollisionScratch, Shape, count_self_crossings,
     point_triangle_distance, ray_hit, ray_shape, triangle_reach,
 };
 pub use constraints::{

@@ -743,3 +743,51 @@ pub fn fanned_cylinder(sides: u32, radius: f32, height: f32) -> (Vec<Vec3>, Vec<
     indices.extend((1..n - 1).flat_map(|i| [n, n + i, n + i + 1]));
     (positions, indices)
 }
+
+/// A closed cube of `size` metres, `n` × `n` quads a face, centred at `centre`: positions and
+/// indices, welded (each vertex once), outward-facing.
+pub fn subdivided_cube(n: i32, size: f32, centre: Vec3) -> (Vec<Vec3>, Vec<u32>) {
+    let mut ids = std::collections::HashMap::new();
+    let mut positions = Vec::new();
+    let mut indices = Vec::new();
+    let mut id = |p: [i32; 3], positions: &mut Vec<Vec3>| -> u32 {
+        *ids.entry(p).or_insert_with(|| {
+            let q = Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32) * (size / n as f32);
+            positions.push(q - Vec3::splat(size / 2.0) + centre);
+            (positions.len() - 1) as u32
+        })
+    };
+    for axis in 0..3 {
+        for side in [0, n] {
+            for a in 0..n {
+                for b in 0..n {
+                    let corner = |da: i32, db: i32| {
+                        let mut p = [0; 3];
+                        p[axis] = side;
+                        p[(axis + 1) % 3] = a + da;
+                        p[(axis + 2) % 3] = b + db;
+                        p
+                    };
+                    let q = [corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)]
+                        .map(|p| id(p, &mut positions));
+                    if side == 0 {
+                        indices.extend([q[0], q[2], q[1], q[0], q[3], q[2]]);
+                    } else {
+                        indices.extend([q[0], q[1], q[2], q[0], q[2], q[3]]);
+                    }
+                }
+            }
+        }
+    }
+    (positions, indices)
+}
+
+/// A mesh's positions.
+pub fn positions_of(mesh: &Mesh) -> Vec<Vec3> {
+    match mesh.attribute(Mesh::ATTRIBUTE_POSITION) {
+        Some(bevy::mesh::VertexAttributeValues::Float32x3(p)) => {
+            p.iter().map(|a| Vec3::from_array(*a)).collect()
+        }
+        _ => panic!("positions as Float32x3"),
+    }
+}

@@ -43,6 +43,21 @@ fn sc_triangle_thickness_of(i: u32, cl: Cloth) -> f32 {
     return cl.sc_thickness * bitcast<f32>(topo[P.sc_triangle_scale_at + i]);
 }
 
+// `self_collision::NEAR_CORNER_THICKNESS`.
+const SC_NEAR_CORNER_THICKNESS: f32 = 0.9;
+
+// `self_collision::capped_thickness`: the thickness vertex `i` of a closed cloth keeps from
+// the triangle of corners `k0`, `k1`, `k2`: `thickness`, at most
+// `SC_NEAR_CORNER_THICKNESS` times its rest distance from the nearest corner.
+fn sc_capped_thickness(thickness: f32, i: u32, k0: u32, k1: u32, k2: u32) -> f32 {
+    let r = state[P.rest_at + i].xyz;
+    let d0 = state[P.rest_at + k0].xyz - r;
+    let d1 = state[P.rest_at + k1].xyz - r;
+    let d2 = state[P.rest_at + k2].xyz - r;
+    let near2 = min(min(dot(d0, d0), dot(d1, d1)), dot(d2, d2));
+    return min(thickness, SC_NEAR_CORNER_THICKNESS * sqrt(near2));
+}
+
 // `sdf::closest_point_on_triangle` (Ericson 5.1.5).
 fn sc_closest(p: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> vec3<f32> {
     let ab = b - a;
@@ -497,6 +512,7 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
     // triangle thickness.
     let thickness = sc_thickness_of(i, cl);
     let triangle_thickness = sc_triangle_thickness_of(i, cl);
+    let closed = (cl.flags & FLAG_CLOSED) != 0u;
     var sum = vec3<f32>(0.0);
     var touching = 0.0;
     let count = atomicLoad(&scratch[P.ncount_at + i]);
@@ -517,10 +533,14 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
         let x0 = sc_read(k0, tethers);
         let x1 = sc_read(k1, tethers);
         let x2 = sc_read(k2, tethers);
+        var tt = triangle_thickness;
+        if closed {
+            tt = sc_capped_thickness(tt, i, k0, k1, k2);
+        }
         let contact = sc_triangle(
             a, prev_a, x0, x1, x2,
             state[P.prev_at + k0].xyz, state[P.prev_at + k1].xyz, state[P.prev_at + k2].xyz,
-            slot & 3u, triangle_thickness, cl.sc_friction,
+            slot & 3u, tt, cl.sc_friction,
         );
         let r = contact.da;
         sum += r.xyz;

@@ -13,8 +13,8 @@ pub(crate) use collider::{SubstepPose, collide_vertex, substep_poses};
 pub use pick::{RayHit, ray_hit, ray_shape};
 pub use sdf::{SdfError, SdfGrid, point_triangle_distance};
 pub use self_collision::{
-    MAX_SELF_NEIGHBOURS, MAX_SELF_TRIANGLES, SelfCollision, SelfCollisionScratch,
-    count_self_crossings, triangle_reach,
+    MAX_SELF_NEIGHBOURS, MAX_SELF_TRIANGLES, NEAR_CORNER_THICKNESS, SelfCollision,
+    SelfCollisionScratch, count_self_crossings, triangle_reach,
 };
 pub(crate) use self_collision::{
     Scales, find_self_collision_candidates, first_corner_reach, self_collide,

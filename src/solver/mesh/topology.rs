@@ -242,6 +242,8 @@ pub struct Topology {
     /// edges.
     self_collision_triangle_scales: Vec<f32>,
     skipped_triangles: usize,
+    /// Every edge lies between exactly two triangles.
+    closed: bool,
     options: TopologyOptions,
 }
 
@@ -387,6 +389,10 @@ impl Topology {
             }
         }
         half.sort_unstable_by_key(|&(a, b, c, t, _)| (a, b, c, t));
+        let closed = !half.is_empty()
+            && half
+                .chunk_by(|x, y| (x.0, x.1) == (y.0, y.1))
+                .all(|sides| sides.len() == 2);
 
         // Warp/weft edges run along a UV axis; the triangle's own corners decide (a welded
         // seam vertex has different UVs in the triangles on either side).
@@ -460,6 +466,7 @@ impl Topology {
             self_collision_scales,
             self_collision_triangle_scales,
             skipped_triangles: 0,
+            closed,
             options,
         }
     }
@@ -612,6 +619,15 @@ impl Topology {
     #[must_use]
     pub fn edges(&self) -> &[Edge] {
         &self.edges
+    }
+
+    /// Whether the mesh is closed: every edge lies between exactly two triangles (a sphere, a
+    /// cube, a torus; welded along its UV seams, as the plugin welds). Self-collision caps the
+    /// thickness a closed cloth keeps near its own vertices (see
+    /// [`NEAR_CORNER_THICKNESS`](crate::solver::NEAR_CORNER_THICKNESS)). A tear opens it.
+    #[must_use]
+    pub fn is_closed(&self) -> bool {
+        self.closed
     }
 
     /// The most edges any one vertex has (6 inside a [`Grid`](crate::solver::Grid); the
@@ -1108,5 +1124,20 @@ mod tests {
         // Interior vertices carry six triangles' thirds, corners fewer.
         let m = t.masses(1.0, MassDistribution::Area);
         assert!(m[g.index(2, 2) as usize] > m[0]);
+    }
+
+    #[test]
+    fn a_tetrahedron_is_closed_a_grid_is_not_and_a_tear_opens_it() {
+        let o = TopologyOptions::default();
+        let p = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z];
+        let tet =
+            Topology::from_triangles(&p, None, &[0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3], o).unwrap();
+        assert!(tet.is_closed());
+        // One face short: three edges in one triangle each.
+        let open = Topology::from_triangles(&p, None, &[0, 2, 1, 0, 1, 3, 0, 3, 2], o).unwrap();
+        assert!(!open.is_closed());
+        let grid = Grid::new(4, 4, 1.0, 1.0).topology(o).unwrap();
+        assert!(!grid.is_closed());
+        assert!(!tet.without_edges(&[[0, 1]]).is_closed());
     }
 }

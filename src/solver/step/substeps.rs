@@ -499,6 +499,11 @@ pub fn step(
                 Scales {
                     vertices: topology.self_collision_scales(),
                     triangles: topology.self_collision_triangle_scales(),
+                    closed_rest: if topology.is_closed() {
+                        topology.rest_positions()
+                    } else {
+                        &[]
+                    },
                 },
                 sc,
                 &mut scratch.self_collision,

@@ -306,6 +306,18 @@ const DEPENETRATION: f32 = 0.35;
 /// itself within an edge or two, which is what the triangle test is for.
 const TRIANGLE_SKIP: f32 = 0.5;
 
+/// The most a vertex of a closed cloth is kept off a triangle, in rest distances from the
+/// triangle's nearest corner ([`Topology::is_closed`](crate::solver::Topology::is_closed)).
+/// A vertex over a triangle through its own neighbour (a corner one edge away, under a
+/// thickness at the default) can get no farther from that triangle's plane than from that
+/// corner, so a whole thickness is more than its edges allow: the contact pushed it out every
+/// substep and the edges pulled it back. Where the cloth can unfold, that push is what opens a
+/// crumpled sheet's tight folds (capped on open sheets, 15 of 27 crumpled uneven cloths ended
+/// crossed instead of 4); a closed shape cannot unfold (a flattened cube, sphere or torus must
+/// crease), and there the push went on for ever: with self-collision none came to rest, its
+/// vertices moving at 3–12 m/s on the ground after 10 s (docs/experiments.md).
+pub const NEAR_CORNER_THICKNESS: f32 = 0.9;
+
 /// A triangle whose first corner rests more than 2.5 thicknesses from the vertex is only looked
 /// at when that corner is now closer to it than 0.9 of their rest distance (squared here): the
 /// cloth has folded or piled up between them. Written squared, not as `0.9 * 0.9`: WGSL folds

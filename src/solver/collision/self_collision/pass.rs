@@ -217,11 +217,33 @@ struct PassChunk<'a> {
 /// Per vertex, the thickness it keeps from other vertices and from triangles over the
 /// cloth's ([`Topology::self_collision_scales`](crate::solver::Topology::self_collision_scales)
 /// and [`Topology::self_collision_triangle_scales`](crate::solver::Topology::self_collision_triangle_scales));
-/// empty: the cloth's.
+/// empty: the cloth's; and the rest positions of a closed cloth, which cap the thickness a
+/// vertex keeps from a triangle with a corner resting near it ([`capped_thickness`]; empty:
+/// no cap, as on an open cloth).
 #[derive(Clone, Copy, Default)]
 pub(crate) struct Scales<'a> {
     pub vertices: &'a [f32],
     pub triangles: &'a [f32],
+    pub closed_rest: &'a [Vec3],
+}
+
+/// The thickness vertex `i` of a closed cloth (`rest`: its rest positions) keeps from
+/// triangle `tri`: `thickness`, at most [`NEAR_CORNER_THICKNESS`] times its rest distance
+/// from the triangle's nearest corner; `thickness` without `rest`. The GPU's
+/// `sc_capped_thickness`.
+#[inline]
+fn capped_thickness(thickness: f32, rest: &[Vec3], i: usize, tri: [u32; 3]) -> f32 {
+    let Some(&rest_i) = rest.get(i) else {
+        return thickness;
+    };
+    let mut near2 = f32::INFINITY;
+    for k in tri {
+        let Some(&c) = rest.get(k as usize) else {
+            return thickness;
+        };
+        near2 = near2.min((c - rest_i).length_squared());
+    }
+    thickness.min(NEAR_CORNER_THICKNESS * near2.sqrt())
 }
 
 /// One self-collision pass (Jacobi): every vertex sums its corrections from its touching
@@ -242,6 +264,7 @@ pub(crate) fn self_collide(
     let Scales {
         vertices: scales,
         triangles: triangle_scales,
+        closed_rest,
     } = scales;
     let n = pos.len();
     if scratch.neighbour_count.len() != n || scratch.triangle_count.len() != n {
@@ -308,6 +331,10 @@ pub(crate) fn self_collide(
                     continue;
                 };
                 let code = slot & 3;
+                let triangle_params = SelfCollision {
+                    thickness: capped_thickness(triangle_params.thickness, closed_rest, i, tri),
+                    ..triangle_params
+                };
                 if let Some((da, bary)) =
                     triangle_correction(a, prev_a, plane, tri, read, prev, code, triangle_params)
                 {
