@@ -27,6 +27,18 @@ fn free_cloth(grid: Grid, friction: f32) -> Simulation {
     scene.build().expect("a valid cloth")
 }
 
+/// Switches self-collision on for `sim`, `thickness` thick with friction 0.3.
+fn self_colliding(sim: &mut Simulation, thickness: f32) {
+    sim.set_features(Features {
+        self_collision: Some(SelfCollision {
+            thickness,
+            friction: 0.3,
+        }),
+        ..Features::default()
+    })
+    .unwrap();
+}
+
 /// Steps `sim` among `colliders` for `steps` steps; returns the crossings at the end and the
 /// most seen after any step.
 fn run(
@@ -304,14 +316,7 @@ fn an_uneven_cloth_crumpled_keeps_its_layers_apart() {
         ..SolverParams::default()
     };
     let mut sim = Simulation::new(topology, &masses, params).unwrap();
-    sim.set_features(Features {
-        self_collision: Some(SelfCollision {
-            thickness,
-            friction: 0.3,
-        }),
-        ..Features::default()
-    })
-    .unwrap();
+    self_colliding(&mut sim, thickness);
     stand_and_spin(&mut sim);
     ends_apart(&format!("uneven ({spread:.2})"), &mut sim, &[floor()], 240);
 }
@@ -355,14 +360,7 @@ fn a_skirt_hung_by_its_waist_keeps_its_shape_at_the_default_thickness() {
         target: rest[v as usize],
     });
     sim.state_mut().set_pins(waist).unwrap();
-    sim.set_features(Features {
-        self_collision: Some(SelfCollision {
-            thickness,
-            friction: 0.3,
-        }),
-        ..Features::default()
-    })
-    .unwrap();
+    self_colliding(&mut sim, thickness);
     let mut stretched = 0.0f32;
     let mut most = 0;
     for _ in 0..300 {
@@ -465,14 +463,7 @@ fn closed_shapes_with_self_collision_come_to_rest() {
             };
             let mut sim = Simulation::new(topology.clone(), &vec![0.5 / n as f32; n], params)
                 .expect("a valid cloth");
-            sim.set_features(Features {
-                self_collision: Some(SelfCollision {
-                    thickness,
-                    friction: 0.3,
-                }),
-                ..Features::default()
-            })
-            .unwrap();
+            self_colliding(&mut sim, thickness);
             let floor = [floor()];
             let mut late = 0.0f32;
             for k in 0..600 {
