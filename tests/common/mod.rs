@@ -526,17 +526,8 @@ pub fn cape_moved_in_update(
 /// The local positions of cloth `e`'s mesh as the CPU wrote them.
 pub fn drawn_on_the_cpu(app: &App, e: Entity) -> Vec<Vec3> {
     let handle = &app.world().get::<Mesh3d>(e).unwrap().0;
-    match app
-        .world()
-        .resource::<Assets<Mesh>>()
-        .get(handle)
-        .and_then(|m| m.attribute(Mesh::ATTRIBUTE_POSITION))
-    {
-        Some(bevy::mesh::VertexAttributeValues::Float32x3(p)) => {
-            p.iter().map(|&v| Vec3::from(v)).collect()
-        }
-        _ => panic!("cloth {e} has no positions"),
-    }
+    let mesh = app.world().resource::<Assets<Mesh>>().get(handle);
+    positions_of(mesh.unwrap_or_else(|| panic!("cloth {e} has no mesh")))
 }
 
 /// A `cols × rows` grid (0.8 × 0.6 m) as triangle strips, one per row of quads, restarted
@@ -672,13 +663,9 @@ pub fn bevy_plane() -> Mesh {
 
 /// The vertices of `mesh` whose rest position passes `keep`.
 pub fn vertices_where(mesh: &Mesh, keep: impl Fn(Vec3) -> bool) -> Vec<u32> {
-    let Some(bevy::mesh::VertexAttributeValues::Float32x3(p)) =
-        mesh.attribute(Mesh::ATTRIBUTE_POSITION)
-    else {
-        panic!("the mesh has no Float32x3 positions");
-    };
+    let p = positions_of(mesh);
     (0..p.len() as u32)
-        .filter(|&i| keep(Vec3::from(p[i as usize])))
+        .filter(|&i| keep(p[i as usize]))
         .collect()
 }
 
