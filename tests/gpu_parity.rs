@@ -139,6 +139,7 @@ fn rounding_bound_with(sim: &Simulation, steps: usize, positions: &[Vec4], extra
 }
 
 /// The CPU twin of one GPU cloth: `solver::step` on the GPU's batches.
+#[derive(Clone)]
 struct Twin {
     sim: Simulation,
     state: ClothState,
@@ -1156,6 +1157,140 @@ fn self_collision_of_a_closed_cloth_caps_its_thickness_as_on_the_cpu() {
     );
 }
 
+/// A closed cloth that tears is closed no more from the step after its first tear, on the GPU
+/// as on the CPU (whose tear opens the topology at once), though the GPU keeps the cloth's
+/// closed record until the host's tear rebuilds it: the closed cube with self-collision
+/// falls on the ground held by its lowest vertex, whose anchor then sinks into the ground
+/// until its edges tear (threshold 1.5). Each step starts from the CPU's state and is compared within
+/// the rounding bound (a step that rounding alone splits, as four CPU runs from starts a few
+/// ulp apart tell, is compared bit for bit on llvmpipe only); the twin tears what the GPU
+/// tore, as in `the_tear_check_and_the_torn_edges_match_the_cpu`. With the thickness cap
+/// left on after the tear (the GPU's closed record alone) the crumpled cube parts from its
+/// twin.
+#[test]
+fn a_closed_cloth_that_tears_self_collides_as_an_open_one_as_on_the_cpu() {
+    let Some(g) = gpu("a_closed_cloth_that_tears_self_collides_as_an_open_one_as_on_the_cpu")
+    else {
+        return;
+    };
+    const PULL: usize = 40;
+    const STEPS: usize = 80;
+    let (positions, indices) = common::subdivided_cube(8, 0.4, Vec3::ZERO);
+    let placed: Vec<Vec3> = positions
+        .iter()
+        .map(|p| Quat::from_rotation_z(0.3) * Quat::from_rotation_x(0.2) * *p + Vec3::Y * 0.32)
+        .collect();
+    let t = Topology::from_triangles(&placed, None, &indices, TopologyOptions::default()).unwrap();
+    assert!(t.is_closed());
+    let thickness = t.default_self_collision_thickness();
+    let masses = vec![0.5 / placed.len() as f32; placed.len()];
+    let mut s = Simulation::new(t, &masses, SolverParams::default()).unwrap();
+    self_colliding(&mut s, thickness);
+    let mut features = *s.features();
+    features.tear_threshold = Some(1.5);
+    s.set_features(features).unwrap();
+    let lowest = (0..placed.len() as u32)
+        .min_by(|&a, &b| placed[a as usize].y.total_cmp(&placed[b as usize].y))
+        .unwrap();
+    let anchor = placed[lowest as usize];
+    s.state_mut()
+        .set_pins(vec![bevy_cloth::solver::Pin {
+            vertex: lowest,
+            target: anchor,
+        }])
+        .unwrap();
+    let ground = [Collider::fixed(
+        Shape::Plane,
+        Pose::at(Vec3::ZERO),
+        0.005,
+        0.6,
+    )];
+    let mut world = GpuWorld::new(&g.device, &g.queue, &g.kernels, &[&s]).unwrap();
+    let mut twin = Twin::new(&s);
+    let full = twin.topology.clone();
+    let mut torn: Vec<[u32; 2]> = Vec::new();
+    let (mut first_tear, mut compared_open, mut split, mut worst) = (None, 0, 0, 0.0f32);
+    for k in 0..STEPS {
+        // After PULL steps the anchor sinks into the ground, 2 cm a step.
+        let target = anchor - Vec3::Y * 0.02 * k.saturating_sub(PULL) as f32;
+        world.upload(&g.queue, 0, &twin.state.positions, &twin.state.velocities);
+        let bound = rounding_bound(&s, 1, &twin.state.positions);
+        let start = twin.clone();
+        twin.step(&[target], Vec3::ZERO, &ground, &[]);
+        let targets = [vec![vec![target]]];
+        let frame = GpuFrame::uniform(DT, 1, &ground, &targets);
+        world.prepare(&g.device, &g.queue, &g.kernels, &frame);
+        let mut encoder = g.device.create_command_encoder(&Default::default());
+        world.record(&mut encoder, &g.kernels);
+        g.queue.submit([encoder.finish()]);
+        let (gpu_positions, _) = world.read_state(&g.device, &g.queue, 0);
+        let diff = twin
+            .state
+            .positions
+            .iter()
+            .zip(&gpu_positions)
+            .map(|(a, b)| (a.truncate() - b.truncate()).length())
+            .fold(0.0f32, f32::max);
+        if g.llvmpipe {
+            assert_eq!(diff, 0.0, "step {k}: not bit for bit on llvmpipe");
+        }
+        // Whether rounding alone splits this step beyond the bound.
+        let splits = (1..=4u32).any(|m| {
+            let mut member = start.clone();
+            let mut seed = 0x9e37_79b9_u32.wrapping_mul(m) ^ (k as u32).wrapping_mul(0x85eb_ca6b);
+            nudge(&mut member.state.positions, &mut seed, |x| {
+                NUDGE_ULP * f32::EPSILON * x.abs()
+            });
+            member.step(&[target], Vec3::ZERO, &ground, &[]);
+            member
+                .state
+                .positions
+                .iter()
+                .zip(&twin.state.positions)
+                .any(|(a, b)| (a.truncate() - b.truncate()).length() > bound)
+        });
+        if splits {
+            split += 1;
+        } else {
+            assert!(
+                diff <= bound,
+                "step {k} ({} torn edges, twin closed: {}): positions differ by {diff} m, \
+                 rounding allows {bound}",
+                torn.len(),
+                twin.topology.is_closed()
+            );
+            if !twin.topology.is_closed() {
+                compared_open += 1;
+                worst = worst.max(diff / bound);
+            }
+        }
+        let mut flagged = world.read_torn_edges(&g.device, &g.queue, 0).torn;
+        flagged.sort_unstable();
+        if !flagged.is_empty() && first_tear.is_none() {
+            first_tear = Some(k);
+        }
+        if flagged != torn {
+            tear_twin(&mut twin, &full, &flagged);
+            torn = flagged;
+        }
+    }
+    eprintln!(
+        "closed cube torn from step {first_tear:?}: {} edges; {compared_open} steps compared \
+         open, worst {worst:.3} of the rounding bound; {split} of {STEPS} steps split by \
+         rounding alone",
+        torn.len()
+    );
+    assert!(
+        first_tear.is_some_and(|k| k > PULL),
+        "the cube must tear after its anchor pulls, not before ({first_tear:?})"
+    );
+    assert!(!twin.topology.is_closed());
+    assert!(
+        compared_open >= 20,
+        "only {compared_open} steps compared after the tear"
+    );
+}
+
 /// A closed cylinder whose caps are fanned from one rim vertex (as Bevy's `Cylinder` writes
 /// them: that vertex joins 33 others), so its distances are swept forward and back
 /// (`SYMMETRIC_SWEEP_DEGREE`), hung from that vertex on a sliding anchor and swinging: the
@@ -2005,40 +2140,16 @@ fn the_tear_check_and_the_torn_edges_match_the_cpu() {
         if world.read_status(&g.device, &g.queue, 0).1 && gpu_first.is_none() {
             gpu_first = Some(k);
         }
-        // What lets go: the torn edges and those the torn topology has no more.
-        let kept = full.without_edges(&flagged);
-        let mut cpu_released: Vec<[u32; 2]> = full
-            .edges()
-            .iter()
-            .map(|e| e.v)
-            .filter(|v| !kept.edges().iter().any(|k| k.v == *v))
-            .collect();
-        cpu_released.sort_unstable();
+        // What lets go: the torn edges and those the torn topology has no more. The twin
+        // holds what the GPU tore (the two stay in step where an edge sits on the threshold
+        // itself).
+        let (cpu_released, hinges) = tear_twin(&mut twin, &full, &flagged);
         let mut gpu_released = gpu_torn.released;
         gpu_released.sort_unstable();
         assert_eq!(gpu_released, cpu_released, "step {k}: edges let go of");
-        // The twin holds what the GPU tore (the two stay in step where an edge sits on the
-        // threshold itself).
         torn = flagged;
         released = gpu_released;
-        let slots: Vec<u32> = released.iter().map(|e| edge_index[e]).collect();
-        twin.batches.release_edges(&slots);
-        // And the hinges that lost a triangle to a torn edge.
-        let has_torn_edge = |t: [u32; 3]| {
-            (0..3).any(|k| {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                torn.binary_search(&[a.min(b), a.max(b)]).is_ok()
-            })
-        };
-        let hinges: Vec<u32> = (0..full.bends().len() as u32)
-            .filter(|&i| {
-                let v = full.bends()[i as usize].v;
-                has_torn_edge([v[0], v[1], v[2]]) || has_torn_edge([v[0], v[1], v[3]])
-            })
-            .collect();
-        released_hinges = hinges.len();
-        twin.batches.release_bends(&hinges);
-        twin.topology = kept;
+        released_hinges = hinges;
     }
     eprintln!(
         "first overstretched step: CPU {cpu_first:?}, GPU {gpu_first:?}; {} edges torn, {} let go \
@@ -2058,6 +2169,42 @@ fn the_tear_check_and_the_torn_edges_match_the_cpu() {
         "the tear must run through the cloth: {} edges in {torn_frames} steps",
         torn.len()
     );
+}
+
+/// Tears `twin` as the GPU tears its cloth until the host rebuilds it: from `full` (the
+/// topology the GPU was built with) the sorted edges `torn` and the triangles they bound leave
+/// the twin's topology, and their distance constraints and hinges hold nothing (the
+/// constraints keep their slots in `full`). Returns the edges let go of (sorted: the torn ones
+/// and those left without a triangle) and the number of hinges let go of.
+fn tear_twin(twin: &mut Twin, full: &Topology, torn: &[[u32; 2]]) -> (Vec<[u32; 2]>, usize) {
+    let kept = full.without_edges(torn);
+    let mut released: Vec<[u32; 2]> = full
+        .edges()
+        .iter()
+        .map(|e| e.v)
+        .filter(|v| !kept.edges().iter().any(|k| k.v == *v))
+        .collect();
+    released.sort_unstable();
+    let slots: Vec<u32> = (0..full.edges().len() as u32)
+        .filter(|&i| released.binary_search(&full.edges()[i as usize].v).is_ok())
+        .collect();
+    twin.batches.release_edges(&slots);
+    // And the hinges that lost a triangle to a torn edge.
+    let has_torn_edge = |t: [u32; 3]| {
+        (0..3).any(|k| {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            torn.binary_search(&[a.min(b), a.max(b)]).is_ok()
+        })
+    };
+    let hinges: Vec<u32> = (0..full.bends().len() as u32)
+        .filter(|&i| {
+            let v = full.bends()[i as usize].v;
+            has_torn_edge([v[0], v[1], v[2]]) || has_torn_edge([v[0], v[1], v[3]])
+        })
+        .collect();
+    twin.batches.release_bends(&hinges);
+    twin.topology = kept;
+    (released, hinges.len())
 }
 
 /// The vertex pairs in one sorted list and not the other.

@@ -130,8 +130,9 @@ pub(crate) struct WorldUniform {
     settle_edges: u32,
     sc_triangle_scale_at: u32,
     react_at: u32,
+    opened_at: u32,
     // The uniform's size a multiple of 16 bytes.
-    pad: [u32; 2],
+    pad: u32,
 }
 
 #[repr(C)]
@@ -399,6 +400,7 @@ struct ScratchRegions {
     react: u32,
     torn: u32,
     dead: u32,
+    opened: u32,
     settle_speed: u32,
     settle_strain: u32,
     impulse: u32,
@@ -627,7 +629,8 @@ impl GpuWorld {
         if layout.any_tearing {
             s.torn = words;
             s.dead = s.torn + layout.distances;
-            words = s.dead + layout.triangles;
+            s.opened = s.dead + layout.triangles;
+            words = s.opened + c;
         }
         if layout.settle_steps > 0 {
             s.settle_speed = words;
@@ -1047,7 +1050,8 @@ impl GpuWorld {
             settle_edges_at: l.settle_edges_at,
             settle_edges: l.settle_edges,
             sc_triangle_scale_at: l.sc_triangle_scale_at,
-            pad: [0; 2],
+            opened_at: s.opened,
+            pad: 0,
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         // The per-frame words of every cloth's record: gravity·h and the damping factor (the

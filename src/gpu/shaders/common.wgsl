@@ -34,10 +34,10 @@
 // vertex its neighbour count and `SC_MAX` neighbours, per vertex its triangle count and
 // `SC_TRI_MAX` triangles (`triangle << 2 | side`) | with tearing, per distance constraint 1
 // once `tear_check` found its edge past the threshold, 2 once `tear_release` found its edge
-// left without a triangle (either way the constraint holds nothing), then per triangle 1
-// once an edge of it tore | while a cloth settles a settings change, per vertex its speed
-// when the change was made (bits), then per cloth the step's largest strain (bits) | the
-// colliders' impulse slots.
+// left without a triangle (either way the constraint holds nothing), then per triangle 1 once
+// an edge of it tore, then per cloth 1 once an edge of a closed cloth tore | while a cloth
+// settles a settings change, per vertex its speed when the change was made (bits), then per
+// cloth the step's largest strain (bits) | the colliders' impulse slots.
 //
 // `frame` (vec4): per step every pin's target | per step and cloth a record (xyz: teleport
 // offset; w: 0 not stepped, else 1 + 2 teleporting + 4 carried + 8 held by motion targets;
@@ -96,8 +96,9 @@ struct World {
     // Per vertex, four atomics: the reactions of the self-collision contacts it is a corner
     // of (x, y, z in SC_REACTION_UNITS, and their number).
     react_at: u32,
-    pad1: u32,
-    pad2: u32,
+    // Per cloth, 1 once an edge of a closed cloth tore (with tearing): it is closed no more.
+    opened_at: u32,
+    pad: u32,
 }
 
 // One substep of one step (binding 1, a dynamic offset per substep).
@@ -192,6 +193,14 @@ const FLAG_CLOSED: u32 = 256u;
 // once.
 fn triangle_torn(t: u32, flags: u32) -> bool {
     return (flags & FLAG_TEARING) != 0u && atomicLoad(&scratch[P.dead_at + t]) != 0u;
+}
+
+// Whether cloth `c` with record `flags` is closed (`Topology::is_closed`): built closed and no
+// edge of it torn since (`tear_check` marks it), as on the CPU, whose tear opens the topology
+// at once, until the host's tear rebuilds the cloth's record without `FLAG_CLOSED`.
+fn cloth_closed(c: u32, flags: u32) -> bool {
+    return (flags & FLAG_CLOSED) != 0u
+        && ((flags & FLAG_TEARING) == 0u || atomicLoad(&scratch[P.opened_at + c]) == 0u);
 }
 
 @group(0) @binding(0) var<uniform> P: World;

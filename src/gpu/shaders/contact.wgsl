@@ -512,7 +512,7 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
     // triangle thickness.
     let thickness = sc_thickness_of(i, cl);
     let triangle_thickness = sc_triangle_thickness_of(i, cl);
-    let closed = (cl.flags & FLAG_CLOSED) != 0u;
+    let closed = cloth_closed(c, cl.flags);
     var sum = vec3<f32>(0.0);
     var touching = 0.0;
     let count = atomicLoad(&scratch[P.ncount_at + i]);

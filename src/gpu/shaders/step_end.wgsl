@@ -65,6 +65,9 @@ fn tear_check(@builtin(global_invocation_id) id: vec3<u32>) {
     let d = state[topo[at]].xyz - state[topo[at + 1u]].xyz;
     if rest > 0.0 && cl.tear > 1.0 && length(d) > cl.tear * rest {
         state[P.status_at + cl.status].y = 1.0;
+        if (cl.flags & FLAG_CLOSED) != 0u {
+            atomicStore(&scratch[P.opened_at + c], 1u);
+        }
         if slot != NO_PIN {
             atomicStore(&scratch[P.torn_at + slot], 1u);
             let end = topo[P.edge_tris_at + e + 1u];
