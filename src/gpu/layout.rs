@@ -56,7 +56,11 @@ fn choose_batches(sim: &Simulation) -> ConstraintBatches {
     let solver = sim.params().solver;
     let mut k = n.div_ceil(TILE).max(1);
     loop {
-        let b = ConstraintBatches::new(sim.topology(), solver, k);
+        let mut b = ConstraintBatches::new(sim.topology(), solver, k);
+        // The CPU's sweep order (kept through a tear: `ConstraintBatches::sweep_symmetrically`).
+        if sim.batches().symmetric_sweeps() {
+            b.sweep_symmetrically();
+        }
         let straddling = b.boundary.distance.a().len() + b.boundary.bending.v()[0].len();
         if k == 1 || straddling == 0 {
             return b;

@@ -778,3 +778,20 @@ pub fn positions_of(mesh: &Mesh) -> Vec<Vec3> {
         _ => panic!("positions as Float32x3"),
     }
 }
+
+/// `mesh`'s vertices welded where they coincide (as the plugin welds a mesh split along its
+/// UV seams) and moved by `offset`, with its triangles on them: positions and indices.
+pub fn welded(mesh: &Mesh, offset: Vec3) -> (Vec<Vec3>, Vec<u32>) {
+    let positions: Vec<Vec3> = positions_of(mesh).into_iter().map(|p| p + offset).collect();
+    let weld = bevy_cloth::solver::Weld::new(&positions, None, 1e-5);
+    let welded = (0..weld.particle_count() as u32)
+        .map(|q| positions[weld.representative(q) as usize])
+        .collect();
+    let indices = mesh
+        .indices()
+        .expect("indexed")
+        .iter()
+        .map(|i| weld.particle(i as u32))
+        .collect();
+    (welded, indices)
+}

@@ -204,7 +204,11 @@ impl Simulation {
     /// Rebuilds the batches with `parts` vertex ranges (see [`default_part_count`]).
     pub fn set_part_count(&mut self, parts: usize) {
         self.sleep.wake();
+        let symmetric = self.batches.symmetric_sweeps();
         self.batches = ConstraintBatches::new(&self.topology, self.params.solver, parts);
+        if symmetric {
+            self.batches.sweep_symmetrically();
+        }
     }
 
     /// Advances by `dt` seconds, alone in the world (no colliders, no wind).
@@ -365,11 +369,16 @@ impl Simulation {
     fn take_topology(&mut self, topology: Topology) {
         self.topology = topology;
         self.scratch.implicit.invalidate();
+        let symmetric = self.batches.symmetric_sweeps();
         self.batches = ConstraintBatches::new(
             &self.topology,
             self.params.solver,
             self.batches.part_count(),
         );
+        // A closed cloth torn open sweeps as before (`ConstraintBatches::sweep_symmetrically`).
+        if symmetric {
+            self.batches.sweep_symmetrically();
+        }
         self.tethers = None;
     }
 
