@@ -1111,6 +1111,25 @@ fn layered_contacts(pos: &[Vec4], rest: &[Vec3], tris: &[[u32; 3]], thickness: f
         .count()
 }
 
+/// A closed cube (8 × 8 quads a face, 0.4 m) tilted just over the ground, 0.5 kg, with
+/// self-collision at its default thickness, which the closed cap binds (its neighbours rest
+/// closer than the thickness over the cap).
+fn tilted_closed_cube() -> Simulation {
+    let (positions, indices) = common::subdivided_cube(8, 0.4, Vec3::ZERO);
+    let placed: Vec<Vec3> = positions
+        .iter()
+        .map(|p| Quat::from_rotation_z(0.3) * Quat::from_rotation_x(0.2) * *p + Vec3::Y * 0.32)
+        .collect();
+    let t = Topology::from_triangles(&placed, None, &indices, TopologyOptions::default()).unwrap();
+    assert!(t.is_closed());
+    let thickness = t.default_self_collision_thickness();
+    assert!(bevy_cloth::solver::NEAR_CORNER_THICKNESS * t.short_rest_edge() < thickness);
+    let masses = vec![0.5 / placed.len() as f32; placed.len()];
+    let mut s = Simulation::new(t, &masses, SolverParams::default()).unwrap();
+    self_colliding(&mut s, thickness);
+    s
+}
+
 /// A closed cube (8 × 8 quads a face) at its default thickness (1.1 of its spacing, farther
 /// than its edges let a vertex get from the triangles through its neighbours), dropped tilted
 /// onto the ground: on landing its faces crease, and the thickness kept near a vertex is
@@ -1122,19 +1141,7 @@ fn self_collision_of_a_closed_cloth_caps_its_thickness_as_on_the_cpu() {
     let Some(g) = gpu("self_collision_of_a_closed_cloth_caps_its_thickness_as_on_the_cpu") else {
         return;
     };
-    let (positions, indices) = common::subdivided_cube(8, 0.4, Vec3::ZERO);
-    let placed: Vec<Vec3> = positions
-        .iter()
-        .map(|p| Quat::from_rotation_z(0.3) * Quat::from_rotation_x(0.2) * *p + Vec3::Y * 0.32)
-        .collect();
-    let t = Topology::from_triangles(&placed, None, &indices, TopologyOptions::default()).unwrap();
-    assert!(t.is_closed());
-    let thickness = t.default_self_collision_thickness();
-    // The cap binds: the neighbours rest closer than the thickness over the cap.
-    assert!(bevy_cloth::solver::NEAR_CORNER_THICKNESS * t.short_rest_edge() < thickness);
-    let masses = vec![0.5 / placed.len() as f32; placed.len()];
-    let mut s = Simulation::new(t, &masses, SolverParams::default()).unwrap();
-    self_colliding(&mut s, thickness);
+    let s = tilted_closed_cube();
     let ground = vec![Collider::fixed(
         Shape::Plane,
         Pose::at(Vec3::ZERO),
@@ -1175,17 +1182,8 @@ fn a_closed_cloth_that_tears_self_collides_as_an_open_one_as_on_the_cpu() {
     };
     const PULL: usize = 40;
     const STEPS: usize = 80;
-    let (positions, indices) = common::subdivided_cube(8, 0.4, Vec3::ZERO);
-    let placed: Vec<Vec3> = positions
-        .iter()
-        .map(|p| Quat::from_rotation_z(0.3) * Quat::from_rotation_x(0.2) * *p + Vec3::Y * 0.32)
-        .collect();
-    let t = Topology::from_triangles(&placed, None, &indices, TopologyOptions::default()).unwrap();
-    assert!(t.is_closed());
-    let thickness = t.default_self_collision_thickness();
-    let masses = vec![0.5 / placed.len() as f32; placed.len()];
-    let mut s = Simulation::new(t, &masses, SolverParams::default()).unwrap();
-    self_colliding(&mut s, thickness);
+    let mut s = tilted_closed_cube();
+    let placed: Vec<Vec3> = s.topology().rest_positions().to_vec();
     let mut features = *s.features();
     features.tear_threshold = Some(1.5);
     s.set_features(features).unwrap();
