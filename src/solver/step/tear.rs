@@ -120,6 +120,37 @@ mod tests {
     }
 
     #[test]
+    fn a_closed_cloth_torn_open_keeps_sweeping_both_ways() {
+        use crate::solver::{Simulation, SolverParams};
+        let p = [
+            glam::Vec3::ZERO,
+            glam::Vec3::X,
+            glam::Vec3::Y,
+            glam::Vec3::Z,
+        ];
+        let o = TopologyOptions::default();
+        let tet =
+            Topology::from_triangles(&p, None, &[0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3], o).unwrap();
+        let mut s = Simulation::new(tet, &[0.01; 4], SolverParams::default()).unwrap();
+        assert!(
+            s.batches().symmetric_sweeps(),
+            "a closed cloth sweeps both ways"
+        );
+        assert!(!s.tear_edges(&[[0, 1]]).is_empty());
+        assert!(!s.topology().is_closed());
+        assert!(
+            s.batches().symmetric_sweeps(),
+            "and keeps doing so once torn open"
+        );
+        s.set_part_count(1);
+        assert!(s.batches().symmetric_sweeps(), "and with other parts");
+        // An open cloth built so sweeps forward only.
+        let open = Topology::from_triangles(&p, None, &[0, 2, 1, 0, 1, 3, 0, 3, 2], o).unwrap();
+        let s = Simulation::new(open, &[0.01; 4], SolverParams::default()).unwrap();
+        assert!(!s.batches().symmetric_sweeps());
+    }
+
+    #[test]
     fn only_edges_past_the_threshold_tear() {
         let g = Grid::new(3, 2, 2.0, 1.0);
         let t = g.topology(TopologyOptions::default()).unwrap();
