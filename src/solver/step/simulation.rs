@@ -204,6 +204,13 @@ impl Simulation {
     /// Rebuilds the batches with `parts` vertex ranges (see [`default_part_count`]).
     pub fn set_part_count(&mut self, parts: usize) {
         self.sleep.wake();
+        self.rebuild_batches(parts);
+    }
+
+    /// Rebuilds the batches from the topology with `parts` parts, keeping their sweep order:
+    /// a closed cloth torn open or split otherwise sweeps both ways as before
+    /// (`ConstraintBatches::sweep_symmetrically`).
+    fn rebuild_batches(&mut self, parts: usize) {
         let symmetric = self.batches.symmetric_sweeps();
         self.batches = ConstraintBatches::new(&self.topology, self.params.solver, parts);
         if symmetric {
@@ -369,16 +376,7 @@ impl Simulation {
     fn take_topology(&mut self, topology: Topology) {
         self.topology = topology;
         self.scratch.implicit.invalidate();
-        let symmetric = self.batches.symmetric_sweeps();
-        self.batches = ConstraintBatches::new(
-            &self.topology,
-            self.params.solver,
-            self.batches.part_count(),
-        );
-        // A closed cloth torn open sweeps as before (`ConstraintBatches::sweep_symmetrically`).
-        if symmetric {
-            self.batches.sweep_symmetrically();
-        }
+        self.rebuild_batches(self.batches.part_count());
         self.tethers = None;
     }
 
