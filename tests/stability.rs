@@ -5,16 +5,19 @@
 //! stops.
 //!
 //! Property tests sample the ranges; named tests pin the corners and every case the property
-//! tests ever found (see `regression_*`).
+//! tests ever found (see `regression_*`). The `*_on_the_gpu` tests run the same scenarios on
+//! the GPU backend's kernels (llvmpipe in CI; skipped with a message without an adapter,
+//! failing with `CLOTH_REQUIRE_GPU=1`): the same invariants, read back after every step.
 
 use std::sync::Arc;
 
 mod common;
 
+use bevy_cloth::gpu::{ClothFrame, GpuFrame, GpuKernels, GpuWorld, StepColliders};
 use bevy_cloth::solver::{
-    Collider, Environment, Features, Grid, MeshShading, Pin, Pose, SYMMETRIC_SWEEP_DEGREE, SdfGrid,
-    SelfCollision, Serial, Shape, Simulation, Solver, SolverParams, TetherParams, Topology,
-    TopologyError, TopologyOptions, WindField, WindParams,
+    AirGrid, Collider, Environment, Features, Grid, MeshShading, Pin, Pose, SYMMETRIC_SWEEP_DEGREE,
+    SdfGrid, SelfCollision, Serial, Shape, Simulation, Solver, SolverParams, TetherParams,
+    Topology, TopologyError, TopologyOptions, WindField, WindParams,
 };
 use glam::{Quat, Vec2, Vec3};
 use proptest::prelude::*;
@@ -136,6 +139,42 @@ struct Outcome {
     max_travel: f32,
 }
 
+impl Outcome {
+    /// Nothing seen yet, for a cloth of `sim`'s masses and speed limit.
+    fn of(sim: &Simulation) -> Self {
+        let free_mass: f64 = sim
+            .state()
+            .positions
+            .iter()
+            .filter(|p| p.w > 0.0)
+            .map(|p| 1.0 / f64::from(p.w))
+            .sum();
+        let max_speed = f64::from(sim.params().max_speed);
+        Self {
+            max_energy: 0.0,
+            bound: 0.5 * free_mass * max_speed * max_speed,
+            energy_after_disturbance: 0.0,
+            final_energy: 0.0,
+            recoveries: 0,
+            non_finite: 0,
+            max_travel: 0.0,
+        }
+    }
+
+    /// The kinetic energy `e` and `positions` after step `step` of a run whose disturbance
+    /// lasts `on` steps (`start`: where the vertices began).
+    fn record(&mut self, step: usize, on: usize, e: f64, positions: &[glam::Vec4], start: &[Vec3]) {
+        self.max_energy = self.max_energy.max(e);
+        if step + 1 == on {
+            self.energy_after_disturbance = e;
+        }
+        self.final_energy = e;
+        for (p, s0) in positions.iter().zip(start) {
+            self.max_travel = self.max_travel.max(p.truncate().distance(*s0));
+        }
+    }
+}
+
 /// A `n × n` grid in the xz plane of side `size`, centred at height `size`.
 fn grid_mesh(n: u32, size: f32) -> (Vec<Vec3>, Vec<Vec2>, Vec<u32>) {
     let g = Grid::new(n, n, size, size);
@@ -201,93 +240,15 @@ fn run_mesh(s: &Scenario, pos: &[Vec3], uvs: Option<&[Vec2]>, idx: &[u32]) -> Ou
     let mut sim = simulation(s, pos, uvs, idx);
     let start: Vec<Vec3> = pos.to_vec();
     let centre = start.iter().copied().sum::<Vec3>() / start.len() as f32;
-    let free_mass: f64 = (0..sim.state().len())
-        .filter(|&i| sim.state().positions[i].w > 0.0)
-        .map(|i| 1.0 / f64::from(sim.state().positions[i].w))
-        .sum();
-    let max_speed = f64::from(sim.params().max_speed);
-    let bound = 0.5 * free_mass * max_speed * max_speed;
-    let floor = Collider::fixed(
-        Shape::Plane,
-        Pose::at(Vec3::new(0.0, -0.5 * s.size, 0.0)),
-        0.01 * s.size,
-        0.5,
-    );
-    let wind_field = match s.disturbance {
-        Disturbance::Wind(speed) => Some(WindField::new([(
-            WindParams {
-                velocity: Vec3::new(speed, 0.2 * speed, 0.1 * speed),
-                gust_amplitude: 0.5,
-                turbulence: 0.5,
-                ..Default::default()
-            },
-            None,
-        )])),
-        _ => None,
-    };
-    let mut out = Outcome {
-        max_energy: 0.0,
-        bound,
-        energy_after_disturbance: 0.0,
-        final_energy: 0.0,
-        recoveries: 0,
-        non_finite: 0,
-        max_travel: 0.0,
-    };
+    let mut out = Outcome::of(&sim);
+    let wind_field = wind_field(s);
     let (on, off) = s.steps;
     let mut time = 0.0f32;
     for step in 0..on + off {
         let disturbing = step < on;
-        let mut colliders = Vec::new();
-        if s.floor {
-            colliders.push(floor.clone());
-        }
-        if disturbing {
-            match s.disturbance {
-                Disturbance::FastCollider(speed) => {
-                    // Along x through the cloth's centre, from one side to the other.
-                    let x0 = -s.size + speed * time;
-                    let ball = Collider {
-                        shape: Shape::Sphere {
-                            radius: 0.2 * s.size,
-                        },
-                        start: Pose::at(Vec3::new(x0, s.size, centre.z)),
-                        end: Pose::at(Vec3::new(x0 + speed * s.dt, s.size, centre.z)),
-                        thickness: 0.01 * s.size,
-                        friction: 0.5,
-                    };
-                    colliders.push(ball);
-                }
-                Disturbance::SwallowingCollider => colliders.push(Collider::fixed(
-                    Shape::Sphere {
-                        radius: 20.0 * s.size,
-                    },
-                    Pose::at(centre),
-                    0.01 * s.size,
-                    0.5,
-                )),
-                Disturbance::PinTeleport(d) if step == 1 => {
-                    let targets: Vec<Vec3> = sim
-                        .state()
-                        .pins()
-                        .iter()
-                        .enumerate()
-                        .map(|(k, p)| p.target + if k == 0 { Vec3::X * d } else { Vec3::ZERO })
-                        .collect();
-                    sim.state_mut().set_pin_targets(targets);
-                }
-                Disturbance::PinTeleport(_) if step == on - 1 => {
-                    // The pin comes back home: the disturbance stops.
-                    let targets: Vec<Vec3> = sim
-                        .state()
-                        .pins()
-                        .iter()
-                        .map(|p| start[p.vertex as usize])
-                        .collect();
-                    sim.state_mut().set_pin_targets(targets);
-                }
-                _ => {}
-            }
+        let colliders = colliders_at(s, step, time, centre);
+        if let Some(targets) = pin_targets_at(s, step, sim.state().pins(), &start) {
+            sim.state_mut().set_pin_targets(targets);
         }
         let env = Environment {
             colliders: &colliders,
@@ -306,16 +267,96 @@ fn run_mesh(s: &Scenario, pos: &[Vec3], uvs: Option<&[Vec2]>, idx: &[u32]) -> Ou
         out.non_finite += shading.normals().iter().filter(|n| !n.is_finite()).count();
         out.non_finite += shading.tangents().iter().filter(|t| !t.is_finite()).count();
         let e = sim.state().kinetic_energy();
-        out.max_energy = out.max_energy.max(e);
-        if step + 1 == on {
-            out.energy_after_disturbance = e;
-        }
-        out.final_energy = e;
-        for (p, s0) in sim.state().positions.iter().zip(&start) {
-            out.max_travel = out.max_travel.max(p.truncate().distance(*s0));
-        }
+        out.record(step, on, e, &sim.state().positions, &start);
     }
     out
+}
+
+/// The floor under a scenario's cloth, when it has one.
+fn floor_of(s: &Scenario) -> Option<Collider> {
+    s.floor.then(|| {
+        Collider::fixed(
+            Shape::Plane,
+            Pose::at(Vec3::new(0.0, -0.5 * s.size, 0.0)),
+            0.01 * s.size,
+            0.5,
+        )
+    })
+}
+
+/// The wind of a [`Disturbance::Wind`] scenario.
+fn wind_field(s: &Scenario) -> Option<WindField> {
+    match s.disturbance {
+        Disturbance::Wind(speed) => Some(WindField::new([(
+            WindParams {
+                velocity: Vec3::new(speed, 0.2 * speed, 0.1 * speed),
+                gust_amplitude: 0.5,
+                turbulence: 0.5,
+                ..Default::default()
+            },
+            None,
+        )])),
+        _ => None,
+    }
+}
+
+/// The colliders of step `step` (at `time` seconds; `centre`: the cloth's centre at the
+/// start): the floor, and a ball while the disturbance is on.
+fn colliders_at(s: &Scenario, step: usize, time: f32, centre: Vec3) -> Vec<Collider> {
+    let mut colliders: Vec<Collider> = floor_of(s).into_iter().collect();
+    if step >= s.steps.0 {
+        return colliders;
+    }
+    match s.disturbance {
+        Disturbance::FastCollider(speed) => {
+            // Along x through the cloth's centre, from one side to the other.
+            let x0 = -s.size + speed * time;
+            colliders.push(Collider {
+                shape: Shape::Sphere {
+                    radius: 0.2 * s.size,
+                },
+                start: Pose::at(Vec3::new(x0, s.size, centre.z)),
+                end: Pose::at(Vec3::new(x0 + speed * s.dt, s.size, centre.z)),
+                thickness: 0.01 * s.size,
+                friction: 0.5,
+            });
+        }
+        Disturbance::SwallowingCollider => colliders.push(Collider::fixed(
+            Shape::Sphere {
+                radius: 20.0 * s.size,
+            },
+            Pose::at(centre),
+            0.01 * s.size,
+            0.5,
+        )),
+        _ => {}
+    }
+    colliders
+}
+
+/// The pins' new targets at step `step` of a [`Disturbance::PinTeleport`] scenario (`pins`:
+/// the pins now, `start`: the mesh's positions): the first pin jumps at step 1 and every pin
+/// is back home at the disturbance's last step; `None` when they stay.
+fn pin_targets_at(s: &Scenario, step: usize, pins: &[Pin], start: &[Vec3]) -> Option<Vec<Vec3>> {
+    let Disturbance::PinTeleport(d) = s.disturbance else {
+        return None;
+    };
+    if step >= s.steps.0 {
+        return None;
+    }
+    if step == 1 {
+        Some(
+            pins.iter()
+                .enumerate()
+                .map(|(k, p)| p.target + if k == 0 { Vec3::X * d } else { Vec3::ZERO })
+                .collect(),
+        )
+    } else if step + 1 == s.steps.0 {
+        // The pin comes back home: the disturbance stops.
+        Some(pins.iter().map(|p| start[p.vertex as usize]).collect())
+    } else {
+        None
+    }
 }
 
 /// The invariants every run keeps, whatever it was given.
@@ -426,9 +467,114 @@ proptest! {
     }
 }
 
+/// The GPU backend's kernels on a device shared by the tests of this file (`None`: no
+/// adapter, the test skipped).
+fn gpu() -> Option<&'static (wgpu::Device, wgpu::Queue, GpuKernels)> {
+    static GPU: std::sync::OnceLock<Option<(wgpu::Device, wgpu::Queue, GpuKernels)>> =
+        std::sync::OnceLock::new();
+    GPU.get_or_init(|| {
+        let (_, device, queue) = common::gpu_or_skip("stability on the GPU")?;
+        GpuKernels::check_limits(&device.limits()).expect("the adapter has the limits");
+        let kernels = GpuKernels::new(&device);
+        Some((device, queue, kernels))
+    })
+    .as_ref()
+}
+
+/// [`run`] on the GPU backend's kernels, one step a frame, the state read back after each:
+/// the same cloth, colliders, pins and wind (sampled as the CPU backend samples it for the
+/// GPU). `recoveries` counts the steps the GPU's guard flagged a non-finite state. `None`
+/// when the GPU backend does not run the scenario's settings.
+fn run_on_gpu(s: &Scenario, gpu: &(wgpu::Device, wgpu::Queue, GpuKernels)) -> Option<Outcome> {
+    let (device, queue, kernels) = gpu;
+    let (pos, uvs, idx) = grid_mesh(s.n, s.size);
+    let sim = simulation(s, &pos, Some(&uvs), &idx);
+    if let Err(e) = GpuWorld::supports(&sim, s.dt) {
+        eprintln!("not on the GPU ({e}): {s:?}");
+        return None;
+    }
+    let mut world = GpuWorld::new(device, queue, kernels, &[&sim]).expect("supported");
+    let centre = pos.iter().copied().sum::<Vec3>() / pos.len() as f32;
+    let mut out = Outcome::of(&sim);
+    let wind = wind_field(s);
+    let mut air_grid = AirGrid::default();
+    let mut air = Vec::new();
+    let mut pins: Vec<Pin> = sim.state().pins().to_vec();
+    let mut positions = sim.state().positions.clone();
+    let (on, off) = s.steps;
+    for step in 0..on + off {
+        let time = step as f32 * s.dt;
+        let colliders = colliders_at(s, step, time, centre);
+        if let Some(targets) = pin_targets_at(s, step, &pins, &pos) {
+            for (p, t) in pins.iter_mut().zip(targets) {
+                p.target = t;
+            }
+        }
+        air.clear();
+        if let Some(field) = wind
+            .as_ref()
+            .filter(|_| step < on && !sim.params().air.is_none())
+        {
+            let t = f64::from(time) + 0.5 * f64::from(s.dt);
+            air_grid.air_velocities(field, &positions, t, &mut air);
+        }
+        let targets = [pins.iter().map(|p| p.target).collect::<Vec<Vec3>>()];
+        let frame = GpuFrame {
+            dt: s.dt,
+            steps: vec![StepColliders::new(&colliders)],
+            cloths: vec![ClothFrame {
+                pin_targets: &targets,
+                air_velocities: &air,
+                ..Default::default()
+            }],
+        };
+        world.prepare(device, queue, kernels, &frame);
+        let mut encoder = device.create_command_encoder(&Default::default());
+        world.record(&mut encoder, kernels);
+        queue.submit([encoder.finish()]);
+        let (p, v) = world.read_state(device, queue, 0);
+        out.recoveries += usize::from(world.read_status(device, queue, 0).0);
+        out.non_finite += p.iter().chain(&v).filter(|x| !x.is_finite()).count();
+        let e: f64 = v
+            .iter()
+            .zip(&p)
+            .filter(|(_, p)| p.w > 0.0)
+            .map(|(v, p)| 0.5 * f64::from(v.truncate().length_squared()) / f64::from(p.w))
+            .sum();
+        out.record(step, on, e, &p, &pos);
+        positions = p;
+    }
+    Some(out)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 40, ..ProptestConfig::default() })]
+
+    /// The same ranges on the GPU backend's kernels (llvmpipe in CI): nothing non-finite, the
+    /// guard never trips, the energy under the same bound. At most 100 projections a step
+    /// (a software GPU takes about a second a case then, 40 s at 2 000);
+    /// `counts_up_to_64_substeps_and_500_iterations` takes the high counts on the CPU.
+    #[test]
+    fn any_scenario_stays_finite_and_bounded_on_the_gpu(
+        s in scenario().prop_map(|s| Scenario {
+            iterations: s.iterations.min((100 / s.substeps).max(1)),
+            ..s
+        })
+    ) {
+        if let Some(o) = gpu().and_then(|gpu| run_on_gpu(&s, gpu)) {
+            check(&s, &o);
+        }
+    }
+}
+
 // ---- corners of the ranges, one at a time ----
 
 fn each_solver(base: Scenario) {
+    each_solver_with(base, |s| Some(run(s)));
+}
+
+/// [`each_solver`] with `run` (`None`: that case does not run there).
+fn each_solver_with(base: Scenario, run: impl Fn(&Scenario) -> Option<Outcome>) {
     for (kind, stiffness, compliance) in [
         (Kind::Lab, 0.99, 0.0),
         (Kind::Pbd, 1.0, 0.0),
@@ -442,8 +588,9 @@ fn each_solver(base: Scenario) {
             compliance,
             ..base.clone()
         };
-        let o = run(&s);
-        check(&s, &o);
+        if let Some(o) = run(&s) {
+            check(&s, &o);
+        }
     }
 }
 
@@ -526,6 +673,95 @@ fn every_feature_on_under_every_disturbance() {
             tear: Some(3.0),
             floor: true,
             ..Default::default()
+        });
+    }
+}
+
+/// [`every_feature_on_under_every_disturbance`] on the GPU backend's kernels.
+#[test]
+fn every_feature_on_under_every_disturbance_on_the_gpu() {
+    let Some(gpu) = gpu() else {
+        return;
+    };
+    for disturbance in [
+        Disturbance::FastCollider(100.0),
+        Disturbance::SwallowingCollider,
+        Disturbance::Wind(100.0),
+        Disturbance::PinTeleport(1000.0),
+    ] {
+        each_solver_with(
+            Scenario {
+                disturbance,
+                self_collision: true,
+                tethers: true,
+                tear: Some(3.0),
+                floor: true,
+                ..Default::default()
+            },
+            |s| {
+                let o = run_on_gpu(s, gpu);
+                assert!(o.is_some(), "the GPU runs every feature: {s:?}");
+                o
+            },
+        );
+    }
+}
+
+/// The corners above (time steps, damping, mass ratio, size, pins) on the GPU backend's
+/// kernels, each solver at each.
+#[test]
+fn the_corners_on_the_gpu() {
+    let Some(gpu) = gpu() else {
+        return;
+    };
+    let corners = [
+        Scenario {
+            dt: 1e-4,
+            ..Default::default()
+        },
+        Scenario {
+            dt: 0.1,
+            ..Default::default()
+        },
+        Scenario {
+            damping: 0.0,
+            ..Default::default()
+        },
+        Scenario {
+            damping: 1.0,
+            ..Default::default()
+        },
+        Scenario {
+            mass_ratio: 1e4,
+            floor: true,
+            ..Default::default()
+        },
+        Scenario {
+            size: 1e-3,
+            floor: true,
+            ..Default::default()
+        },
+        Scenario {
+            size: 100.0,
+            floor: true,
+            ..Default::default()
+        },
+        Scenario {
+            pins: Pins::All,
+            floor: true,
+            ..Default::default()
+        },
+        Scenario {
+            pins: Pins::None,
+            floor: true,
+            ..Default::default()
+        },
+    ];
+    for base in corners {
+        each_solver_with(base, |s| {
+            let o = run_on_gpu(s, gpu);
+            assert!(o.is_some(), "the GPU runs it: {s:?}");
+            o
         });
     }
 }
