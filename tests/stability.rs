@@ -486,9 +486,20 @@ fn gpu() -> Option<&'static (wgpu::Device, wgpu::Queue, GpuKernels)> {
 /// GPU). `recoveries` counts the steps the GPU's guard flagged a non-finite state. `None`
 /// when the GPU backend does not run the scenario's settings.
 fn run_on_gpu(s: &Scenario, gpu: &(wgpu::Device, wgpu::Queue, GpuKernels)) -> Option<Outcome> {
-    let (device, queue, kernels) = gpu;
     let (pos, uvs, idx) = grid_mesh(s.n, s.size);
-    let sim = simulation(s, &pos, Some(&uvs), &idx);
+    run_mesh_on_gpu(s, &pos, Some(&uvs), &idx, gpu)
+}
+
+/// [`run_on_gpu`] on a mesh of its own.
+fn run_mesh_on_gpu(
+    s: &Scenario,
+    pos: &[Vec3],
+    uvs: Option<&[Vec2]>,
+    idx: &[u32],
+    gpu: &(wgpu::Device, wgpu::Queue, GpuKernels),
+) -> Option<Outcome> {
+    let (device, queue, kernels) = gpu;
+    let sim = simulation(s, pos, uvs, idx);
     if let Err(e) = GpuWorld::supports(&sim, s.dt) {
         eprintln!("not on the GPU ({e}): {s:?}");
         return None;
@@ -505,7 +516,7 @@ fn run_on_gpu(s: &Scenario, gpu: &(wgpu::Device, wgpu::Queue, GpuKernels)) -> Op
     for step in 0..on + off {
         let time = step as f32 * s.dt;
         let colliders = colliders_at(s, step, time, centre);
-        if let Some(targets) = pin_targets_at(s, step, &pins, &pos) {
+        if let Some(targets) = pin_targets_at(s, step, &pins, pos) {
             for (p, t) in pins.iter_mut().zip(targets) {
                 p.target = t;
             }
@@ -541,7 +552,7 @@ fn run_on_gpu(s: &Scenario, gpu: &(wgpu::Device, wgpu::Queue, GpuKernels)) -> Op
             .filter(|(_, p)| p.w > 0.0)
             .map(|(v, p)| 0.5 * f64::from(v.truncate().length_squared()) / f64::from(p.w))
             .sum();
-        out.record(step, on, e, &p, &pos);
+        out.record(step, on, e, &p, pos);
         positions = p;
     }
     Some(out)
@@ -875,23 +886,28 @@ fn soup() -> impl Strategy<Value = (Vec<Vec3>, Vec<u32>)> {
     })
 }
 
+/// What a soup runs with: every feature on, a floor, `kind` and `disturbance`.
+fn soup_scenario(kind: Kind, disturbance: Disturbance) -> Scenario {
+    Scenario {
+        kind,
+        stiffness: 0.9,
+        disturbance,
+        self_collision: true,
+        tethers: true,
+        tear: Some(2.0),
+        floor: true,
+        steps: (15, 5),
+        ..Default::default()
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 128, ..ProptestConfig::default() })]
 
     /// Broken meshes: the solver accepts any triangle soup with in-range indices and stays sane.
     #[test]
     fn any_triangle_soup_stays_finite((pos, idx) in soup(), k in kind(), d in disturbance()) {
-        let s = Scenario {
-            kind: k,
-            stiffness: 0.9,
-            disturbance: d,
-            self_collision: true,
-            tethers: true,
-            tear: Some(2.0),
-            floor: true,
-            steps: (15, 5),
-            ..Default::default()
-        };
+        let s = soup_scenario(k, d);
         match Topology::from_triangles(&pos, None, &idx, TopologyOptions::default()) {
             // A soup whose triangles are all degenerate (or that has none) is refused with a
             // typed error; anything else must simulate.
@@ -900,6 +916,24 @@ proptest! {
                 "{e}"
             ),
             Ok(_) => check(&s, &run_mesh(&s, &pos, None, &idx)),
+        }
+    }
+
+    /// [`any_triangle_soup_stays_finite`] on the GPU backend's kernels.
+    #[test]
+    fn any_triangle_soup_stays_finite_on_the_gpu(
+        (pos, idx) in soup(),
+        k in kind(),
+        d in disturbance(),
+    ) {
+        let s = soup_scenario(k, d);
+        let gpu = gpu();
+        if gpu.is_some() && Topology::from_triangles(&pos, None, &idx, TopologyOptions::default()).is_ok() {
+            let o = gpu.and_then(|gpu| run_mesh_on_gpu(&s, &pos, None, &idx, gpu));
+            prop_assert!(o.is_some(), "the GPU runs it: {:?}", s);
+            if let Some(o) = o {
+                check(&s, &o);
+            }
         }
     }
 }
