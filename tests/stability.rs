@@ -671,20 +671,39 @@ fn all_pinned_and_none_pinned() {
 
 #[test]
 fn every_feature_on_under_every_disturbance() {
-    for disturbance in [
+    for s in every_feature_under_every_disturbance() {
+        each_solver(s);
+    }
+}
+
+/// Every feature on (self-collision, tethers, tearing, a floor) under each of the strongest
+/// disturbances.
+fn every_feature_under_every_disturbance() -> impl Iterator<Item = Scenario> {
+    [
         Disturbance::FastCollider(100.0),
         Disturbance::SwallowingCollider,
         Disturbance::Wind(100.0),
         Disturbance::PinTeleport(1000.0),
-    ] {
-        each_solver(Scenario {
-            disturbance,
-            self_collision: true,
-            tethers: true,
-            tear: Some(3.0),
-            floor: true,
-            ..Default::default()
-        });
+    ]
+    .into_iter()
+    .map(|disturbance| Scenario {
+        disturbance,
+        self_collision: true,
+        tethers: true,
+        tear: Some(3.0),
+        floor: true,
+        ..Default::default()
+    })
+}
+
+/// [`run_on_gpu`] on `gpu`, for a scenario the GPU backend must run.
+fn on_the_gpu(
+    gpu: &(wgpu::Device, wgpu::Queue, GpuKernels),
+) -> impl Fn(&Scenario) -> Option<Outcome> + '_ {
+    move |s| {
+        let o = run_on_gpu(s, gpu);
+        assert!(o.is_some(), "the GPU runs it: {s:?}");
+        o
     }
 }
 
@@ -694,86 +713,36 @@ fn every_feature_on_under_every_disturbance_on_the_gpu() {
     let Some(gpu) = gpu() else {
         return;
     };
-    for disturbance in [
-        Disturbance::FastCollider(100.0),
-        Disturbance::SwallowingCollider,
-        Disturbance::Wind(100.0),
-        Disturbance::PinTeleport(1000.0),
-    ] {
-        each_solver_with(
-            Scenario {
-                disturbance,
-                self_collision: true,
-                tethers: true,
-                tear: Some(3.0),
-                floor: true,
-                ..Default::default()
-            },
-            |s| {
-                let o = run_on_gpu(s, gpu);
-                assert!(o.is_some(), "the GPU runs every feature: {s:?}");
-                o
-            },
-        );
+    for s in every_feature_under_every_disturbance() {
+        each_solver_with(s, on_the_gpu(gpu));
     }
 }
 
 /// The corners above (time steps, damping, mass ratio, size, pins) on the GPU backend's
-/// kernels, each solver at each.
+/// kernels, each solver at each (with a floor where the CPU's test has one).
 #[test]
 fn the_corners_on_the_gpu() {
     let Some(gpu) = gpu() else {
         return;
     };
-    let corners = [
-        Scenario {
-            dt: 1e-4,
-            ..Default::default()
-        },
-        Scenario {
-            dt: 0.1,
-            ..Default::default()
-        },
-        Scenario {
-            damping: 0.0,
-            ..Default::default()
-        },
-        Scenario {
-            damping: 1.0,
-            ..Default::default()
-        },
-        Scenario {
-            mass_ratio: 1e4,
-            floor: true,
-            ..Default::default()
-        },
-        Scenario {
-            size: 1e-3,
-            floor: true,
-            ..Default::default()
-        },
-        Scenario {
-            size: 100.0,
-            floor: true,
-            ..Default::default()
-        },
-        Scenario {
-            pins: Pins::All,
-            floor: true,
-            ..Default::default()
-        },
-        Scenario {
-            pins: Pins::None,
-            floor: true,
-            ..Default::default()
-        },
+    let corners: [fn(&mut Scenario); 9] = [
+        |s| s.dt = 1e-4,
+        |s| s.dt = 0.1,
+        |s| s.damping = 0.0,
+        |s| s.damping = 1.0,
+        |s| s.mass_ratio = 1e4,
+        |s| s.size = 1e-3,
+        |s| s.size = 100.0,
+        |s| s.pins = Pins::All,
+        |s| s.pins = Pins::None,
     ];
-    for base in corners {
-        each_solver_with(base, |s| {
-            let o = run_on_gpu(s, gpu);
-            assert!(o.is_some(), "the GPU runs it: {s:?}");
-            o
-        });
+    for (k, corner) in corners.into_iter().enumerate() {
+        let mut s = Scenario {
+            floor: k >= 4,
+            ..Default::default()
+        };
+        corner(&mut s);
+        each_solver_with(s, on_the_gpu(gpu));
     }
 }
 
