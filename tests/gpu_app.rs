@@ -1530,20 +1530,27 @@ fn a_rebuilt_gpu_cloth_starts_from_its_rest_shape_as_on_the_cpu() {
 /// The positions in `mesh`'s vertex slab on the GPU (the render world of `app`), read with
 /// the stride of `layout`'s attributes.
 fn positions_on_the_gpu(app: &App, mesh: AssetId<Mesh>, layout: &Mesh) -> Option<Vec<Vec3>> {
+    let (words, stride) = vertices_on_the_gpu(app, mesh, layout)?;
+    // The position is the first attribute (the lowest id).
+    Some(
+        words
+            .chunks_exact(stride)
+            .map(|v| Vec3::new(v[0], v[1], v[2]))
+            .collect(),
+    )
+}
+
+/// Every float of `mesh`'s vertex slab as the GPU holds it (attributes interleaved as in
+/// `layout`, all of them 32-bit floats here), and the floats a vertex.
+fn vertices_on_the_gpu(app: &App, mesh: AssetId<Mesh>, layout: &Mesh) -> Option<(Vec<f32>, usize)> {
     use bevy::render::mesh::allocator::MeshAllocator;
     let slice = render_world(app)
         .resource::<MeshAllocator>()
         .mesh_vertex_slice(&mesh)?;
     let stride: u64 = layout.attributes().map(|(a, _)| a.format.size()).sum();
     let range = u64::from(slice.range.start) * stride..u64::from(slice.range.end) * stride;
-    let words: Vec<f32> = bytemuck::pod_collect_to_vec(&read_buffer(app, slice.buffer, range));
-    // The position is the first attribute (the lowest id).
-    Some(
-        words
-            .chunks_exact((stride / 4) as usize)
-            .map(|v| Vec3::new(v[0], v[1], v[2]))
-            .collect(),
-    )
+    let words = bytemuck::pod_collect_to_vec(&read_buffer(app, slice.buffer, range));
+    Some((words, (stride / 4) as usize))
 }
 
 /// The local positions of GPU cloth `e`'s mesh as the GPU wrote them (the render world of a
@@ -1880,6 +1887,93 @@ fn a_gpu_cloth_at_zero_scale_keeps_a_finite_slab() {
     app.world_mut().get_mut::<Transform>(cloth).unwrap().scale = Vec3::ONE;
     common::run(&mut app, 3);
     assert!(finite(&app));
+}
+
+/// A mesh as a modelling tool can leave it — a zero-area triangle of three vertices in a row,
+/// a triangle naming one vertex twice, a triangle to a vertex a hair off another (welded to
+/// it: a zero-length edge), a vertex stored twice at one place and a vertex no triangle uses
+/// — runs on the GPU with self-collision and tearing while its pinned entity is dragged
+/// sideways at 3 m/s: every float the GPU writes into its vertex slab (positions, normals,
+/// UVs, tangents) stays finite, every frame.
+#[test]
+fn a_broken_mesh_runs_on_the_gpu_and_draws_only_finite_vertices() {
+    use bevy::mesh::{Indices, VertexAttributeValues};
+    if common::gpu_or_skip("a_broken_mesh_runs_on_the_gpu_and_draws_only_finite_vertices").is_none()
+    {
+        return;
+    }
+    let mut app = render_app_with(ClothPlugins::default(), false);
+    let grid = Grid::new(8, 8, 1.0, 1.0);
+    let mut mesh = grid_mesh(&grid);
+    let Some(VertexAttributeValues::Float32x3(positions)) =
+        mesh.attribute(Mesh::ATTRIBUTE_POSITION).cloned()
+    else {
+        panic!("grid_mesh has positions");
+    };
+    let mut positions = positions;
+    let Some(Indices::U32(mut indices)) = mesh.indices().cloned() else {
+        panic!("grid_mesh has u32 indices");
+    };
+    let n = positions.len() as u32;
+    let at = |i: u32, j: u32| grid.index(i, j);
+    // Three vertices in a row (zero area), a vertex named twice, a triangle to a point a
+    // hair off a vertex, a copy of a vertex, and a vertex of nobody's.
+    indices.extend([at(0, 3), at(1, 3), at(2, 3)]);
+    indices.extend([at(4, 4), at(4, 4), at(5, 4)]);
+    let p = positions[at(6, 6) as usize];
+    positions.push([p[0] + 1e-7, p[1], p[2]]);
+    indices.extend([at(6, 6), at(7, 6), n]);
+    let q = positions[at(3, 5) as usize];
+    positions.push(q);
+    indices.extend([n + 1, at(4, 5), at(3, 6)]);
+    positions.push([5.0, 5.0, 5.0]);
+    let count = positions.len();
+    mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
+    mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0f32, 1.0, 0.0]; count]);
+    mesh.insert_attribute(Mesh::ATTRIBUTE_UV_0, vec![[0.5f32, 0.5]; count]);
+    mesh.insert_attribute(
+        Mesh::ATTRIBUTE_TANGENT,
+        vec![[1.0f32, 0.0, 0.0, 1.0]; count],
+    );
+    mesh.insert_indices(Indices::U32(indices));
+    let handle = app.world_mut().resource_mut::<Assets<Mesh>>().add(mesh);
+    let cloth = app
+        .world_mut()
+        .spawn((
+            Mesh3d(handle),
+            Transform::from_xyz(0.0, 1.0, 0.0),
+            Cloth::default(),
+            ClothBackend::Gpu,
+            ClothSelfCollision::default(),
+            ClothTearing::default(),
+            ClothPins::rest([at(0, 0), at(7, 0)]),
+        ))
+        .id();
+    common::run(&mut app, 10);
+    assert!(in_use(&app, cloth).gpu, "{:?}", in_use(&app, cloth));
+    let drawn = app.world().get::<Mesh3d>(cloth).unwrap().0.clone();
+    let layout = app
+        .world()
+        .resource::<Assets<Mesh>>()
+        .get(&drawn)
+        .unwrap()
+        .clone();
+    for frame in 0..40 {
+        app.world_mut()
+            .get_mut::<Transform>(cloth)
+            .unwrap()
+            .translation
+            .x += 0.05;
+        common::run(&mut app, 1);
+        let (words, stride) = vertices_on_the_gpu(&app, drawn.id(), &layout).expect("on the GPU");
+        assert_eq!(stride, 12, "position, normal, UV and tangent");
+        let bad = words.iter().filter(|w| !w.is_finite()).count();
+        assert_eq!(
+            bad, 0,
+            "frame {frame}: {bad} non-finite floats in the vertex slab"
+        );
+    }
+    assert!(in_use(&app, cloth).gpu, "still on the GPU");
 }
 
 #[test]
