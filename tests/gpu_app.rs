@@ -1553,6 +1553,18 @@ fn vertices_on_the_gpu(app: &App, mesh: AssetId<Mesh>, layout: &Mesh) -> Option<
     Some((words, (stride / 4) as usize))
 }
 
+/// Cloth `e`'s drawn mesh and a copy of it from the main world (its vertex layout).
+fn drawn_mesh(app: &App, e: Entity) -> (Handle<Mesh>, Mesh) {
+    let handle = app.world().get::<Mesh3d>(e).unwrap().0.clone();
+    let layout = app
+        .world()
+        .resource::<Assets<Mesh>>()
+        .get(&handle)
+        .unwrap()
+        .clone();
+    (handle, layout)
+}
+
 /// The local positions of GPU cloth `e`'s mesh as the GPU wrote them (the render world of a
 /// render app without pipelined rendering).
 fn drawn_on_the_gpu(app: &App, e: Entity) -> Vec<Vec3> {
@@ -1867,13 +1879,7 @@ fn a_gpu_cloth_at_zero_scale_keeps_a_finite_slab() {
     let cloth = spawn(&mut app, Some(ClothBackend::Gpu), false);
     common::run(&mut app, 15);
     assert!(in_use(&app, cloth).gpu);
-    let mesh = app.world().get::<Mesh3d>(cloth).unwrap().0.clone();
-    let layout = app
-        .world()
-        .resource::<Assets<Mesh>>()
-        .get(&mesh)
-        .unwrap()
-        .clone();
+    let (mesh, layout) = drawn_mesh(&app, cloth);
     let finite = |app: &App| {
         positions_on_the_gpu(app, mesh.id(), &layout)
             .expect("on the GPU")
@@ -1951,13 +1957,7 @@ fn a_broken_mesh_runs_on_the_gpu_and_draws_only_finite_vertices() {
         .id();
     common::run(&mut app, 10);
     assert!(in_use(&app, cloth).gpu, "{:?}", in_use(&app, cloth));
-    let drawn = app.world().get::<Mesh3d>(cloth).unwrap().0.clone();
-    let layout = app
-        .world()
-        .resource::<Assets<Mesh>>()
-        .get(&drawn)
-        .unwrap()
-        .clone();
+    let (drawn, layout) = drawn_mesh(&app, cloth);
     for frame in 0..40 {
         app.world_mut()
             .get_mut::<Transform>(cloth)
