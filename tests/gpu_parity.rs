@@ -47,11 +47,9 @@ struct Gpu {
 }
 
 fn gpu(test: &str) -> Option<Gpu> {
-    let (adapter, device, queue) = common::gpu_or_skip(test)?;
+    let (adapter, device, queue, kernels) = common::gpu_kernels_or_skip(test)?;
     let name = adapter.get_info().name;
     eprintln!("adapter: {name:?}");
-    GpuKernels::check_limits(&device.limits()).expect("the adapter has the limits");
-    let kernels = GpuKernels::new(&device);
     Some(Gpu {
         device,
         queue,
@@ -424,10 +422,7 @@ fn compare(
                 })
                 .collect(),
         };
-        world.prepare(&g.device, &g.queue, &g.kernels, &frame);
-        let mut encoder = g.device.create_command_encoder(&Default::default());
-        world.record(&mut encoder, &g.kernels);
-        g.queue.submit([encoder.finish()]);
+        common::run_gpu_frame(&mut world, &g.device, &g.queue, &g.kernels, &frame);
         k += steps_per_frame;
         for (i, twin) in twins.iter().enumerate() {
             let (pos, vel) = world.read_state(&g.device, &g.queue, i);
@@ -892,10 +887,7 @@ fn a_non_finite_state_is_flagged() {
     let run = |world: &mut GpuWorld, bad: Vec<Vec3>| {
         let targets = [vec![bad], vec![start.clone()]];
         let frame = GpuFrame::uniform(DT, 1, &[], &targets);
-        world.prepare(&g.device, &g.queue, &g.kernels, &frame);
-        let mut encoder = g.device.create_command_encoder(&Default::default());
-        world.record(&mut encoder, &g.kernels);
-        g.queue.submit([encoder.finish()]);
+        common::run_gpu_frame(world, &g.device, &g.queue, &g.kernels, &frame);
     };
     run(&mut world, start.clone());
     assert_eq!(world.read_status(&g.device, &g.queue, 0), (false, false));
@@ -1217,10 +1209,7 @@ fn a_closed_cloth_that_tears_self_collides_as_an_open_one_as_on_the_cpu() {
         twin.step(&[target], Vec3::ZERO, &ground, &[]);
         let targets = [vec![vec![target]]];
         let frame = GpuFrame::uniform(DT, 1, &ground, &targets);
-        world.prepare(&g.device, &g.queue, &g.kernels, &frame);
-        let mut encoder = g.device.create_command_encoder(&Default::default());
-        world.record(&mut encoder, &g.kernels);
-        g.queue.submit([encoder.finish()]);
+        common::run_gpu_frame(&mut world, &g.device, &g.queue, &g.kernels, &frame);
         let (gpu_positions, _) = world.read_state(&g.device, &g.queue, 0);
         let diff = twin
             .state
@@ -1596,10 +1585,7 @@ fn the_gpu_stretches_no_more_than_the_cpu_backend() {
         for _ in 0..60 {
             cpu.step(DT, &Serial);
             let frame = GpuFrame::uniform(DT, 1, &[], &targets);
-            world.prepare(&g.device, &g.queue, &g.kernels, &frame);
-            let mut encoder = g.device.create_command_encoder(&Default::default());
-            world.record(&mut encoder, &g.kernels);
-            g.queue.submit([encoder.finish()]);
+            common::run_gpu_frame(&mut world, &g.device, &g.queue, &g.kernels, &frame);
         }
         let (pos, _) = world.read_state(&g.device, &g.queue, 0);
         let edges = cpu.topology().edges();
@@ -2088,10 +2074,7 @@ fn the_tear_check_and_the_torn_edges_match_the_cpu() {
         twin.step(&t, Vec3::ZERO, &[], &[]);
         let targets = [vec![t]];
         let frame = GpuFrame::uniform(DT, 1, &[], &targets);
-        world.prepare(&g.device, &g.queue, &g.kernels, &frame);
-        let mut encoder = g.device.create_command_encoder(&Default::default());
-        world.record(&mut encoder, &g.kernels);
-        g.queue.submit([encoder.finish()]);
+        common::run_gpu_frame(&mut world, &g.device, &g.queue, &g.kernels, &frame);
         let cpu = &twin.state.positions;
         let (gpu_positions, _) = world.read_state(&g.device, &g.queue, 0);
         let diff = cpu
@@ -2582,10 +2565,7 @@ fn a_settings_change_settles_as_on_the_cpu() {
             let mut pins = vec![vec![targets.clone()]];
             pins.resize(cloths, vec![Vec::new()]);
             let frame = GpuFrame::uniform(DT, 1, &[], &pins);
-            world.prepare(&g.device, &g.queue, &g.kernels, &frame);
-            let mut encoder = g.device.create_command_encoder(&Default::default());
-            world.record(&mut encoder, &g.kernels);
-            g.queue.submit([encoder.finish()]);
+            common::run_gpu_frame(&mut world, &g.device, &g.queue, &g.kernels, &frame);
             cpu.step(DT, &Serial);
             frames += 1;
             let (pos, vel) = world.read_state(&g.device, &g.queue, 0);

@@ -473,9 +473,7 @@ fn gpu() -> Option<&'static (wgpu::Device, wgpu::Queue, GpuKernels)> {
     static GPU: std::sync::OnceLock<Option<(wgpu::Device, wgpu::Queue, GpuKernels)>> =
         std::sync::OnceLock::new();
     GPU.get_or_init(|| {
-        let (_, device, queue) = common::gpu_or_skip("stability on the GPU")?;
-        GpuKernels::check_limits(&device.limits()).expect("the adapter has the limits");
-        let kernels = GpuKernels::new(&device);
+        let (_, device, queue, kernels) = common::gpu_kernels_or_skip("stability on the GPU")?;
         Some((device, queue, kernels))
     })
     .as_ref()
@@ -539,10 +537,7 @@ fn run_mesh_on_gpu(
                 ..Default::default()
             }],
         };
-        world.prepare(device, queue, kernels, &frame);
-        let mut encoder = device.create_command_encoder(&Default::default());
-        world.record(&mut encoder, kernels);
-        queue.submit([encoder.finish()]);
+        common::run_gpu_frame(&mut world, device, queue, kernels, &frame);
         let (p, v) = world.read_state(device, queue, 0);
         out.recoveries += usize::from(world.read_status(device, queue, 0).0);
         out.non_finite += p.iter().chain(&v).filter(|x| !x.is_finite()).count();

@@ -6,6 +6,7 @@ use std::time::Duration;
 use bevy::mesh::MeshPlugin;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
+use bevy_cloth::gpu::{GpuFrame, GpuKernels, GpuWorld};
 use bevy_cloth::prelude::*;
 use bevy_cloth::solver::{Topology, TopologyOptions};
 
@@ -137,6 +138,32 @@ pub fn gpu_or_skip(test: &str) -> Option<(wgpu::Adapter, wgpu::Device, wgpu::Que
             None
         }
     }
+}
+
+/// [`gpu_or_skip`] with the GPU backend's kernels built for the device (checked against its
+/// limits first).
+pub fn gpu_kernels_or_skip(
+    test: &str,
+) -> Option<(wgpu::Adapter, wgpu::Device, wgpu::Queue, GpuKernels)> {
+    let (adapter, device, queue) = gpu_or_skip(test)?;
+    GpuKernels::check_limits(&device.limits()).expect("the adapter has the limits");
+    let kernels = GpuKernels::new(&device);
+    Some((adapter, device, queue, kernels))
+}
+
+/// Runs one frame of `world` on the GPU: prepares `frame`, records the world's passes and
+/// submits them.
+pub fn run_gpu_frame(
+    world: &mut GpuWorld,
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    kernels: &GpuKernels,
+    frame: &GpuFrame,
+) {
+    world.prepare(device, queue, kernels, frame);
+    let mut encoder = device.create_command_encoder(&Default::default());
+    world.record(&mut encoder, kernels);
+    queue.submit([encoder.finish()]);
 }
 
 /// A character (a root with a bone child) wearing a cape: a child of the root pinned along
