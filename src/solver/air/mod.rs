@@ -5,5 +5,6 @@
 mod aero;
 mod wind;
 
+pub(crate) use aero::air_velocity_changes4;
 pub use aero::{Aerodynamics, air_force, air_velocity_change, vertex_area_vectors};
 pub use wind::{AirGrid, WindField, WindParams, WindRegion};

@@ -36,7 +36,9 @@ use glam::{Vec3, Vec4, Vec4Swizzles};
 use super::lab::{LabScratch, lab_step};
 use super::params::SolverParams;
 use super::state::ClothState;
-use crate::solver::air::{Aerodynamics, air_velocity_change, vertex_area_vectors};
+use crate::solver::air::{
+    Aerodynamics, air_velocity_change, air_velocity_changes4, vertex_area_vectors,
+};
 use crate::solver::collision::{
     Collider, ContactImpulse, Scales, SelfCollision, SelfCollisionScratch, SubstepPose,
     collide_vertex, find_self_collision_candidates, self_collide, substep_poses,
@@ -234,12 +236,12 @@ fn run_part(
     }
     if phase.integrate {
         let gh = c.gravity.extend(0.0) * c.h;
-        let vertices = w
-            .vel
-            .iter_mut()
-            .zip(w.pos.iter_mut())
-            .zip(w.prev.iter_mut());
         if w.area.is_empty() {
+            let vertices = w
+                .vel
+                .iter_mut()
+                .zip(w.pos.iter_mut())
+                .zip(w.prev.iter_mut());
             for ((v, x), p) in vertices {
                 if x.w > 0.0 {
                     *p = *x;
@@ -248,7 +250,37 @@ fn run_part(
                 }
             }
         } else {
-            for (i, ((v, x), p)) in vertices.enumerate() {
+            // Four vertices at a time through the air (the same bits as one at a time), the
+            // last few one by one.
+            let n = w.pos.len();
+            let whole = n / 4 * 4;
+            for first in (0..whole).step_by(4) {
+                let u: [Vec4; 4] = core::array::from_fn(|k| w.vel[first + k] * c.damp + gh);
+                let wind = |k: usize| w.air.get(first + k).map_or(Vec3::ZERO, |a| a.xyz());
+                let dv = air_velocity_changes4(
+                    core::array::from_fn(|k| w.area[first + k].xyz()),
+                    core::array::from_fn(|k| u[k].xyz() - wind(k)),
+                    core::array::from_fn(|k| w.pos[first + k].w),
+                    c.h,
+                    &c.air,
+                );
+                for (k, (u, dv)) in u.into_iter().zip(dv).enumerate() {
+                    let i = first + k;
+                    let x = &mut w.pos[i];
+                    if x.w > 0.0 {
+                        w.prev[i] = *x;
+                        let u = u + dv.extend(0.0);
+                        w.vel[i] = u;
+                        *x += u * c.h;
+                    }
+                }
+            }
+            let vertices = w
+                .vel
+                .iter_mut()
+                .zip(w.pos.iter_mut())
+                .zip(w.prev.iter_mut());
+            for (i, ((v, x), p)) in vertices.enumerate().skip(whole) {
                 if x.w > 0.0 {
                     *p = *x;
                     let mut u = *v * c.damp + gh;
