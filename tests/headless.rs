@@ -98,6 +98,77 @@ fn a_pinned_cloth_sags_and_its_mesh_is_rewritten() {
 }
 
 #[test]
+fn many_cloths_written_back_together_each_draw_their_own_state() {
+    // Cloths of different sizes, turned, scaled and mirrored, written back in the same frame
+    // (their normals and local vertices computed in parallel on the plugin's workers): each
+    // mesh shows its own cloth, in its own entity's space, with unit normals.
+    let mut app = app_with_frame(Duration::from_secs_f64(1.0 / 60.0));
+    let mut cloths = Vec::new();
+    for k in 0..7u32 {
+        let g = Grid {
+            columns: 6 + 3 * k,
+            rows: 5 + 2 * k,
+            width: 0.5 + 0.2 * k as f32,
+            height: 0.8,
+        };
+        let mesh = app
+            .world_mut()
+            .resource_mut::<Assets<Mesh>>()
+            .add(grid_mesh(&g));
+        let mut transform = Transform::from_xyz(3.0 * k as f32, 2.0, -(k as f32))
+            .with_rotation(Quat::from_rotation_y(0.4 * k as f32))
+            .with_scale(Vec3::splat(0.8 + 0.1 * k as f32));
+        if k % 3 == 2 {
+            transform.scale.x = -transform.scale.x;
+        }
+        let e = app
+            .world_mut()
+            .spawn((
+                Mesh3d(mesh),
+                transform,
+                Cloth::default(),
+                ClothPins::rest([g.index(0, 0), g.index(g.columns - 1, 0)]),
+            ))
+            .id();
+        cloths.push((e, transform));
+    }
+    run(&mut app, 40);
+    for (e, transform) in cloths {
+        let s = sim(&app, e);
+        let own = app.world().get::<Mesh3d>(e).unwrap().0.clone();
+        assert_eq!(&own, s.mesh());
+        let written = positions(&app, &own);
+        let state = s.simulation().state();
+        let weld = s.weld();
+        assert_eq!(written.len(), weld.particles().len());
+        let to_local = transform.compute_affine().inverse();
+        let mut moved = 0.0f32;
+        for (v, (w, &p)) in written.iter().zip(weld.particles()).enumerate() {
+            let expect = to_local.transform_point3(state.position(p as usize));
+            let error = (Vec3::from(*w) - expect).length();
+            assert!(
+                error < 1e-4,
+                "{e}: vertex {v} drawn {w:?}, simulated {expect}"
+            );
+            moved = moved.max((Vec3::from(*w) - s.rest_shape()[p as usize]).length());
+        }
+        assert!(moved > 0.05, "{e}: the cloth hung down ({moved} m at most)");
+        let mesh = app.world().resource::<Assets<Mesh>>().get(&own).unwrap();
+        let Some(VertexAttributeValues::Float32x3(normals)) =
+            mesh.attribute(Mesh::ATTRIBUTE_NORMAL)
+        else {
+            panic!("no normals")
+        };
+        assert_eq!(normals.len(), written.len());
+        assert!(
+            normals
+                .iter()
+                .all(|n| (Vec3::from(*n).length() - 1.0).abs() < 1e-4)
+        );
+    }
+}
+
+#[test]
 fn frame_rate_does_not_change_the_result() {
     // Same fixed rate, frames of 1/144 s against 1/25 s: after the same number of fixed steps
     // the cloths must be bit-identical.

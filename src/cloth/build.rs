@@ -44,6 +44,7 @@ impl Built {
             dirty: true,
             drawn_shift: 0.0,
             drawn: Vec::new(),
+            local: Default::default(),
             indices_dirty: false,
             torn_edges: 0,
             recoveries: 0,

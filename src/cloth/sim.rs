@@ -44,6 +44,8 @@ pub struct ClothSim {
     pub(super) drawn_shift: f32,
     /// The shifted positions drawn (working space of the write-back).
     pub(super) drawn: Vec<bevy::math::Vec4>,
+    /// The vertices in the entity's local space (working space of the write-back).
+    pub(super) local: super::writeback::LocalVertices,
     /// The triangles changed (tearing): the index buffer must be rewritten.
     pub(super) indices_dirty: bool,
     pub(super) torn_edges: usize,

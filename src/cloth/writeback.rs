@@ -13,16 +13,39 @@
 //! With [`ClothSmoothing`], each vertex is drawn `x + s·v` (see [`ClothSmoothing::shift`]),
 //! written every frame the shift changes; the GPU's `mesh.wgsl` draws the same.
 
+use bevy::math::Affine3A;
 use bevy::mesh::VertexAttributeValues;
 use bevy::prelude::*;
 
 use super::{ClothSim, ClothSmoothing, ClothSteppedElsewhere};
 use crate::foundation::ClothSchedule;
-use crate::solver::ClothState;
+use crate::foundation::ClothWorkers;
+use crate::solver::{ClothState, Parallel};
+
+/// A cloth's vertices in its entity's local space, as the write-back last computed them
+/// (working space, kept between frames so that no frame allocates).
+#[derive(Debug, Default)]
+pub(super) struct LocalVertices {
+    positions: Vec<[f32; 3]>,
+    normals: Vec<[f32; 3]>,
+    tangents: Vec<[f32; 4]>,
+    /// Whether the entity's transform could be inverted (a zero scale cannot: nothing is
+    /// written, and the mesh keeps its last shape rather than take non-finite positions).
+    finite: bool,
+}
+
+/// A moved cloth this frame's write-back draws anew.
+struct Moved<'a> {
+    cloth: &'a mut ClothSim,
+    affine: Affine3A,
+    shift: f32,
+}
 
 /// Copies the moved cloths' state into their meshes (torn triangles leave the index buffer,
 /// kept in the mesh's own index format; the vertex buffer keeps its size). Cloths stepped
-/// elsewhere write their own mesh.
+/// elsewhere write their own mesh. The normals, tangents and local-space vertices of the
+/// cloths are computed in parallel with each other on [`ClothWorkers`] (each cloth's the same
+/// whatever the threads), then copied into the meshes one after another.
 pub(super) fn write_back(
     mut meshes: Option<ResMut<Assets<Mesh>>>,
     mut cloths: Query<
@@ -31,11 +54,13 @@ pub(super) fn write_back(
     >,
     schedule: Option<Res<ClothSchedule>>,
     fixed: Option<Res<Time<Fixed>>>,
+    workers: Option<Res<ClothWorkers>>,
 ) {
     let Some(meshes) = meshes.as_deref_mut() else {
         return;
     };
     let overstep = ClothSchedule::overstep(schedule.as_deref(), fixed.as_deref());
+    let mut moved: Vec<Moved<'_>> = Vec::new();
     for (cloth, gt, smoothing) in &mut cloths {
         // A sleeping cloth's velocities are zero: no shift to draw.
         let shift = match (smoothing, overstep) {
@@ -50,77 +75,128 @@ pub(super) fn write_back(
         let cloth = cloth.into_inner();
         cloth.dirty = false;
         cloth.drawn_shift = shift;
-        let state = cloth.sim.state();
-        if shift != 0.0 {
-            // Each vertex's velocity with the motion carried into the step (`ClothInertia`),
-            // which moved it too.
-            let carried = cloth.sim.carried_velocity();
-            cloth.drawn.clear();
-            cloth
-                .drawn
-                .extend(state.positions.iter().zip(&state.velocities).map(|(p, v)| {
-                    let v = match carried {
-                        Some(c) => *v + c.at(p.truncate()).extend(0.0),
-                        None => *v,
-                    };
-                    ClothSmoothing::place(*p, v, shift)
-                }));
-        }
-        cloth
-            .binding
-            .update_shading(drawn(cloth.sim.state(), &cloth.drawn, shift));
+        moved.push(Moved {
+            cloth,
+            affine: gt.affine(),
+            shift,
+        });
+    }
+    let par = ClothWorkers::or_serial(workers.as_deref());
+    par.for_each_mut(&mut moved, |m| shade(m.cloth, m.affine, m.shift, par));
+    for Moved { cloth, .. } in moved {
         let Some(mut mesh) = meshes.get_mut(&cloth.mesh) else {
             continue;
         };
         cloth.write_indices(&mut mesh);
-        let particles = drawn(cloth.sim.state(), &cloth.drawn, shift);
-        let binding = &cloth.binding;
-        let affine = gt.affine();
-        let to_local = affine.inverse();
-        if !to_local.is_finite() {
-            // A zero scale (the entity or a parent shrunk to nothing): nothing is drawn, and
-            // the mesh keeps its last shape rather than take non-finite positions.
+        let local = &cloth.local;
+        if !local.finite {
             continue;
         }
-        let linear = affine.matrix3;
-        let flip = if linear.determinant() < 0.0 {
-            -1.0
-        } else {
-            1.0
-        };
-        let normal_to_local = linear.transpose();
-        let tangent_to_local = to_local.matrix3;
-        let weld = binding.weld();
-
         if let Ok(VertexAttributeValues::Float32x3(out)) =
             mesh.try_attribute_mut(Mesh::ATTRIBUTE_POSITION)
         {
-            for (o, &p) in out.iter_mut().zip(weld.particles()) {
-                *o = to_local
-                    .transform_point3(particles[p as usize].truncate())
-                    .to_array();
-            }
+            copy_into(out, &local.positions);
         }
-        let shading = binding.shading();
         if let Ok(VertexAttributeValues::Float32x3(out)) =
             mesh.try_attribute_mut(Mesh::ATTRIBUTE_NORMAL)
         {
-            for (o, n) in out.iter_mut().zip(shading.normals()) {
-                *o = (normal_to_local * (*n * flip))
-                    .normalize_or(Vec3::Y)
-                    .to_array();
-            }
+            copy_into(out, &local.normals);
         }
-        if !shading.tangents().is_empty()
+        if !local.tangents.is_empty()
             && let Ok(VertexAttributeValues::Float32x4(out)) =
                 mesh.try_attribute_mut(Mesh::ATTRIBUTE_TANGENT)
         {
-            for (o, t) in out.iter_mut().zip(shading.tangents()) {
-                let local = (tangent_to_local * t.truncate()).normalize_or(Vec3::X);
-                *o = local.extend(t.w).to_array();
-            }
+            copy_into(out, &local.tangents);
         }
     }
+}
+
+/// `from` over the start of `out` (as many as both have).
+fn copy_into<T: Copy>(out: &mut [T], from: &[T]) {
+    let n = out.len().min(from.len());
+    out[..n].copy_from_slice(&from[..n]);
+}
+
+/// Recomputes a moved cloth's normals and tangents and its vertices in the local space of an
+/// entity placed by `affine`, drawn `shift` seconds along their velocities. The vertices are
+/// mapped in chunks on `par` (serially when called from inside another of its regions, as for
+/// several cloths at once).
+fn shade(cloth: &mut ClothSim, affine: Affine3A, shift: f32, par: &impl Parallel) {
+    let state = cloth.sim.state();
+    if shift != 0.0 {
+        // Each vertex's velocity with the motion carried into the step (`ClothInertia`),
+        // which moved it too.
+        let carried = cloth.sim.carried_velocity();
+        cloth.drawn.clear();
+        cloth
+            .drawn
+            .extend(state.positions.iter().zip(&state.velocities).map(|(p, v)| {
+                let v = match carried {
+                    Some(c) => *v + c.at(p.truncate()).extend(0.0),
+                    None => *v,
+                };
+                ClothSmoothing::place(*p, v, shift)
+            }));
+    }
+    let particles = drawn(cloth.sim.state(), &cloth.drawn, shift);
+    cloth.binding.update_shading(particles);
+    let local = &mut cloth.local;
+    let to_local = affine.inverse();
+    local.finite = to_local.is_finite();
+    if !local.finite {
+        return;
+    }
+    let linear = affine.matrix3;
+    let flip = if linear.determinant() < 0.0 {
+        -1.0
+    } else {
+        1.0
+    };
+    let normal_to_local = linear.transpose();
+    let tangent_to_local = to_local.matrix3;
+    let welded = cloth.binding.weld().particles();
+    map_chunks(par, &mut local.positions, welded.len(), |i| {
+        to_local
+            .transform_point3(particles[welded[i] as usize].truncate())
+            .to_array()
+    });
+    let shading = cloth.binding.shading();
+    let normals = shading.normals();
+    map_chunks(par, &mut local.normals, normals.len(), |i| {
+        (normal_to_local * (normals[i] * flip))
+            .normalize_or(Vec3::Y)
+            .to_array()
+    });
+    let tangents = shading.tangents();
+    map_chunks(par, &mut local.tangents, tangents.len(), |i| {
+        let t = tangents[i];
+        let v = (tangent_to_local * t.truncate()).normalize_or(Vec3::X);
+        v.extend(t.w).to_array()
+    });
+}
+
+/// Vertices a work item of [`map_chunks`] maps.
+const CHUNK: usize = 4096;
+
+/// `out[i] = f(i)` for `i < n`, in chunks of [`CHUNK`] on `par`.
+fn map_chunks<T: Copy + Default + Send>(
+    par: &impl Parallel,
+    out: &mut Vec<T>,
+    n: usize,
+    f: impl Fn(usize) -> T + Sync,
+) {
+    out.clear();
+    out.resize(n, T::default());
+    let mut chunks: Vec<(usize, &mut [T])> = out
+        .chunks_mut(CHUNK)
+        .enumerate()
+        .map(|(k, c)| (k * CHUNK, c))
+        .collect();
+    par.for_each_mut(&mut chunks, |(first, chunk)| {
+        for (k, o) in chunk.iter_mut().enumerate() {
+            *o = f(*first + k);
+        }
+    });
 }
 
 /// The particles a cloth is drawn from: its state's positions, or with a shift the shifted

@@ -7,7 +7,8 @@ use bevy::tasks::TaskPool;
 use crate::solver::{Parallel, Workers};
 
 /// The worker threads the plugin steps CPU cloths on ([`Workers::per_core`]: one helper per
-/// core besides the thread running the system), and bakes mesh colliders on. They spin for a moment after each parallel
+/// core besides the thread running the system), computes their meshes' normals and tangents
+/// on (the cloths in parallel with each other), and bakes mesh colliders on. They spin for a moment after each parallel
 /// region and then sleep, so an idle app pays nothing for them. Remove the resource to step
 /// on Bevy's `ComputeTaskPool` instead (slower for one cloth: waking its threads takes about
 /// as long as a substep's work at 64 × 64), or insert `ClothWorkers(Workers::new(0))` to step
