@@ -20,7 +20,8 @@ use bevy::prelude::*;
 use super::{ClothSim, ClothSmoothing, ClothSteppedElsewhere};
 use crate::foundation::ClothSchedule;
 use crate::foundation::ClothWorkers;
-use crate::solver::{ClothState, Parallel};
+use crate::solver::ClothState;
+use crate::solver::parallel::{Parallel, map_chunks};
 
 /// A cloth's vertices in its entity's local space, as the write-back last computed them
 /// (working space, kept between frames so that no frame allocates).
@@ -82,7 +83,10 @@ pub(super) fn write_back(
         });
     }
     let par = ClothWorkers::or_serial(workers.as_deref());
-    par.for_each_mut(&mut moved, |m| shade(m.cloth, m.affine, m.shift, par));
+    let alone = moved.len() == 1;
+    par.for_each_mut(&mut moved, |m| {
+        shade(m.cloth, m.affine, m.shift, par, alone)
+    });
     for Moved { cloth, .. } in moved {
         let Some(mut mesh) = meshes.get_mut(&cloth.mesh) else {
             continue;
@@ -120,8 +124,9 @@ fn copy_into<T: Copy>(out: &mut [T], from: &[T]) {
 /// Recomputes a moved cloth's normals and tangents and its vertices in the local space of an
 /// entity placed by `affine`, drawn `shift` seconds along their velocities. The vertices are
 /// mapped in chunks on `par` (serially when called from inside another of its regions, as for
-/// several cloths at once).
-fn shade(cloth: &mut ClothSim, affine: Affine3A, shift: f32, par: &impl Parallel) {
+/// several cloths at once); a cloth drawn `alone` gathers its normals' and tangents' sums on
+/// `par` too, the others scatter them on their own thread (the same values either way).
+fn shade(cloth: &mut ClothSim, affine: Affine3A, shift: f32, par: &impl Parallel, alone: bool) {
     let state = cloth.sim.state();
     if shift != 0.0 {
         // Each vertex's velocity with the motion carried into the step (`ClothInertia`),
@@ -139,7 +144,11 @@ fn shade(cloth: &mut ClothSim, affine: Affine3A, shift: f32, par: &impl Parallel
             }));
     }
     let particles = drawn(cloth.sim.state(), &cloth.drawn, shift);
-    cloth.binding.update_shading(particles);
+    if alone {
+        cloth.binding.update_shading_in(particles, par);
+    } else {
+        cloth.binding.update_shading(particles);
+    }
     let local = &mut cloth.local;
     let to_local = affine.inverse();
     local.finite = to_local.is_finite();
@@ -172,30 +181,6 @@ fn shade(cloth: &mut ClothSim, affine: Affine3A, shift: f32, par: &impl Parallel
         let t = tangents[i];
         let v = (tangent_to_local * t.truncate()).normalize_or(Vec3::X);
         v.extend(t.w).to_array()
-    });
-}
-
-/// Vertices a work item of [`map_chunks`] maps.
-const CHUNK: usize = 4096;
-
-/// `out[i] = f(i)` for `i < n`, in chunks of [`CHUNK`] on `par`.
-fn map_chunks<T: Copy + Default + Send>(
-    par: &impl Parallel,
-    out: &mut Vec<T>,
-    n: usize,
-    f: impl Fn(usize) -> T + Sync,
-) {
-    out.clear();
-    out.resize(n, T::default());
-    let mut chunks: Vec<(usize, &mut [T])> = out
-        .chunks_mut(CHUNK)
-        .enumerate()
-        .map(|(k, c)| (k * CHUNK, c))
-        .collect();
-    par.for_each_mut(&mut chunks, |(first, chunk)| {
-        for (k, o) in chunk.iter_mut().enumerate() {
-            *o = f(*first + k);
-        }
     });
 }
 

@@ -13,6 +13,7 @@ use glam::{Vec2, Vec3, Vec4, Vec4Swizzles};
 
 use super::topology::Topology;
 use super::weld::Weld;
+use crate::solver::parallel::{Parallel, map_chunks};
 
 /// Per-mesh-vertex normals and tangents from the simulated particles.
 ///
@@ -32,6 +33,74 @@ pub struct MeshShading {
     /// Last update's normals, the fallback for vertices left in no triangle.
     old_normals: Vec<Vec3>,
     tangents: Vec<Vec4>,
+    /// Which drawn triangles each normal group and each vertex sums, for
+    /// [`Self::update_gathered`] (built for one weld, triangle list and drawn set).
+    layout: Option<GatherLayout>,
+    /// Each drawn triangle's unnormalised normal, and its `(T', B')` (zero where the scatter
+    /// adds nothing).
+    faces: Vec<Vec3>,
+    frames: Vec<(Vec3, Vec3)>,
+}
+
+/// Which drawn triangles (positions in the drawn list) each normal group and each mesh vertex
+/// sums, in the order [`MeshShading::update`] adds them (a triangle naming a group or vertex
+/// twice is listed twice): compressed rows, offsets then entries.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct GatherLayout {
+    group_offsets: Vec<u32>,
+    group_entries: Vec<u32>,
+    vertex_offsets: Vec<u32>,
+    vertex_entries: Vec<u32>,
+}
+
+impl GatherLayout {
+    fn new(weld: &Weld, triangles: &[[u32; 3]], drawn: &[u32]) -> Self {
+        let (group, groups) = weld.normal_groups();
+        let corners = || {
+            drawn
+                .iter()
+                .enumerate()
+                .flat_map(|(k, &t)| triangles[t as usize].map(|v| (k as u32, v)))
+        };
+        let (group_offsets, group_entries) =
+            rows(groups, corners().map(|(k, v)| (group[v as usize], k)));
+        let (vertex_offsets, vertex_entries) =
+            rows(weld.vertex_count(), corners().map(|(k, v)| (v, k)));
+        Self {
+            group_offsets,
+            group_entries,
+            vertex_offsets,
+            vertex_entries,
+        }
+    }
+}
+
+/// `(row, value)` pairs as compressed rows (a counting sort: each row keeps its values in
+/// the order given).
+fn rows(count: usize, pairs: impl Iterator<Item = (u32, u32)> + Clone) -> (Vec<u32>, Vec<u32>) {
+    let mut offsets = vec![0u32; count + 1];
+    for (r, _) in pairs.clone() {
+        offsets[r as usize + 1] += 1;
+    }
+    for i in 0..count {
+        offsets[i + 1] += offsets[i];
+    }
+    let mut fill = offsets.clone();
+    let mut entries = vec![0u32; offsets[count] as usize];
+    for (r, value) in pairs {
+        entries[fill[r as usize] as usize] = value;
+        fill[r as usize] += 1;
+    }
+    (offsets, entries)
+}
+
+/// The sum of `values` at `entries` in order, from zero (what the scatter adds one by one).
+fn sum_at<T: Copy + core::ops::AddAssign>(zero: T, values: &[T], entries: &[u32]) -> T {
+    let mut s = zero;
+    for &k in entries {
+        s += values[k as usize];
+    }
+    s
 }
 
 impl MeshShading {
@@ -197,6 +266,74 @@ impl MeshShading {
         }
     }
 
+    /// [`Self::update`] with every sum gathered per group and per vertex instead of scattered
+    /// per triangle, the triangles, groups and vertices in chunks on `par`: the same values bit
+    /// for bit (each sum adds the same terms in the same order, from zero; a triangle the
+    /// scatter skips adds zero, which changes no sum). `weld`, `triangles` and `drawn` must be
+    /// those of the last call unless [`Self::forget_layout`] was called since (the layout of
+    /// the sums is kept between calls).
+    pub(crate) fn update_gathered(
+        &mut self,
+        weld: &Weld,
+        particles: &[Vec4],
+        triangles: &[[u32; 3]],
+        drawn: &[u32],
+        par: &impl Parallel,
+    ) {
+        let layout = self
+            .layout
+            .get_or_insert_with(|| GatherLayout::new(weld, triangles, drawn));
+        let n = weld.vertex_count();
+        let (group, groups) = weld.normal_groups();
+        let at = |v: u32| particles[weld.particle(v) as usize].xyz();
+        map_chunks(par, &mut self.faces, drawn.len(), |k| {
+            let [a, b, c] = triangles[drawn[k] as usize].map(at);
+            let face = (b - a).cross(c - a);
+            if face.is_finite() { face } else { Vec3::ZERO }
+        });
+        let faces = &self.faces;
+        map_chunks(par, &mut self.group_sum, groups, |g| {
+            let r = layout.group_offsets[g] as usize..layout.group_offsets[g + 1] as usize;
+            sum_at(Vec3::ZERO, faces, &layout.group_entries[r])
+        });
+        core::mem::swap(&mut self.normals, &mut self.old_normals);
+        let (sums, old) = (&self.group_sum, &self.old_normals);
+        map_chunks(par, &mut self.normals, n, |i| {
+            sums[group[i] as usize].try_normalize().unwrap_or_else(|| {
+                // Keep last frame's normal where no triangle is left (a torn-off vertex).
+                old.get(i)
+                    .copied()
+                    .filter(|v| v.is_finite() && *v != Vec3::ZERO)
+                    .unwrap_or(Vec3::Y)
+            })
+        });
+        let Some(corner_uvs) = &self.corner_uvs else {
+            self.tangents.clear();
+            return;
+        };
+        map_chunks(par, &mut self.frames, drawn.len(), |k| {
+            let t = drawn[k] as usize;
+            triangle_tangent(triangles[t].map(at), corner_uvs[t])
+                .unwrap_or((Vec3::ZERO, Vec3::ZERO))
+        });
+        let (frames, normals, handedness) = (&self.frames, &self.normals, &self.handedness);
+        map_chunks(par, &mut self.tangents, n, |i| {
+            let r = layout.vertex_offsets[i] as usize..layout.vertex_offsets[i + 1] as usize;
+            let (mut tan, mut bit) = (Vec3::ZERO, Vec3::ZERO);
+            for &k in &layout.vertex_entries[r] {
+                let (tp, bp) = frames[k as usize];
+                tan += tp;
+                bit += bp;
+            }
+            finish_tangent(normals[i], tan, bit, handedness.as_ref().map(|h| h[i]))
+        });
+    }
+
+    /// Drops the layout [`Self::update_gathered`] keeps (the drawn triangles changed).
+    pub(crate) fn forget_layout(&mut self) {
+        self.layout = None;
+    }
+
     /// Unit normal of every mesh vertex (world space) as of the last [`Self::update`].
     #[must_use]
     pub fn normals(&self) -> &[Vec3] {
@@ -271,6 +408,101 @@ mod tests {
         let binding = MeshBinding::new(&g.positions(), attributes, &g.indices(), 0.0).unwrap();
         let p = g.positions().iter().map(|p| p.extend(1.0)).collect();
         (binding, p)
+    }
+
+    #[test]
+    fn gathered_sums_give_the_scattered_shading_bit_for_bit() {
+        // A creased sheet stored as a triangle soup (every corner its own vertex, face
+        // normals): welded into particles, with normal groups split along the crease; more
+        // vertices than a chunk, UVs, a few broken particles, and the drawn set changed twice
+        // (as tears do), on one thread and on four.
+        let g = Grid::new(71, 64, 2.0, 1.5);
+        let flat = g.positions();
+        let mid = flat.iter().map(|p| p.x).sum::<f32>() / flat.len() as f32;
+        let bent: Vec<Vec3> = flat
+            .iter()
+            .map(|p| Vec3::new(p.x, (p.x - mid).abs() * 2.5, p.z))
+            .collect();
+        let grid_uvs = g.uvs();
+        let idx = g.indices();
+        let positions: Vec<Vec3> = idx.iter().map(|&i| bent[i as usize]).collect();
+        let uvs: Vec<Vec2> = idx.iter().map(|&i| grid_uvs[i as usize]).collect();
+        let normals: Vec<Vec3> = positions
+            .chunks(3)
+            .flat_map(|t| [(t[1] - t[0]).cross(t[2] - t[0]).normalize(); 3])
+            .collect();
+        let soup: Vec<u32> = (0..positions.len() as u32).collect();
+        let attributes = MeshAttributes {
+            normals: Some(&normals),
+            uvs: Some(&uvs),
+            ..Default::default()
+        };
+        let binding = MeshBinding::new(&positions, attributes, &soup, 1e-6).unwrap();
+        let weld = binding.weld();
+        let (_, groups) = weld.normal_groups();
+        assert!(weld.particles().iter().max().unwrap() + 1 < positions.len() as u32 / 4);
+        assert!(
+            groups > weld.gather(&positions).len(),
+            "the crease splits groups: {groups} groups, {} particles, {} vertices",
+            weld.gather(&positions).len(),
+            positions.len()
+        );
+        assert!(positions.len() > 2 * crate::solver::parallel::CHUNK);
+        let triangles: Vec<[u32; 3]> = soup.chunks(3).map(|t| [t[0], t[1], t[2]]).collect();
+        let particles = weld.gather(&positions);
+        let workers = crate::solver::Workers::new(3);
+        for threads in [1, 4] {
+            let mut scattered = MeshShading::new(&triangles, Some(&uvs), &positions, None);
+            let mut gathered = scattered.clone();
+            let mut seed = 0x9e37_79b9_u32;
+            let mut drawn: Vec<u32> = (0..triangles.len() as u32).collect();
+            for frame in 0..6 {
+                if frame == 2 || frame == 4 {
+                    // A tear: some triangles are no longer drawn.
+                    drawn.retain(|&t| (t * 7 + frame) % 11 != 0);
+                    gathered.forget_layout();
+                }
+                let p: Vec<Vec4> = particles
+                    .iter()
+                    .enumerate()
+                    .map(|(i, q)| {
+                        seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                        let jitter = (seed >> 8) as f32 / (1u32 << 24) as f32 - 0.5;
+                        match (i + frame as usize) % 997 {
+                            0 => Vec4::new(f32::NAN, 0.0, 0.0, 1.0),
+                            1 => Vec4::new(3e30, -3e30, 1.0, 1.0),
+                            _ => (*q + Vec3::splat(jitter * 0.01 * frame as f32)).extend(1.0),
+                        }
+                    })
+                    .collect();
+                scattered.update(weld, &p, &triangles, &drawn);
+                if threads == 1 {
+                    gathered.update_gathered(weld, &p, &triangles, &drawn, &crate::solver::Serial);
+                } else {
+                    gathered.update_gathered(weld, &p, &triangles, &drawn, &workers);
+                }
+                let bits3 = |v: &[Vec3]| {
+                    v.iter()
+                        .map(|v| v.to_array().map(f32::to_bits))
+                        .collect::<Vec<_>>()
+                };
+                let bits4 = |v: &[Vec4]| {
+                    v.iter()
+                        .map(|v| v.to_array().map(f32::to_bits))
+                        .collect::<Vec<_>>()
+                };
+                assert_eq!(scattered.normals().len(), positions.len());
+                assert!(
+                    bits3(scattered.normals()) == bits3(gathered.normals()),
+                    "normals differ at frame {frame} on {threads} threads"
+                );
+                assert_eq!(scattered.tangents().len(), positions.len());
+                assert!(
+                    bits4(scattered.tangents()) == bits4(gathered.tangents()),
+                    "tangents differ at frame {frame} on {threads} threads"
+                );
+            }
+        }
     }
 
     #[test]

@@ -25,6 +25,7 @@ use glam::{IVec3, Vec2, Vec3, Vec4};
 
 use super::shading::MeshShading;
 use super::topology::{Topology, TopologyError, TopologyOptions};
+use crate::solver::parallel::Parallel;
 
 /// Copies whose source normals have a cosine at least this large share a normal (about 8°).
 pub const HARD_EDGE_COS: f32 = 0.99;
@@ -412,12 +413,22 @@ impl MeshBinding {
         self.drawn = (0..self.triangles.len() as u32)
             .filter(|&t| alive.contains(&self.keys[t as usize]))
             .collect();
+        self.shading.forget_layout();
     }
 
     /// Recomputes the mesh's normals and tangents from the particle positions.
     pub fn update_shading(&mut self, particles: &[Vec4]) {
         self.shading
             .update(&self.weld, particles, &self.triangles, &self.drawn);
+    }
+
+    /// [`Self::update_shading`] with the triangles and vertices in chunks on `par`: the same
+    /// values bit for bit, whatever the threads. Each vertex gathers its sums, which costs
+    /// more work than [`Self::update_shading`]'s scatter over the triangles: worth it where
+    /// `par` has threads to spare (one big cloth), not inside another parallel region.
+    pub fn update_shading_in(&mut self, particles: &[Vec4], par: &impl Parallel) {
+        self.shading
+            .update_gathered(&self.weld, particles, &self.triangles, &self.drawn, par);
     }
 
     /// The weld.

@@ -22,6 +22,31 @@ pub trait Parallel: Sync {
     }
 }
 
+/// Items a parallel region over a per-vertex array hands out: vertices a work item maps.
+pub(crate) const CHUNK: usize = 4096;
+
+/// `out[i] = f(i)` for every `i < n` (`out` cleared and resized first), in chunks of
+/// [`CHUNK`] on `par`.
+pub(crate) fn map_chunks<T: Copy + Default + Send>(
+    par: &impl Parallel,
+    out: &mut Vec<T>,
+    n: usize,
+    f: impl Fn(usize) -> T + Sync,
+) {
+    out.clear();
+    out.resize(n, T::default());
+    let mut chunks: Vec<(usize, &mut [T])> = out
+        .chunks_mut(CHUNK)
+        .enumerate()
+        .map(|(k, c)| (k * CHUNK, c))
+        .collect();
+    par.for_each_mut(&mut chunks, |(first, chunk)| {
+        for (k, o) in chunk.iter_mut().enumerate() {
+            *o = f(*first + k);
+        }
+    });
+}
+
 /// Runs everything on the calling thread, in order.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Serial;
