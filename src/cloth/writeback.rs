@@ -18,8 +18,7 @@ use bevy::mesh::VertexAttributeValues;
 use bevy::prelude::*;
 
 use super::{ClothSim, ClothSmoothing, ClothSteppedElsewhere};
-use crate::foundation::ClothSchedule;
-use crate::foundation::ClothWorkers;
+use crate::foundation::{ClothSchedule, ClothWorkers};
 use crate::solver::ClothState;
 use crate::solver::parallel::{Parallel, map_chunks};
 
@@ -30,9 +29,6 @@ pub(super) struct LocalVertices {
     positions: Vec<[f32; 3]>,
     normals: Vec<[f32; 3]>,
     tangents: Vec<[f32; 4]>,
-    /// Whether the entity's transform could be inverted (a zero scale cannot: nothing is
-    /// written, and the mesh keeps its last shape rather than take non-finite positions).
-    finite: bool,
 }
 
 /// A moved cloth this frame's write-back draws anew.
@@ -40,6 +36,9 @@ struct Moved<'a> {
     cloth: &'a mut ClothSim,
     affine: Affine3A,
     shift: f32,
+    /// Whether its vertices were placed in the entity's space: a zero scale cannot be
+    /// inverted, and the mesh then keeps its last shape rather than take non-finite positions.
+    placed: bool,
 }
 
 /// Copies the moved cloths' state into their meshes (torn triangles leave the index buffer,
@@ -80,22 +79,23 @@ pub(super) fn write_back(
             cloth,
             affine: gt.affine(),
             shift,
+            placed: false,
         });
     }
     let par = ClothWorkers::or_serial(workers.as_deref());
     let alone = moved.len() == 1;
     par.for_each_mut(&mut moved, |m| {
-        shade(m.cloth, m.affine, m.shift, par, alone)
+        m.placed = shade(m.cloth, m.affine, m.shift, par, alone);
     });
-    for Moved { cloth, .. } in moved {
+    for Moved { cloth, placed, .. } in moved {
         let Some(mut mesh) = meshes.get_mut(&cloth.mesh) else {
             continue;
         };
         cloth.write_indices(&mut mesh);
-        let local = &cloth.local;
-        if !local.finite {
+        if !placed {
             continue;
         }
+        let local = &cloth.local;
         if let Ok(VertexAttributeValues::Float32x3(out)) =
             mesh.try_attribute_mut(Mesh::ATTRIBUTE_POSITION)
         {
@@ -126,7 +126,14 @@ fn copy_into<T: Copy>(out: &mut [T], from: &[T]) {
 /// mapped in chunks on `par` (serially when called from inside another of its regions, as for
 /// several cloths at once); a cloth drawn `alone` gathers its normals' and tangents' sums on
 /// `par` too, the others scatter them on their own thread (the same values either way).
-fn shade(cloth: &mut ClothSim, affine: Affine3A, shift: f32, par: &impl Parallel, alone: bool) {
+/// Returns whether the vertices were placed (`affine` could be inverted).
+fn shade(
+    cloth: &mut ClothSim,
+    affine: Affine3A,
+    shift: f32,
+    par: &impl Parallel,
+    alone: bool,
+) -> bool {
     let state = cloth.sim.state();
     if shift != 0.0 {
         // Each vertex's velocity with the motion carried into the step (`ClothInertia`),
@@ -149,12 +156,11 @@ fn shade(cloth: &mut ClothSim, affine: Affine3A, shift: f32, par: &impl Parallel
     } else {
         cloth.binding.update_shading(particles);
     }
-    let local = &mut cloth.local;
     let to_local = affine.inverse();
-    local.finite = to_local.is_finite();
-    if !local.finite {
-        return;
+    if !to_local.is_finite() {
+        return false;
     }
+    let local = &mut cloth.local;
     let linear = affine.matrix3;
     let flip = if linear.determinant() < 0.0 {
         -1.0
@@ -182,6 +188,7 @@ fn shade(cloth: &mut ClothSim, affine: Affine3A, shift: f32, par: &impl Parallel
         let v = (tangent_to_local * t.truncate()).normalize_or(Vec3::X);
         v.extend(t.w).to_array()
     });
+    true
 }
 
 /// The particles a cloth is drawn from: its state's positions, or with a shift the shifted

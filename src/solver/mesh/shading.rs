@@ -33,9 +33,6 @@ pub struct MeshShading {
     /// Last update's normals, the fallback for vertices left in no triangle.
     old_normals: Vec<Vec3>,
     tangents: Vec<Vec4>,
-    /// Which drawn triangles each normal group and each vertex sums, for
-    /// [`Self::update_gathered`] (built for one weld, triangle list and drawn set).
-    layout: Option<GatherLayout>,
     /// Each drawn triangle's unnormalised normal, and its `(T', B')` (zero where the scatter
     /// adds nothing).
     faces: Vec<Vec3>,
@@ -46,7 +43,7 @@ pub struct MeshShading {
 /// sums, in the order [`MeshShading::update`] adds them (a triangle naming a group or vertex
 /// twice is listed twice): compressed rows, offsets then entries.
 #[derive(Clone, Debug, Default, PartialEq)]
-struct GatherLayout {
+pub(crate) struct GatherLayout {
     group_offsets: Vec<u32>,
     group_entries: Vec<u32>,
     vertex_offsets: Vec<u32>,
@@ -54,7 +51,8 @@ struct GatherLayout {
 }
 
 impl GatherLayout {
-    fn new(weld: &Weld, triangles: &[[u32; 3]], drawn: &[u32]) -> Self {
+    /// The layout of `weld`'s sums over the `drawn` ones of `triangles`.
+    pub(crate) fn new(weld: &Weld, triangles: &[[u32; 3]], drawn: &[u32]) -> Self {
         let (group, groups) = weld.normal_groups();
         let corners = || {
             drawn
@@ -95,12 +93,29 @@ fn rows(count: usize, pairs: impl Iterator<Item = (u32, u32)> + Clone) -> (Vec<u
 }
 
 /// The sum of `values` at `entries` in order, from zero (what the scatter adds one by one).
-fn sum_at<T: Copy + core::ops::AddAssign>(zero: T, values: &[T], entries: &[u32]) -> T {
-    let mut s = zero;
+fn sum_at(values: &[Vec3], entries: &[u32]) -> Vec3 {
+    let mut s = Vec3::ZERO;
     for &k in entries {
         s += values[k as usize];
     }
     s
+}
+
+/// A triangle's unnormalised normal `(b − a) × (c − a)`; `None` where it is not finite (the
+/// triangle then adds nothing to its vertices' normals).
+fn face_normal([a, b, c]: [Vec3; 3]) -> Option<Vec3> {
+    let face = (b - a).cross(c - a);
+    face.is_finite().then_some(face)
+}
+
+/// A vertex's unit normal from its group's `sum`, or where that has no direction (a torn-off
+/// vertex) its normal of the last update (`old`), or +Y.
+fn vertex_normal(sum: Vec3, old: Option<&Vec3>) -> Vec3 {
+    sum.try_normalize().unwrap_or_else(|| {
+        old.copied()
+            .filter(|v| v.is_finite() && *v != Vec3::ZERO)
+            .unwrap_or(Vec3::Y)
+    })
 }
 
 impl MeshShading {
@@ -210,20 +225,11 @@ impl MeshShading {
         let n = weld.vertex_count();
         let (group, groups) = weld.normal_groups();
         let at = |v: u32| particles[weld.particle(v) as usize].xyz();
-        // Keep last frame's normal where no triangle is left (a torn-off vertex).
-        let fallback = |i: usize, old: &[Vec3]| {
-            old.get(i)
-                .copied()
-                .filter(|v| v.is_finite() && *v != Vec3::ZERO)
-                .unwrap_or(Vec3::Y)
-        };
         self.group_sum.clear();
         self.group_sum.resize(groups, Vec3::ZERO);
         for &t in drawn {
             let tri = triangles[t as usize];
-            let [a, b, c] = tri.map(at);
-            let face = (b - a).cross(c - a);
-            if face.is_finite() {
+            if let Some(face) = face_normal(tri.map(at)) {
                 for v in tri {
                     self.group_sum[group[v as usize] as usize] += face;
                 }
@@ -232,11 +238,10 @@ impl MeshShading {
         // Last frame's normals move to the scratch buffer (no allocation per frame).
         core::mem::swap(&mut self.normals, &mut self.old_normals);
         self.normals.clear();
-        self.normals.extend((0..n).map(|i| {
-            self.group_sum[group[i] as usize]
-                .try_normalize()
-                .unwrap_or_else(|| fallback(i, &self.old_normals))
-        }));
+        self.normals
+            .extend((0..n).map(|i| {
+                vertex_normal(self.group_sum[group[i] as usize], self.old_normals.get(i))
+            }));
         let Some(corner_uvs) = &self.corner_uvs else {
             self.tangents.clear();
             return;
@@ -269,43 +274,32 @@ impl MeshShading {
     /// [`Self::update`] with every sum gathered per group and per vertex instead of scattered
     /// per triangle, the triangles, groups and vertices in chunks on `par`: the same values bit
     /// for bit (each sum adds the same terms in the same order, from zero; a triangle the
-    /// scatter skips adds zero, which changes no sum). `weld`, `triangles` and `drawn` must be
-    /// those of the last call unless [`Self::forget_layout`] was called since (the layout of
-    /// the sums is kept between calls).
+    /// scatter skips adds zero, which changes no sum). `layout` is
+    /// [`GatherLayout::new`]`(weld, triangles, drawn)`.
     pub(crate) fn update_gathered(
         &mut self,
         weld: &Weld,
         particles: &[Vec4],
         triangles: &[[u32; 3]],
         drawn: &[u32],
+        layout: &GatherLayout,
         par: &impl Parallel,
     ) {
-        let layout = self
-            .layout
-            .get_or_insert_with(|| GatherLayout::new(weld, triangles, drawn));
         let n = weld.vertex_count();
         let (group, groups) = weld.normal_groups();
         let at = |v: u32| particles[weld.particle(v) as usize].xyz();
         map_chunks(par, &mut self.faces, drawn.len(), |k| {
-            let [a, b, c] = triangles[drawn[k] as usize].map(at);
-            let face = (b - a).cross(c - a);
-            if face.is_finite() { face } else { Vec3::ZERO }
+            face_normal(triangles[drawn[k] as usize].map(at)).unwrap_or(Vec3::ZERO)
         });
         let faces = &self.faces;
         map_chunks(par, &mut self.group_sum, groups, |g| {
             let r = layout.group_offsets[g] as usize..layout.group_offsets[g + 1] as usize;
-            sum_at(Vec3::ZERO, faces, &layout.group_entries[r])
+            sum_at(faces, &layout.group_entries[r])
         });
         core::mem::swap(&mut self.normals, &mut self.old_normals);
         let (sums, old) = (&self.group_sum, &self.old_normals);
         map_chunks(par, &mut self.normals, n, |i| {
-            sums[group[i] as usize].try_normalize().unwrap_or_else(|| {
-                // Keep last frame's normal where no triangle is left (a torn-off vertex).
-                old.get(i)
-                    .copied()
-                    .filter(|v| v.is_finite() && *v != Vec3::ZERO)
-                    .unwrap_or(Vec3::Y)
-            })
+            vertex_normal(sums[group[i] as usize], old.get(i))
         });
         let Some(corner_uvs) = &self.corner_uvs else {
             self.tangents.clear();
@@ -327,11 +321,6 @@ impl MeshShading {
             }
             finish_tangent(normals[i], tan, bit, handedness.as_ref().map(|h| h[i]))
         });
-    }
-
-    /// Drops the layout [`Self::update_gathered`] keeps (the drawn triangles changed).
-    pub(crate) fn forget_layout(&mut self) {
-        self.layout = None;
     }
 
     /// Unit normal of every mesh vertex (world space) as of the last [`Self::update`].
@@ -456,11 +445,12 @@ mod tests {
             let mut gathered = scattered.clone();
             let mut seed = 0x9e37_79b9_u32;
             let mut drawn: Vec<u32> = (0..triangles.len() as u32).collect();
+            let mut layout = GatherLayout::new(weld, &triangles, &drawn);
             for frame in 0..6 {
                 if frame == 2 || frame == 4 {
                     // A tear: some triangles are no longer drawn.
                     drawn.retain(|&t| (t * 7 + frame) % 11 != 0);
-                    gathered.forget_layout();
+                    layout = GatherLayout::new(weld, &triangles, &drawn);
                 }
                 let p: Vec<Vec4> = particles
                     .iter()
@@ -477,9 +467,10 @@ mod tests {
                     .collect();
                 scattered.update(weld, &p, &triangles, &drawn);
                 if threads == 1 {
-                    gathered.update_gathered(weld, &p, &triangles, &drawn, &crate::solver::Serial);
+                    let serial = crate::solver::Serial;
+                    gathered.update_gathered(weld, &p, &triangles, &drawn, &layout, &serial);
                 } else {
-                    gathered.update_gathered(weld, &p, &triangles, &drawn, &workers);
+                    gathered.update_gathered(weld, &p, &triangles, &drawn, &layout, &workers);
                 }
                 let bits3 = |v: &[Vec3]| {
                     v.iter()

@@ -23,7 +23,7 @@ use std::collections::HashMap;
 
 use glam::{IVec3, Vec2, Vec3, Vec4};
 
-use super::shading::MeshShading;
+use super::shading::{GatherLayout, MeshShading};
 use super::topology::{Topology, TopologyError, TopologyOptions};
 use crate::solver::parallel::Parallel;
 
@@ -269,6 +269,9 @@ pub struct MeshBinding {
     drawn: Vec<u32>,
     uvs: Option<Vec<Vec2>>,
     shading: MeshShading,
+    /// The layout of the shading's sums over `drawn`, once [`Self::update_shading_in`] has
+    /// needed it (dropped when `drawn` changes).
+    gather: Option<GatherLayout>,
 }
 
 /// What a mesh carries besides positions and indices, all optional, one entry per vertex.
@@ -344,6 +347,7 @@ impl MeshBinding {
             drawn,
             uvs: attributes.uvs.map(<[Vec2]>::to_vec),
             shading,
+            gather: None,
         })
     }
 
@@ -413,7 +417,7 @@ impl MeshBinding {
         self.drawn = (0..self.triangles.len() as u32)
             .filter(|&t| alive.contains(&self.keys[t as usize]))
             .collect();
-        self.shading.forget_layout();
+        self.gather = None;
     }
 
     /// Recomputes the mesh's normals and tangents from the particle positions.
@@ -427,8 +431,12 @@ impl MeshBinding {
     /// more work than [`Self::update_shading`]'s scatter over the triangles: worth it where
     /// `par` has threads to spare (one big cloth), not inside another parallel region.
     pub fn update_shading_in(&mut self, particles: &[Vec4], par: &impl Parallel) {
+        let (weld, triangles, drawn) = (&self.weld, &self.triangles, &self.drawn);
+        let layout = self
+            .gather
+            .get_or_insert_with(|| GatherLayout::new(weld, triangles, drawn));
         self.shading
-            .update_gathered(&self.weld, particles, &self.triangles, &self.drawn, par);
+            .update_gathered(weld, particles, triangles, drawn, layout, par);
     }
 
     /// The weld.

@@ -5,7 +5,7 @@
 //! 1. pins move to their interpolated targets;
 //! 2. every unpinned vertex: `x_prev ← x`, `v ← v/(1 + damping·h) + g·h`, then the air's
 //!    velocity change for this substep's velocity against the air's (see
-//!    [`air_velocity_change`]), then `x ← x + v·h`;
+//!    [`air_velocity_change`](crate::solver::air_velocity_change), four vertices at a time), then `x ← x + v·h`;
 //!    If bending is solved implicitly (see [`BendingSolve`](crate::solver::BendingSolve)), one banded
 //!    solve `(M + h²K) δ = −h²K x̃` follows, and the projections below skip bending;
 //! 3. `iterations` times: each part's constraints (in parallel), then the seams' (in
@@ -36,9 +36,7 @@ use glam::{Vec3, Vec4, Vec4Swizzles};
 use super::lab::{LabScratch, lab_step};
 use super::params::SolverParams;
 use super::state::ClothState;
-use crate::solver::air::{
-    Aerodynamics, air_velocity_change, air_velocity_changes4, vertex_area_vectors,
-};
+use crate::solver::air::{Aerodynamics, air_velocity_changes4, vertex_area_vectors};
 use crate::solver::collision::{
     Collider, ContactImpulse, Scales, SelfCollision, SelfCollisionScratch, SubstepPose,
     collide_vertex, find_self_collision_candidates, self_collide, substep_poses,
@@ -250,21 +248,21 @@ fn run_part(
                 }
             }
         } else {
-            // Four vertices at a time through the air (the same bits as one at a time), the
-            // last few one by one.
+            // Four vertices at a time through the air (each lane the same bits as one vertex
+            // alone); the last group's missing lanes are zeros, computed and dropped.
             let n = w.pos.len();
-            let whole = n / 4 * 4;
-            for first in (0..whole).step_by(4) {
-                let u: [Vec4; 4] = core::array::from_fn(|k| w.vel[first + k] * c.damp + gh);
-                let wind = |k: usize| w.air.get(first + k).map_or(Vec3::ZERO, |a| a.xyz());
+            for first in (0..n).step_by(4) {
+                let lanes = (n - first).min(4);
+                let at = |k: usize, of: &[Vec4]| of.get(first + k).copied().unwrap_or(Vec4::ZERO);
+                let u: [Vec4; 4] = core::array::from_fn(|k| at(k, w.vel) * c.damp + gh);
                 let dv = air_velocity_changes4(
-                    core::array::from_fn(|k| w.area[first + k].xyz()),
-                    core::array::from_fn(|k| u[k].xyz() - wind(k)),
-                    core::array::from_fn(|k| w.pos[first + k].w),
+                    core::array::from_fn(|k| at(k, w.area).xyz()),
+                    core::array::from_fn(|k| u[k].xyz() - at(k, w.air).xyz()),
+                    core::array::from_fn(|k| at(k, w.pos).w),
                     c.h,
                     &c.air,
                 );
-                for (k, (u, dv)) in u.into_iter().zip(dv).enumerate() {
+                for (k, (u, dv)) in u.into_iter().zip(dv).enumerate().take(lanes) {
                     let i = first + k;
                     let x = &mut w.pos[i];
                     if x.w > 0.0 {
@@ -273,22 +271,6 @@ fn run_part(
                         w.vel[i] = u;
                         *x += u * c.h;
                     }
-                }
-            }
-            let vertices = w
-                .vel
-                .iter_mut()
-                .zip(w.pos.iter_mut())
-                .zip(w.prev.iter_mut());
-            for (i, ((v, x), p)) in vertices.enumerate().skip(whole) {
-                if x.w > 0.0 {
-                    *p = *x;
-                    let mut u = *v * c.damp + gh;
-                    let wind = w.air.get(i).map_or(Vec3::ZERO, |a| a.xyz());
-                    u += air_velocity_change(w.area[i].xyz(), u.xyz() - wind, x.w, c.h, &c.air)
-                        .extend(0.0);
-                    *v = u;
-                    *x += u * c.h;
                 }
             }
         }
