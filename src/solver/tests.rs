@@ -657,3 +657,67 @@ fn a_lone_self_colliding_cloth_spreads_its_self_collision_over_the_threads() {
         .count();
     assert!(low > 100, "{low} vertices near the floor");
 }
+
+/// [`Serial`], counting its calls (the parallel regions a step forks and joins).
+#[derive(Default)]
+struct Counting {
+    calls: std::sync::atomic::AtomicUsize,
+}
+
+impl Parallel for Counting {
+    fn for_each_mut<T: Send, F: Fn(&mut T) + Sync>(&self, items: &mut [T], f: F) {
+        self.calls
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        Serial.for_each_mut(items, f);
+    }
+}
+
+/// Colliders, tethers and a skin's motion constraints run at the start of the next region
+/// over the parts: a step with all three forks and joins as often as the cloth alone (one
+/// region more a substep before they were merged), and the cloth does meet them.
+#[test]
+fn colliders_tethers_and_a_skin_add_no_parallel_region() {
+    let mut scene = HangingCloth::new(40);
+    scene.params.sleep = Sleep::NEVER;
+    let alone = scene.build().unwrap();
+    scene.features.tethers = Some(TetherParams::default());
+    let mut with = scene.build().unwrap();
+    let ball = [Collider::fixed(
+        Shape::Sphere { radius: 0.1 },
+        Pose::at(Vec3::new(0.0, 0.0, 0.0)),
+        0.01,
+        0.4,
+    )];
+    let targets: Vec<Vec4> = with
+        .state()
+        .positions
+        .iter()
+        .map(|p| p.xyz().extend(0.2))
+        .collect();
+    with.set_motion_targets(&targets, &[], 0.0, true).unwrap();
+    let mut alone = alone;
+    for sim in [&mut alone, &mut with] {
+        sim.set_part_count(3);
+        assert_eq!(sim.batches().part_count(), 3);
+    }
+    let env = Environment {
+        colliders: &ball,
+        ..Default::default()
+    };
+    let count = |sim: &mut Simulation, env: &Environment<'_>| {
+        let par = Counting::default();
+        for _ in 0..3 {
+            sim.step_in(1.0 / 60.0, env, &par);
+        }
+        par.calls.load(std::sync::atomic::Ordering::Relaxed)
+    };
+    let plain = count(&mut alone, &Environment::default());
+    let busy = count(&mut with, &env);
+    assert_eq!(busy, plain, "regions with colliders, tethers and a skin");
+    // The ball was in the way: it took momentum from the cloth.
+    assert!(
+        with.impulses()[0].linear.length() > 0.0,
+        "{:?}",
+        with.impulses()
+    );
+}

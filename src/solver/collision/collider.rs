@@ -114,59 +114,69 @@ pub(crate) fn substep_poses(colliders: &[Collider], s: u32, n: u32, out: &mut Ve
     }
 }
 
-/// Pushes one vertex out of every collider and applies friction; adds the momentum it gave
-/// each collider (`−m·Δx/h`, before dividing by `h`) to `impulses`.
+/// Pushes a run of vertices out of every collider and applies friction; adds the momentum
+/// they gave each collider (`−m·Δx/h`, before dividing by `h`) to `impulses`.
 ///
-/// `x` is the vertex after the substep's constraints, `prev` where it started the substep.
-#[inline]
-pub(crate) fn collide_vertex(
-    x: &mut Vec4,
-    prev: Vec4,
+/// `pos` holds the vertices after the substep's constraints, `prev` where they started the
+/// substep (same length). Each vertex meets the colliders in their order, and each
+/// collider's momentum is summed over the vertices in theirs: the same values as taking the
+/// vertices one at a time through every collider, with the cheap test for "within the
+/// collider's reach" in one tight loop per collider.
+pub(crate) fn collide_vertices(
+    pos: &mut [Vec4],
+    prev: &[Vec4],
     colliders: &[Collider],
     poses: &[SubstepPose],
     impulses: &mut [ContactImpulse],
 ) {
-    if x.w <= 0.0 {
+    for ((c, pose), imp) in colliders.iter().zip(poses).zip(impulses.iter_mut()) {
+        let centre = pose.to.translation;
+        for (x, p) in pos.iter_mut().zip(prev) {
+            // Pinned vertices (w = 0) are not pushed. (A vertex that is not finite is
+            // left alone either way: any push of it would land out of range.)
+            if x.w > 0.0 && (x.xyz() - centre).length_squared() <= pose.reach2 {
+                touch(x, *p, c, pose, imp);
+            }
+        }
+    }
+}
+
+/// Pushes one vertex within a collider's reach out of it and applies friction.
+#[inline(never)]
+fn touch(x: &mut Vec4, prev: Vec4, c: &Collider, pose: &SubstepPose, imp: &mut ContactImpulse) {
+    let p = x.xyz();
+    let local = pose.to.inverse_apply(p);
+    let (d_local, n_local) = c.shape.distance(local);
+    let d = d_local * pose.to.scale;
+    // NaN distances (a degenerate shape) count as "no contact".
+    if d.is_nan() || d >= c.thickness {
         return;
     }
-    for ((c, pose), imp) in colliders.iter().zip(poses).zip(impulses.iter_mut()) {
-        let p = x.xyz();
-        if (p - pose.to.translation).length_squared() > pose.reach2 {
-            continue;
-        }
-        let local = pose.to.inverse_apply(p);
-        let (d_local, n_local) = c.shape.distance(local);
-        let d = d_local * pose.to.scale;
-        // NaN distances (a degenerate shape) count as "no contact".
-        if d.is_nan() || d >= c.thickness {
-            continue;
-        }
-        let n = pose.to.rotation * n_local;
-        let push = c.thickness - d;
-        let mut corrected = p + n * push;
-        // Friction against the surface's own motion during the substep.
-        let surface = pose.to.apply(local) - pose.from.apply(local);
-        let slide = (corrected - prev.xyz()) - surface;
-        let tangential = slide - n * n.dot(slide);
-        let t_len = tangential.length();
-        let limit = c.friction * push;
-        if t_len > 0.0 {
-            corrected -= if t_len <= limit {
-                tangential
-            } else {
-                tangential * (limit / t_len)
-            };
-        }
-        // A push out of a huge or broken shape that lands nowhere sensible is dropped.
-        if !within_range(corrected) {
-            continue;
-        }
-        // Momentum given to the cloth is m·Δx/h; the collider gets the opposite (h applied later).
-        let dp = (corrected - p) / x.w;
-        imp.linear -= dp;
-        imp.angular -= (p - pose.to.translation).cross(dp);
-        *x = corrected.extend(x.w);
+    let n = pose.to.rotation * n_local;
+    let push = c.thickness - d;
+    let mut corrected = p + n * push;
+    // Friction against the surface's own motion during the substep.
+    let surface = pose.to.apply(local) - pose.from.apply(local);
+    let slide = (corrected - prev.xyz()) - surface;
+    let tangential = slide - n * n.dot(slide);
+    let t_len = tangential.length();
+    let limit = c.friction * push;
+    if t_len > 0.0 {
+        corrected -= if t_len <= limit {
+            tangential
+        } else {
+            tangential * (limit / t_len)
+        };
     }
+    // A push out of a huge or broken shape that lands nowhere sensible is dropped.
+    if !within_range(corrected) {
+        return;
+    }
+    // Momentum given to the cloth is m·Δx/h; the collider gets the opposite (h applied later).
+    let dp = (corrected - p) / x.w;
+    imp.linear -= dp;
+    imp.angular -= (p - pose.to.translation).cross(dp);
+    *x = corrected.extend(x.w);
 }
 
 #[cfg(test)]
@@ -223,7 +233,7 @@ mod tests {
         let mut imp = [ContactImpulse::default()];
         let mut x = Vec4::new(0.0, 0.5, 0.0, 2.0); // inverse mass 2 → mass 0.5
         let prev = x;
-        collide_vertex(&mut x, prev, &c, &poses, &mut imp);
+        collide_vertices(core::slice::from_mut(&mut x), &[prev], &c, &poses, &mut imp);
         assert!((x.y - 1.1).abs() < 1e-6 && x.x == 0.0 && x.z == 0.0);
         // Δx = 0.6 up, m = 0.5: the cloth gained 0.3 (×1/h) upwards, the sphere lost it.
         assert!((imp[0].linear - Vec3::new(0.0, -0.3, 0.0)).length() < 1e-6);
@@ -248,7 +258,7 @@ mod tests {
             // Moved 0.5 along x and sank 0.1 below the plane during the substep.
             let prev = Vec4::new(0.0, 0.0, 0.0, 1.0);
             let mut x = Vec4::new(0.5, -0.1, 0.0, 1.0);
-            collide_vertex(&mut x, prev, &c, &poses, &mut imp);
+            collide_vertices(core::slice::from_mut(&mut x), &[prev], &c, &poses, &mut imp);
             assert!(x.y.abs() < 1e-6);
             assert!((x.x - expect_x).abs() < 1e-5, "μ {friction}: x {}", x.x);
         }
@@ -269,7 +279,7 @@ mod tests {
         let mut imp = [ContactImpulse::default()];
         let prev = Vec4::new(0.0, 0.0, 0.0, 1.0);
         let mut x = Vec4::new(0.0, -0.01, 0.0, 1.0);
-        collide_vertex(&mut x, prev, &c, &poses, &mut imp);
+        collide_vertices(core::slice::from_mut(&mut x), &[prev], &c, &poses, &mut imp);
         assert!((x.x - 0.2).abs() < 1e-5, "{x}");
     }
 }

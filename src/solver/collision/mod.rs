@@ -9,7 +9,7 @@ mod self_collision;
 mod shape;
 
 pub use collider::{Collider, ContactImpulse};
-pub(crate) use collider::{SubstepPose, collide_vertex, substep_poses};
+pub(crate) use collider::{SubstepPose, collide_vertices, substep_poses};
 pub use pick::{RayHit, ray_hit, ray_shape};
 pub use sdf::{SdfError, SdfGrid, point_triangle_distance};
 pub use self_collision::{

@@ -14,18 +14,22 @@
 //! 4. tethers, then self-collision (if on; one pass each). Tethers move only free vertices,
 //!    toward copies of the pins' positions, so they run part by part at the start of the
 //!    next parallel region (before self-collision in a region of their own; otherwise in
-//!    the collider pass, the next substep's first region or the final velocity update),
-//!    which costs no extra fork–join;
+//!    the next substep's first region or the final velocity update), which costs no extra
+//!    fork–join;
 //! 5. motion constraints (skinned clothing, if any: [`MotionConstraints`]), then colliders
-//!    (if any), each part in parallel;
+//!    (if any), each part in parallel. Like the tethers, and after them, they run at the
+//!    start of the next region over the parts, with this substep's collider poses (nothing
+//!    in between moves a free vertex);
 //! 6. `v ← (x − x_prev)/h` (done at the start of the next substep, or at the end).
 //!
 //! Step 2 and the parts' first iteration of step 3 share one parallel region, so a substep
-//! with one iteration and no colliders costs two fork–joins (parts, seams; three where the
-//! seams take turns; a cloth of one part has no seams and costs one). Everything a scene does not use costs
-//! nothing: no collider pass without colliders, no tether or self-collision pass unless set,
-//! no air term with [`Aerodynamics::NONE`], no bending pass at zero bending stiffness. Each
-//! vertex's area vector is computed once per step, from the positions at its start.
+//! with one iteration costs two fork–joins (parts, seams; three where the seams take turns;
+//! a cloth of one part has no seams and costs one), with or without colliders, tethers and
+//! motion constraints; self-collision adds its own. Everything a scene does not use costs
+//! nothing: no collider or motion work without colliders or a skin, no tether or
+//! self-collision pass unless set, no air term with [`Aerodynamics::NONE`], no bending pass
+//! at zero bending stiffness. Each vertex's area vector is computed once per step, from the
+//! positions at its start.
 //!
 //! Bending is projected in every substep, together with the distances. Solving it less often
 //! (every `k` substeps, as an impulse or as a positional correction over the window) was tried
@@ -39,7 +43,7 @@ use super::state::ClothState;
 use crate::solver::air::{Aerodynamics, air_velocity_changes4, vertex_area_vectors};
 use crate::solver::collision::{
     Collider, ContactImpulse, Scales, SelfCollision, SelfCollisionScratch, SubstepPose,
-    collide_vertex, find_self_collision_candidates, self_collide, substep_poses,
+    collide_vertices, find_self_collision_candidates, self_collide, substep_poses,
 };
 use crate::solver::constraints::{
     ConstraintBatches, ImplicitBending, Mode, MotionConstraints, Part, Solver, Tethers,
@@ -163,16 +167,17 @@ struct Phase {
     /// Pull over-stretched vertices back to their pins (the previous substep's tethers: they
     /// run first in the next region over the parts instead of in a region of their own).
     tethers: bool,
+    /// Bring free vertices within their motion constraints (`Some(substep)`, the previous
+    /// substep's, like the tethers).
+    motion: Option<u32>,
+    /// Push vertices out of the colliders (posed for the previous substep).
+    collide: bool,
     /// `v ← (x − x_prev)/h` for unpinned vertices.
     finish_velocity: bool,
     /// Integrate (and zero λ).
     integrate: bool,
     /// Project the part's constraints once.
     project: bool,
-    /// Bring free vertices within their motion constraints (`Some(substep)`).
-    motion: Option<u32>,
-    /// Push vertices out of the colliders.
-    collide: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -223,6 +228,17 @@ fn run_part(
         && let Some((t, anchors)) = tethers
     {
         t.project_range(w.part.range.clone(), w.pos, anchors);
+    }
+    if let Some(s) = phase.motion {
+        let first = w.part.range.start;
+        for (k, x) in w.pos.iter_mut().enumerate() {
+            if x.w > 0.0 {
+                motion.constrain(first + k, x, s, c.substeps);
+            }
+        }
+    }
+    if phase.collide {
+        collide_vertices(w.pos, w.prev, colliders, poses, w.impulses);
     }
     if phase.finish_velocity {
         for ((v, x), p) in w.vel.iter_mut().zip(w.pos.iter()).zip(w.prev.iter()) {
@@ -280,19 +296,6 @@ fn run_part(
     }
     if phase.project {
         w.part.project(w.pos, c.mode, c.bending, c.accumulate);
-    }
-    if let Some(s) = phase.motion {
-        let first = w.part.range.start;
-        for (k, x) in w.pos.iter_mut().enumerate() {
-            if x.w > 0.0 {
-                motion.constrain(first + k, x, s, c.substeps);
-            }
-        }
-    }
-    if phase.collide {
-        for (x, p) in w.pos.iter_mut().zip(w.prev.iter()) {
-            collide_vertex(x, *p, colliders, poses, w.impulses);
-        }
     }
 }
 
@@ -420,6 +423,15 @@ pub fn step(
     // rebuild), and whether the last substep's tethers are still to be applied.
     let tethers = input.tethers.filter(|t| t.vertex_count() == state.len());
     let mut tethers_due = false;
+    // The substep whose motion constraints and colliders are still to be applied, and what
+    // that asks of the next region over the parts.
+    let mut ends_due: Option<u32> = None;
+    let end_of = |due: Option<u32>| {
+        (
+            due.filter(|_| has_motion),
+            due.is_some() && !colliders.is_empty(),
+        )
+    };
     // One phase over every part, the parts in parallel (with this substep's collider poses
     // and the due tethers' pin copies from `scratch`).
     let run_parts =
@@ -449,11 +461,13 @@ pub fn step(
             state.prev[i] = state.positions[i];
         }
         state.place_pins(&scratch.pin_start, s, substeps);
-        substep_poses(colliders, s, substeps, &mut scratch.poses);
 
         if implicit {
+            let (motion, collide) = end_of(ends_due.take());
             let phase = Phase {
                 tethers: core::mem::take(&mut tethers_due),
+                motion,
+                collide,
                 finish_velocity: s > 0,
                 integrate: true,
                 ..Default::default()
@@ -462,13 +476,14 @@ pub fn step(
             scratch.implicit.solve(topology, &mut state.positions, h);
         }
         for it in 0..params.iterations.max(1) {
+            let (motion, collide) = end_of(ends_due.take());
             let phase = Phase {
                 tethers: core::mem::take(&mut tethers_due),
+                motion,
+                collide,
                 finish_velocity: it == 0 && s > 0 && !implicit,
                 integrate: it == 0 && !implicit,
                 project: true,
-                motion: None,
-                collide: false,
             };
             run_parts(&mut batches.parts, state, scratch, phase);
             // Then what straddles parts: the seams in parallel (all, or even then odd), the
@@ -524,18 +539,18 @@ pub fn step(
                 par,
             );
         }
+        // Motion constraints and colliders: applied first in the next region over the parts
+        // (nothing between here and there moves a free vertex), with this substep's poses.
         if !colliders.is_empty() || has_motion {
-            let phase = Phase {
-                tethers: core::mem::take(&mut tethers_due),
-                motion: has_motion.then_some(s),
-                collide: !colliders.is_empty(),
-                ..Default::default()
-            };
-            run_parts(&mut batches.parts, state, scratch, phase);
+            substep_poses(colliders, s, substeps, &mut scratch.poses);
+            ends_due = Some(s);
         }
     }
+    let (motion, collide) = end_of(ends_due);
     let phase = Phase {
         tethers: tethers_due,
+        motion,
+        collide,
         finish_velocity: true,
         ..Default::default()
     };
