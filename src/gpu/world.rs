@@ -1070,11 +1070,17 @@ impl GpuWorld {
         for (k, sc) in step_colliders.iter().enumerate() {
             let k = k as u32;
             let grids: Vec<[u32; 4]> = sc.colliders.iter().map(|c| self.grid_of(c)).collect();
+            substep_poses(sc.colliders, substeps, &mut poses);
+            let m = sc.colliders.len();
             for sub in 0..substeps {
                 let pose_at = gpu_colliders.len() as u32;
-                substep_poses(sc.colliders, sub, substeps, &mut poses);
-                for (i, ((col, pose), grid)) in
-                    sc.colliders.iter().zip(&poses).zip(&grids).enumerate()
+                let at = sub as usize * m;
+                for (i, ((col, pose), grid)) in sc
+                    .colliders
+                    .iter()
+                    .zip(&poses[at..at + m])
+                    .zip(&grids)
+                    .enumerate()
                 {
                     gpu_colliders.push(gpu_collider(
                         col,

@@ -170,8 +170,8 @@ struct Phase {
     /// Bring free vertices within their motion constraints (`Some(substep)`, the previous
     /// substep's, like the tethers).
     motion: Option<u32>,
-    /// Push vertices out of the colliders (posed for the previous substep).
-    collide: bool,
+    /// Push vertices out of the colliders, posed for this substep (the previous one).
+    collide: Option<u32>,
     /// `v ← (x − x_prev)/h` for unpinned vertices.
     finish_velocity: bool,
     /// Integrate (and zero λ).
@@ -237,7 +237,7 @@ fn run_part(
             }
         }
     }
-    if phase.collide {
+    if phase.collide.is_some() {
         collide_vertices(w.pos, w.prev, colliders, poses, w.impulses);
     }
     if phase.finish_velocity {
@@ -429,9 +429,13 @@ pub fn step(
     let end_of = |due: Option<u32>| {
         (
             due.filter(|_| has_motion),
-            due.is_some() && !colliders.is_empty(),
+            due.filter(|_| !colliders.is_empty()),
         )
     };
+    // Every substep's collider poses, once a step.
+    if !colliders.is_empty() {
+        substep_poses(colliders, substeps, &mut scratch.poses);
+    }
     // One phase over every part, the parts in parallel (with this substep's collider poses
     // and the due tethers' pin copies from `scratch`).
     let run_parts =
@@ -445,7 +449,12 @@ pub fn step(
                 &scratch.areas,
                 &mut scratch.part_impulses,
             );
-            let (poses, anchors) = (&scratch.poses[..], &scratch.anchors[..]);
+            // The colliders posed for the substep whose collisions are due.
+            let m = colliders.len();
+            let poses = phase
+                .collide
+                .map_or(&[][..], |s| &scratch.poses[s as usize * m..][..m]);
+            let anchors = &scratch.anchors[..];
             let tethers = tethers.map(|t| (t, anchors));
             par.for_each_mut(&mut work, |w| {
                 run_part(w, phase, c, colliders, poses, tethers, &motion);
@@ -542,7 +551,6 @@ pub fn step(
         // Motion constraints and colliders: applied first in the next region over the parts
         // (nothing between here and there moves a free vertex), with this substep's poses.
         if !colliders.is_empty() || has_motion {
-            substep_poses(colliders, s, substeps, &mut scratch.poses);
             ends_due = Some(s);
         }
     }
