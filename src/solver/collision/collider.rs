@@ -12,7 +12,8 @@
 //! `v` is caught as long as `v·h < r + thickness`, with `h` the substep length. At 60 Hz and 10
 //! substeps (`h` ≈ 1.7 ms) a 0.2 m ball survives speeds up to about 120 m/s.
 
-use glam::{Vec3, Vec4, Vec4Swizzles};
+use glam::{Mat3, Vec3, Vec4, Vec4Swizzles};
+use wide::{CmpGt, CmpLe, f32x4};
 
 use super::shape::{Pose, Shape};
 use crate::solver::limits::{self, MAX_COORDINATE, within_range};
@@ -94,16 +95,22 @@ pub(crate) struct SubstepPose {
     pub to: Pose,
     /// Squared distance beyond which a vertex cannot touch (bounding ball + thickness).
     pub reach2: f32,
-    /// Squared distance from the shape's core ([`Shape::core_distance2`], in its local
-    /// frame) beyond which a vertex surely does not touch it: the core's radius plus the
-    /// thickness in local units, widened by a relative 1e-5 so that rounding never skips a
-    /// vertex the full test would push (infinite where the shape has no core).
+    /// Squared distance from the shape's core (see `Shape::core_radius`), in its local
+    /// frame, beyond which a vertex surely does not touch it: the core's radius plus the
+    /// thickness in local units, widened (see [`CORE_SLACK`]) so that rounding never skips
+    /// a vertex the full test would push; infinite where the shape has no core.
     pub core2: f32,
+    /// The rows of the matrix taking `p − to.translation` into the shape's frame (`to`'s
+    /// inverse rotation over its scale), for the core test; the full test turns the point
+    /// with the quaternion.
+    pub local: [Vec3; 3],
 }
 
-/// Relative widening of [`SubstepPose::core2`]: far above the few roundings between it and
-/// the full test (each at most 6e-8 relative).
-const CORE_SLACK: f32 = 1.0 + 1e-5;
+/// Widening of [`SubstepPose::core2`], relative to the core's reach and to the bounding
+/// ball's (in which the points tested lie): far above the roundings between the core test
+/// (a matrix turn, a few products) and the full one (a quaternion turn, square roots), each
+/// at most a few times 6e-8 of those lengths.
+const CORE_SLACK: f32 = 1e-5;
 
 /// The colliders' poses for each of a step's `n` substeps, substep by substep (`out[s·m +
 /// i]` for collider `i` of `m`). Each pose between two substeps is interpolated once: the
@@ -120,19 +127,23 @@ pub(crate) fn substep_poses(colliders: &[Collider], n: u32, out: &mut Vec<Subste
             let to = c.start.lerp(&c.end, t1);
             let reach = c.shape.bounding_radius() * to.scale + c.thickness;
             let finite2 = |r: f32| if r.is_finite() { r * r } else { f32::INFINITY };
-            let core = c.shape.core_radius() + c.thickness / to.scale;
+            let own = c.thickness / to.scale;
+            let core = c.shape.core_radius() + own;
+            let ball = c.shape.bounding_radius() + own;
+            let turn = Mat3::from_quat(to.rotation.inverse()) * (1.0 / to.scale);
             out.push(SubstepPose {
                 from,
                 to,
                 reach2: finite2(reach),
-                core2: finite2(core * CORE_SLACK),
+                core2: finite2(core + CORE_SLACK * (core + ball)),
+                local: [0, 1, 2].map(|i| turn.row(i)),
             });
         }
     }
 }
 
 /// Vertices whose reach test [`collide_vertices`] makes at once.
-const LANES: usize = 8;
+const LANES: usize = 4;
 
 /// Pushes a run of vertices out of every collider and applies friction; adds the momentum
 /// they gave each collider (`−m·Δx/h`, before dividing by `h`) to `impulses`.
@@ -140,8 +151,9 @@ const LANES: usize = 8;
 /// `pos` holds the vertices after the substep's constraints, `prev` where they started the
 /// substep (same length). Each vertex meets the colliders in their order, and each
 /// collider's momentum is summed over the vertices in theirs: the same values as taking the
-/// vertices one at a time through every collider, with the cheap test for "within the
-/// collider's reach" in one tight loop per collider.
+/// vertices one at a time through every collider. The cheap tests — within the bounding
+/// ball's reach, then (spheres, capsules, boxes) near enough to the shape's core — take four
+/// vertices at a time in SIMD lanes; only the vertices that pass take the exact one.
 pub(crate) fn collide_vertices(
     pos: &mut [Vec4],
     prev: &[Vec4],
@@ -151,14 +163,53 @@ pub(crate) fn collide_vertices(
 ) {
     for ((c, pose), imp) in colliders.iter().zip(poses).zip(impulses.iter_mut()) {
         let centre = pose.to.translation;
+        let (cx, cy, cz) = (
+            f32x4::splat(centre.x),
+            f32x4::splat(centre.y),
+            f32x4::splat(centre.z),
+        );
+        let reach2 = f32x4::splat(pose.reach2);
+        // The core test, for spheres, capsules and boxes in range.
+        let core2 = f32x4::splat(pose.core2);
+        let cull = pose.core2.is_finite()
+            && matches!(
+                c.shape,
+                Shape::Sphere { .. } | Shape::Capsule { .. } | Shape::Cuboid { .. }
+            );
         for (xs, ps) in pos.chunks_mut(LANES).zip(prev.chunks(LANES)) {
-            // Which of these vertices are within reach, as bits (no branch a vertex). Pinned
+            // Which of these vertices are within reach, as bits, four at a time in SIMD
+            // lanes (each lane's squared distance the same operations as
+            // `Vec3::length_squared`; missing lanes of a short last group read w = 0). Pinned
             // vertices (w = 0) are not pushed; a vertex that is not finite is left alone
             // either way (any push of it would land out of range).
-            let mut near = 0u32;
-            for (k, x) in xs.iter().enumerate() {
-                let within = (x.xyz() - centre).length_squared() <= pose.reach2;
-                near |= u32::from(within & (x.w > 0.0)) << k;
+            let at = |k: usize| xs.get(k).copied().unwrap_or(Vec4::ZERO);
+            let v: [Vec4; LANES] = core::array::from_fn(at);
+            let lane = |f: fn(Vec4) -> f32| f32x4::new(v.map(f));
+            let (dx, dy, dz) = (lane(|v| v.x) - cx, lane(|v| v.y) - cy, lane(|v| v.z) - cz);
+            let d2 = dx * dx + dy * dy + dz * dz;
+            let within = d2.cmp_le(reach2) & lane(|v| v.w).cmp_gt(f32x4::ZERO);
+            let mut near = within.move_mask() as u32;
+            // Of those, the ones surely out of touch of the shape's core (no square root,
+            // no division; a NaN keeps the vertex for the full test).
+            if near != 0 && cull {
+                let row = |r: Vec3| {
+                    f32x4::splat(r.x) * dx + f32x4::splat(r.y) * dy + f32x4::splat(r.z) * dz
+                };
+                let [lx, ly, lz] = pose.local.map(row);
+                let d2 = match c.shape {
+                    Shape::Capsule { half_length, .. } => {
+                        let h = f32x4::splat(half_length);
+                        let ay = ly - ly.max(-h).min(h);
+                        lx * lx + ay * ay + lz * lz
+                    }
+                    Shape::Cuboid { half_extents: e } => {
+                        let out = |l: f32x4, e: f32| (l.abs() - f32x4::splat(e)).max(f32x4::ZERO);
+                        let (ox, oy, oz) = (out(lx, e.x), out(ly, e.y), out(lz, e.z));
+                        ox * ox + oy * oy + oz * oz
+                    }
+                    _ => lx * lx + ly * ly + lz * lz,
+                };
+                near &= !(d2.cmp_gt(core2).move_mask() as u32);
             }
             while near != 0 {
                 let k = near.trailing_zeros() as usize;
@@ -174,10 +225,6 @@ pub(crate) fn collide_vertices(
 fn touch(x: &mut Vec4, prev: Vec4, c: &Collider, pose: &SubstepPose, imp: &mut ContactImpulse) {
     let p = x.xyz();
     let local = pose.to.inverse_apply(p);
-    // Surely out of touch: no square root, no division.
-    if c.shape.core_distance2(local) > pose.core2 {
-        return;
-    }
     let (d_local, n_local) = c.shape.distance(local);
     let d = d_local * pose.to.scale;
     // NaN distances (a degenerate shape) count as "no contact".
@@ -271,10 +318,11 @@ mod tests {
         assert!((imp[0].linear - Vec3::new(0.0, -0.3, 0.0)).length() < 1e-6);
     }
 
-    /// The core bound in `touch` skips only vertices the full test leaves alone: points
-    /// placed a few roundings either side of touching distance from spheres, capsules and
-    /// boxes (turned, scaled from 1e-3 to 1e3, thickness 0 to 1 m, friction on) come out
-    /// the same bit for bit, impulses included, with the bound and without it.
+    /// The core test of `collide_vertices` skips only vertices the full test leaves alone:
+    /// points placed a few roundings either side of touching distance from spheres,
+    /// capsules and boxes (long and thin ones too; turned, scaled from 1e-3 to 1e3,
+    /// thickness 0 to 1 m, friction on) come out the same bit for bit, impulses included,
+    /// with the core test and without it.
     #[test]
     fn the_core_bound_skips_no_vertex_the_full_test_would_push() {
         let shapes = [
@@ -286,6 +334,14 @@ mod tests {
             },
             Shape::Cuboid {
                 half_extents: Vec3::new(0.2, 0.05, 0.4),
+            },
+            // Long and thin: points far from the origin, close to the surface.
+            Shape::Capsule {
+                radius: 0.01,
+                half_length: 2.0,
+            },
+            Shape::Cuboid {
+                half_extents: Vec3::new(1.5, 0.01, 1.5),
             },
         ];
         let mut seed = 0x2545_f491_u32;
@@ -319,7 +375,7 @@ mod tests {
                         // A surface point (the nearest one to a random local point), then
                         // out along its normal by the thickness, give or take a few ulps.
                         let dir = Vec3::new(unit() - 0.5, unit() - 0.5, unit() - 0.5);
-                        let local = dir * 0.8;
+                        let local = dir * 0.8 * shape.bounding_radius();
                         let (d, n) = shape.distance(local);
                         let on = local - n * d;
                         let off = thickness / scale * (1.0 + (unit() - 0.5) * 4e-6);

@@ -118,30 +118,12 @@ impl Shape {
         }
     }
 
-    /// Squared distance from `p` (local frame) to the shape's core: the centre of a sphere,
-    /// the segment of a capsule, the box of a cuboid (0 inside); 0 for a plane or a mesh,
-    /// which have none. The surface lies [`Shape::core_radius`] beyond the core, so a point
-    /// farther than that (plus any thickness) from it cannot touch the shape.
-    #[inline]
+    /// How far the surface lies beyond the shape's *core* — a sphere's centre, a capsule's
+    /// segment, a cuboid's box — so that a point farther than that from the core cannot
+    /// touch the shape: the radius of a sphere or capsule, 0 for a cuboid; infinite for a
+    /// plane or a mesh, which have no core.
     #[must_use]
-    pub fn core_distance2(&self, p: Vec3) -> f32 {
-        match self {
-            Shape::Sphere { .. } => p.length_squared(),
-            Shape::Cuboid { half_extents } => {
-                (p.abs() - *half_extents).max(Vec3::ZERO).length_squared()
-            }
-            Shape::Capsule { half_length, .. } => {
-                (p - Vec3::new(0.0, p.y.clamp(-half_length, *half_length), 0.0)).length_squared()
-            }
-            Shape::Plane | Shape::Mesh(_) => 0.0,
-        }
-    }
-
-    /// How far the surface lies beyond the core of [`Shape::core_distance2`] (the radius of
-    /// a sphere or capsule, 0 for a cuboid; infinite for a plane or a mesh, whose distance
-    /// the core does not bound).
-    #[must_use]
-    pub fn core_radius(&self) -> f32 {
+    pub(crate) fn core_radius(&self) -> f32 {
         match self {
             Shape::Sphere { radius } | Shape::Capsule { radius, .. } => *radius,
             Shape::Cuboid { .. } => 0.0,
