@@ -169,13 +169,10 @@ pub(crate) fn collide_vertices(
             f32x4::splat(centre.z),
         );
         let reach2 = f32x4::splat(pose.reach2);
-        // The core test, for spheres, capsules and boxes in range.
+        // The core test: spheres, capsules and boxes (a plane's or a mesh's `core2` is
+        // infinite, as is any core out of range).
         let core2 = f32x4::splat(pose.core2);
-        let cull = pose.core2.is_finite()
-            && matches!(
-                c.shape,
-                Shape::Sphere { .. } | Shape::Capsule { .. } | Shape::Cuboid { .. }
-            );
+        let cull = pose.core2.is_finite();
         for (xs, ps) in pos.chunks_mut(LANES).zip(prev.chunks(LANES)) {
             // Which of these vertices are within reach, as bits, four at a time in SIMD
             // lanes (each lane's squared distance the same operations as
@@ -207,6 +204,7 @@ pub(crate) fn collide_vertices(
                         let (ox, oy, oz) = (out(lx, e.x), out(ly, e.y), out(lz, e.z));
                         ox * ox + oy * oy + oz * oz
                     }
+                    // A sphere (planes and meshes have no core).
                     _ => lx * lx + ly * ly + lz * lz,
                 };
                 near &= !(d2.cmp_gt(core2).move_mask() as u32);

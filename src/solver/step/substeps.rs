@@ -167,11 +167,10 @@ struct Phase {
     /// Pull over-stretched vertices back to their pins (the previous substep's tethers: they
     /// run first in the next region over the parts instead of in a region of their own).
     tethers: bool,
-    /// Bring free vertices within their motion constraints (`Some(substep)`, the previous
-    /// substep's, like the tethers).
-    motion: Option<u32>,
-    /// Push vertices out of the colliders, posed for this substep (the previous one).
-    collide: Option<u32>,
+    /// The end of substep `Some(s)` (the previous one, like the tethers): bring free vertices
+    /// within their motion constraints, if any, then push them out of the colliders posed
+    /// for that substep, if any.
+    end: Option<u32>,
     /// `v ← (x − x_prev)/h` for unpinned vertices.
     finish_velocity: bool,
     /// Integrate (and zero λ).
@@ -193,6 +192,8 @@ struct Consts {
     /// XPBD with several iterations: multipliers carry over between iterations.
     accumulate: bool,
     substeps: u32,
+    /// Motion constraints apply to this cloth.
+    motion: bool,
 }
 
 /// `v` shortened to at most `max` (w stays 0).
@@ -229,15 +230,15 @@ fn run_part(
     {
         t.project_range(w.part.range.clone(), w.pos, anchors);
     }
-    if let Some(s) = phase.motion {
-        let first = w.part.range.start;
-        for (k, x) in w.pos.iter_mut().enumerate() {
-            if x.w > 0.0 {
-                motion.constrain(first + k, x, s, c.substeps);
+    if let Some(s) = phase.end {
+        if c.motion {
+            let first = w.part.range.start;
+            for (k, x) in w.pos.iter_mut().enumerate() {
+                if x.w > 0.0 {
+                    motion.constrain(first + k, x, s, c.substeps);
+                }
             }
         }
-    }
-    if phase.collide.is_some() {
         collide_vertices(w.pos, w.prev, colliders, poses, w.impulses);
     }
     if phase.finish_velocity {
@@ -370,6 +371,11 @@ pub fn step(
             h,
             (params.bending_solve, params.gravity.length()),
         );
+    let motion = if input.motion.applies_to(state.len()) {
+        input.motion
+    } else {
+        MotionConstraints::default()
+    };
     let c = Consts {
         h,
         inv_h: 1.0 / h,
@@ -381,13 +387,8 @@ pub fn step(
         bending: batches.bending && !implicit,
         accumulate: batches.mode_is_xpbd && params.iterations > 1,
         substeps,
+        motion: motion.applies_to(state.len()),
     };
-    let motion = if input.motion.applies_to(state.len()) {
-        input.motion
-    } else {
-        MotionConstraints::default()
-    };
-    let has_motion = motion.applies_to(state.len());
     let air_velocities = if input.air_velocities.len() == state.len() {
         input.air_velocities
     } else {
@@ -423,15 +424,8 @@ pub fn step(
     // rebuild), and whether the last substep's tethers are still to be applied.
     let tethers = input.tethers.filter(|t| t.vertex_count() == state.len());
     let mut tethers_due = false;
-    // The substep whose motion constraints and colliders are still to be applied, and what
-    // that asks of the next region over the parts.
-    let mut ends_due: Option<u32> = None;
-    let end_of = |due: Option<u32>| {
-        (
-            due.filter(|_| has_motion),
-            due.filter(|_| !colliders.is_empty()),
-        )
-    };
+    // The substep whose motion constraints and colliders are still to be applied.
+    let mut end_due: Option<u32> = None;
     // Every substep's collider poses, once a step.
     if !colliders.is_empty() {
         substep_poses(colliders, substeps, &mut scratch.poses);
@@ -452,7 +446,7 @@ pub fn step(
             // The colliders posed for the substep whose collisions are due.
             let m = colliders.len();
             let poses = phase
-                .collide
+                .end
                 .map_or(&[][..], |s| &scratch.poses[s as usize * m..][..m]);
             let anchors = &scratch.anchors[..];
             let tethers = tethers.map(|t| (t, anchors));
@@ -472,11 +466,9 @@ pub fn step(
         state.place_pins(&scratch.pin_start, s, substeps);
 
         if implicit {
-            let (motion, collide) = end_of(ends_due.take());
             let phase = Phase {
                 tethers: core::mem::take(&mut tethers_due),
-                motion,
-                collide,
+                end: end_due.take(),
                 finish_velocity: s > 0,
                 integrate: true,
                 ..Default::default()
@@ -485,11 +477,9 @@ pub fn step(
             scratch.implicit.solve(topology, &mut state.positions, h);
         }
         for it in 0..params.iterations.max(1) {
-            let (motion, collide) = end_of(ends_due.take());
             let phase = Phase {
                 tethers: core::mem::take(&mut tethers_due),
-                motion,
-                collide,
+                end: end_due.take(),
                 finish_velocity: it == 0 && s > 0 && !implicit,
                 integrate: it == 0 && !implicit,
                 project: true,
@@ -550,15 +540,13 @@ pub fn step(
         }
         // Motion constraints and colliders: applied first in the next region over the parts
         // (nothing between here and there moves a free vertex), with this substep's poses.
-        if !colliders.is_empty() || has_motion {
-            ends_due = Some(s);
+        if !colliders.is_empty() || c.motion {
+            end_due = Some(s);
         }
     }
-    let (motion, collide) = end_of(ends_due);
     let phase = Phase {
         tethers: tethers_due,
-        motion,
-        collide,
+        end: end_due,
         finish_velocity: true,
         ..Default::default()
     };
