@@ -72,8 +72,17 @@ fn sc_cell(p: vec3<f32>, inv: f32) -> vec3<i32> {
 
 // `self_collision::hash`, over a cloth's `size` buckets.
 fn sc_hash(c: vec3<i32>, size: u32) -> u32 {
-    let h = (c.x * 92837111) ^ (c.y * 689287499) ^ (c.z * 283923481);
-    return bitcast<u32>(select(h, -h, h < 0)) % size;
+    let h = sc_fmix(sc_fmix(sc_fmix(bitcast<u32>(c.z)) + bitcast<u32>(c.y)) + bitcast<u32>(c.x));
+    return h % size;
+}
+
+// MurmurHash3's 32-bit finaliser (`self_collision::grid::fmix`).
+fn sc_fmix(x: u32) -> u32 {
+    var h = x ^ (x >> 16u);
+    h *= 0x85ebca6bu;
+    h ^= h >> 13u;
+    h *= 0xc2b2ae35u;
+    return h ^ (h >> 16u);
 }
 
 // Cells of the self-collision hash: as wide as the farthest a query reaches (2.5 thicknesses

@@ -20,7 +20,7 @@ pub fn count_self_crossings(
     let mean_edge =
         edges.iter().map(|e| p(e[0]).distance(p(e[1]))).sum::<f32>() / edges.len() as f32;
     let cell = mean_edge.max(1e-6) * 2.0;
-    let inv = 1.0 / cell;
+    let inv = Vec3::splat(1.0 / cell);
     let size = triangles.len() * 4;
     // Each triangle's bounding box, padded past what rounding could move a crossing by: an
     // edge whose box misses it cannot cross it (most of those in a pile's buckets).

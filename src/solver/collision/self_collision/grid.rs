@@ -10,7 +10,7 @@ pub(super) const SORT_RUN: usize = 4096;
 const BIN_BITS: u32 = 8;
 
 #[inline]
-pub(super) fn cell_of(p: Vec3, inv_cell: f32) -> IVec3 {
+pub(super) fn cell_of(p: Vec3, inv_cell: Vec3) -> IVec3 {
     // floor() without a libm call (x86-64's baseline has no rounding instruction):
     // truncate, then step down for negative non-integers. The cast saturates far out (a cloth
     // flung 2³¹ cells away): the step down then wraps, as WGSL's does, and never panics.
@@ -19,18 +19,25 @@ pub(super) fn cell_of(p: Vec3, inv_cell: f32) -> IVec3 {
     t.wrapping_sub(IVec3::select(t.as_vec3().cmpgt(v), IVec3::ONE, IVec3::ZERO))
 }
 
-/// The cell hash of [`count_self_crossings`] (the GPU's `sc_hash` mixes the same way).
+/// MurmurHash3's 32-bit finaliser: each input bit flips about half of the output bits.
 #[inline]
-fn mix(c: IVec3) -> usize {
-    let h = (c.x.wrapping_mul(92_837_111))
-        ^ (c.y.wrapping_mul(689_287_499))
-        ^ (c.z.wrapping_mul(283_923_481));
-    h.unsigned_abs() as usize
+fn fmix(mut h: u32) -> u32 {
+    h ^= h >> 16;
+    h = h.wrapping_mul(0x85eb_ca6b);
+    h ^= h >> 13;
+    h = h.wrapping_mul(0xc2b2_ae35);
+    h ^ (h >> 16)
 }
 
+/// The bucket of cell `c` in a table of `size` buckets, for [`count_self_crossings`]; the
+/// GPU's `sc_hash` is the same function. Each coordinate goes through [`fmix`] in turn: the
+/// sum or xor of the coordinates times three odd constants, which this replaced, put a few
+/// times more nearby cells into one bucket than chance would (about two in five of the rows
+/// of a 10 × 10 block of cells shared their bucket with another), and every such cell's
+/// vertices are read by every query through the bucket.
 #[inline]
 pub(super) fn hash(c: IVec3, size: usize) -> usize {
-    mix(c) % size
+    fmix(fmix(fmix(c.z as u32).wrapping_add(c.y as u32)).wrapping_add(c.x as u32)) as usize % size
 }
 
 /// The query grid's bucket of cell `c` in a table of `mask + 1` (a power of two) buckets: the
@@ -40,16 +47,20 @@ pub(super) fn grid_bucket(c: IVec3, mask: usize) -> usize {
     row_base(c.y, c.z).wrapping_add(c.x as isize as usize) & mask
 }
 
+/// The bucket of a row's cell at x = 0 (before the mask), mixed as [`hash`] mixes.
 #[inline]
 pub(super) fn row_base(y: i32, z: i32) -> usize {
-    mix(IVec3::new(0, y, z))
+    fmix(fmix(z as u32).wrapping_add(y as u32)) as usize
 }
 
-/// The step's grid of vertices (cells of [`CELLS_PER_RADIUS`] to the query radius), its
-/// entries in bucket order with their positions in separate lanes.
+/// The step's grid of vertices (cells [`CELLS_PER_RADIUS`] to the query radius across the
+/// rows, [`X_CELL`] of that along them), its entries in bucket order with their positions in
+/// separate lanes.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub(super) struct Grid {
+    /// A cell's size along y and z (a row's square), and along x (the row).
     pub(super) cell: f32,
+    pub(super) cell_x: f32,
     /// Per bucket, its first entry; one more at the end.
     pub(super) start: Vec<u32>,
     pub(super) entries: Vec<u32>,
@@ -77,6 +88,12 @@ pub(super) struct Grid {
 }
 
 impl Grid {
+    /// One over a cell's size along x, y and z.
+    #[inline]
+    pub(super) fn inv_cell(&self) -> Vec3 {
+        Vec3::new(1.0 / self.cell_x, 1.0 / self.cell, 1.0 / self.cell)
+    }
+
     /// Every vertex with a finite position into its cell's bucket, in parallel (see
     /// [`Grid::sort`]).
     pub(super) fn fill(
@@ -91,8 +108,9 @@ impl Grid {
         let n = pos.len();
         let size = (2 * n).next_power_of_two().max(2);
         let mask = size - 1;
-        let inv = 1.0 / cell;
         self.cell = cell;
+        self.cell_x = X_CELL * cell;
+        let inv = self.inv_cell();
         self.vertex_cells.resize(n, IVec3::ZERO);
         fill_each(&mut self.vertex_cells, par, |i| cell_of(pos[i].xyz(), inv));
         self.vertex_buckets.resize(n, 0);
@@ -104,7 +122,7 @@ impl Grid {
                 u32::MAX
             }
         });
-        let real = self.sort(size, pos, par);
+        let real = self.sort(size, par);
         let count = real + LANES;
         // The lanes, one a work item: each read through the entries in order.
         let entries = &self.entries[..real];
@@ -146,10 +164,9 @@ impl Grid {
     /// the vertices' buckets and cells; returns the number of entries (vertices with a finite
     /// position). A parallel counting sort whose order does not depend on the threads: runs
     /// of [`SORT_RUN`] vertices are each laid out by bin (the buckets' high bits) in their own
-    /// stretch, then each bin gathers its stretches in run order and sorts them by bucket;
-    /// then each bucket's entries are ordered by their x (ties: rising vertex order), so a
-    /// query can leave out the ends of a row beyond its x range ([`Query::ranges`]).
-    fn sort(&mut self, size: usize, pos: &[Vec4], par: &impl Parallel) -> usize {
+    /// stretch, then each bin gathers its stretches in run order and sorts them by bucket
+    /// (a bucket's entries in rising vertex order).
+    fn sort(&mut self, size: usize, par: &impl Parallel) -> usize {
         let n = self.vertex_buckets.len();
         let cells = &self.vertex_cells;
         // About a bin per 1024 vertices, at most 2^BIN_BITS: a small cloth's sort is a few
@@ -242,19 +259,7 @@ impl Grid {
                 e[*s as usize] = j;
                 *s += 1;
             }
-            // Each bucket by x, equal x by vertex (an unstable sort: no allocation, and no
-            // two entries compare equal), then the cells in the same order.
-            let mut from = 0;
-            for &end in starts.iter() {
-                let bucket = &mut e[from as usize..end as usize];
-                if bucket.len() > 1 {
-                    bucket.sort_unstable_by(|&a, &b| {
-                        let x = |j: u32| pos[j as usize].x;
-                        x(a).total_cmp(&x(b)).then(a.cmp(&b))
-                    });
-                }
-                from = end;
-            }
+            // The cells in the entries' order.
             for (c, &j) in c.iter_mut().zip(e.iter()) {
                 *c = cells[j as usize];
             }

@@ -35,12 +35,12 @@
 //! kept from step to step (rebuilt when the triangles or rest positions differ, as after a
 //! tear). The grid is made in parallel: the vertices' buckets, their order (a counting sort
 //! by runs of vertices, then by bins of buckets, which gives the same order on any number of
-//! threads; within a bucket by x) and its lanes, one lane a work item.
+//! threads; within a bucket by vertex) and its lanes, one lane a work item.
 //!
 //! The CPU's hash keeps the cells of a row along x in consecutive buckets and the positions,
-//! rest positions and positions two steps ahead in separate lanes, and a bucket's entries
-//! in order of x, so that a query reads a few runs of entries in sequence (a row's ends
-//! beyond its x range left out) and tests eight at a time (vectorised), in one walk: the
+//! rest positions and positions two steps ahead in separate lanes; its cells are narrow along
+//! x, so that a query reads a few runs of whole buckets in sequence (a row's cells beyond its
+//! x range left out) and tests eight entries at a time (vectorised), in one walk: the
 //! groups of eight holding some of the vertex's own neighbourhood are kept for the fold test
 //! and its triangles after it, and a triangle is first tested against a bound from its
 //! centroid (most of those looked at lie beside the vertex, farther than it can slide)
@@ -325,13 +325,20 @@ pub const NEAR_CORNER_THICKNESS: f32 = 0.9;
 /// the two sides must compare against the same number.
 const FOLDED2: f32 = 0.81;
 
-/// The query's grid cells are the query's radius over this (4/3 of the radius wide): a query
-/// reads four to nine rows of two or three cells each, in sequence. Narrower cells (1.5 per
-/// radius) look at fewer vertices outside the radius but cost more rows; measured at 256²
-/// with self-collision (`tradeoff --scene-costs`), this width is faster than that (about 10 %
-/// on one thread, a third on two) and than cells as wide as the radius or twice as wide. The
-/// cell width changes what is looked at, never what is found.
+/// The query's grid cells are the query's radius over this across the rows (4/3 of the radius
+/// in y and z): a query reads four to nine rows. Narrower rows (1 or 1.5 per radius) look at
+/// fewer vertices outside the radius but cost more rows; measured at 256² with self-collision
+/// (`tradeoff --scene-costs`), this width is faster than those and than rows twice as wide.
+/// The cell sizes change what is looked at, never what is found.
 const CELLS_PER_RADIUS: f32 = 0.75;
+
+/// Along a row (x) the cells are this share of their size across it (a third of the radius),
+/// so that a row's range is a run of whole buckets, read without a search for where the
+/// radius begins and ends in them: a bucket holds few vertices, and the row's ends are cut
+/// within a few hundredths of the radius's width. Measured (`tradeoff --scene-costs`, 256²,
+/// one thread, the query's first frames): 1/8 to 1/4 alike, 1/2 slower, whole cells with the
+/// search (before) slower still.
+const X_CELL: f32 = 0.25;
 
 /// A vertex's own neighbourhood (the vertices resting between half a thickness and 2.5
 /// thicknesses from it) has *folded* when one of them is closer to it than 0.97 of their rest

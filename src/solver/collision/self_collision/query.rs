@@ -412,11 +412,11 @@ impl Query<'_> {
     }
 
     /// The grid ranges within the radius of `p`: rows (cells along x) whose y–z square comes
-    /// within it, each trimmed to the x range it leaves there (a hundredth of a cell of slack
-    /// against rounding).
+    /// within it, each trimmed to the cells of the x range it leaves there (a hundredth of a
+    /// cell of slack against rounding): whole buckets, read from start to end.
     fn ranges(&self, p: Vec3, out: &mut Vec<(Row, usize, usize)>) {
         let g = self.grid;
-        let (cell, inv) = (g.cell, 1.0 / g.cell);
+        let (cell, inv) = (g.cell, g.inv_cell());
         let big2 = self.radius * self.radius;
         let size = g.start.len() - 1;
         let mask = size - 1;
@@ -426,7 +426,7 @@ impl Query<'_> {
         // an `i32`, where the cells saturate) whole rows are read.
         let far = p.abs().max_element();
         let slack = 0.01 * cell + far * 1e-6;
-        let exact = (far + self.radius) * inv < 4.0e6;
+        let exact = (far + self.radius) * inv.max_element() < 4.0e6;
         let bounds = |c: i32| (c as f32 * cell, (c as f32 + 1.0) * cell);
         for z in lo.z..=hi.z {
             let (z0, z1) = bounds(z);
@@ -472,15 +472,8 @@ impl Query<'_> {
                 let base = row_base(y, z);
                 let b0 = base.wrapping_add(x0 as isize as usize) & mask;
                 let b1 = base.wrapping_add(x1 as isize as usize) & mask;
-                // A bucket's entries are ordered by x: the first bucket's below the range and
-                // the last one's above it are left out.
-                let (from, to) = (p.x - half, p.x + half);
-                let first = g.start[b0] as usize
-                    + g.x[g.start[b0] as usize..g.start[b0 + 1] as usize]
-                        .partition_point(|&x| x < from);
-                let last = g.start[b1] as usize
-                    + g.x[g.start[b1] as usize..g.start[b1 + 1] as usize]
-                        .partition_point(|&x| x <= to);
+                let first = g.start[b0] as usize;
+                let last = g.start[b1 + 1] as usize;
                 if b0 <= b1 {
                     out.push((row, first, last.max(first)));
                 } else {
