@@ -43,8 +43,9 @@
 //! x range left out) and tests eight entries at a time (vectorised), in one walk: the
 //! groups of eight holding some of the vertex's own neighbourhood are kept for the fold test
 //! and its triangles after it, and a triangle is first tested against a bound from its
-//! centroid (most of those looked at lie beside the vertex, farther than it can slide)
-//! before it is projected. The GPU's (`contact.wgsl`, `sc_query`) is a linked list per bucket.
+//! centroid (most of those looked at lie beside the vertex, farther than it can slide; for
+//! the own neighbourhood's, the slide bounded from the speed of the first corner and the
+//! fastest corner around it) before it is projected. The GPU's (`contact.wgsl`, `sc_query`) is a linked list per bucket.
 //! Both find the same vertices and triangles and keep the same lowest-numbered ones.
 //!
 //! Parts of the cloth that rest close together (a vertex and a vertex or triangle corner
@@ -119,6 +120,14 @@ pub struct SelfCollisionScratch {
     mesh: MeshLists,
     /// Every triangle's [`Frame`] at the step's start.
     frames: Vec<Frame>,
+    /// Per vertex, the fastest a corner of a triangle it is the first corner of moves
+    /// relative to it at the step's start (a bound for the query's slide, see
+    /// [`Query::triangles_through`]).
+    corner_speeds: Vec<f32>,
+    /// Tests: the query slides over the own neighbourhood's triangles by the whole margin in
+    /// its bound, as it did before [`SelfCollisionScratch::corner_speeds`].
+    #[cfg(test)]
+    margin_slides: bool,
     /// Per vertex: its neighbours' count and [`MAX_SELF_NEIGHBOURS`] slots.
     neighbour_count: Vec<u32>,
     neighbours: Vec<u32>,

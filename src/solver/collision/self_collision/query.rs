@@ -237,6 +237,9 @@ pub(super) struct Query<'a> {
     first_start: &'a [u32],
     first_tris: &'a [u32],
     frames: &'a [Frame],
+    /// Per vertex: see [`SelfCollisionScratch::corner_speeds`]; whether to use them.
+    corner_speeds: &'a [f32],
+    slide_bounds: bool,
     /// The triangles put into some list (see [`Listed`]).
     listed: &'a [AtomicU32],
     thickness: f32,
@@ -574,9 +577,19 @@ impl Query<'_> {
         let v = self.vel[i];
         let first =
             &self.first_tris[self.first_start[j] as usize..self.first_start[j + 1] as usize];
+        let near = rest2 <= self.skip * self.skip;
+        // How far it can slide over any of them at most: over the own neighbourhood's, each
+        // corner moves relative to it at most as fast as `j` does plus the fastest a corner
+        // moves relative to `j` (widened against the roundings of the two sums).
+        let slide_bound = if near && self.slide_bounds {
+            let bound = (self.vel[j] - v).xyz().length() + self.corner_speeds[j];
+            (2.0 * self.dt * (bound * 1.0001) + 0.25 * self.thickness).min(margin)
+        } else {
+            margin
+        };
         for &t in first {
             let frame = &self.frames[t as usize];
-            if frame.surely_apart(p, margin, self.reach) {
+            if frame.surely_apart(p, slide_bound, self.reach) {
                 continue;
             }
             let tri = self.triangles[t as usize];
@@ -605,7 +618,7 @@ impl Query<'_> {
                 // How far it can slide over the triangle in the step: the margin; over its
                 // own neighbourhood (which moves with it) twice its fastest speed relative to
                 // a corner and a quarter thickness.
-                let slide = if rest2 > self.skip * self.skip {
+                let slide = if !near {
                     margin
                 } else {
                     let rel = tri
@@ -655,6 +668,18 @@ struct QueryChunk<'a> {
 }
 
 impl SelfCollisionScratch {
+    /// Whether the query bounds the own neighbourhood's slides by the corners' speeds.
+    #[cfg(test)]
+    fn slide_bounds(&self) -> bool {
+        !self.margin_slides
+    }
+
+    #[cfg(not(test))]
+    #[expect(clippy::unused_self)]
+    fn slide_bounds(&self) -> bool {
+        true
+    }
+
     /// Fills the grid with the current positions and every vertex's lists (see the module
     /// docs), the vertices in parallel (`WALK_TWICE`: see [`Query::vertex`]).
     #[expect(clippy::too_many_arguments)]
@@ -692,6 +717,19 @@ impl SelfCollisionScratch {
             }
         });
 
+        self.corner_speeds.resize(n, 0.0);
+        let (first_start, first_tris) = (&self.mesh.first_start, &self.mesh.first_tris);
+        fill_each(&mut self.corner_speeds, par, |j| {
+            let first = &first_tris[first_start[j] as usize..first_start[j + 1] as usize];
+            first
+                .iter()
+                .filter(|&&t| valid(&triangles[t as usize]))
+                .flat_map(|&t| triangles[t as usize])
+                .map(|k| (vel[k as usize] - vel[j]).xyz().length_squared())
+                .fold(0.0f32, f32::max)
+                .sqrt()
+        });
+
         self.neighbour_count.clear();
         self.neighbour_count.resize(n, 0);
         self.neighbours.resize(n * MAX_SELF_NEIGHBOURS, 0);
@@ -717,6 +755,8 @@ impl SelfCollisionScratch {
             first_start: &self.mesh.first_start,
             first_tris: &self.mesh.first_tris,
             frames: &self.frames,
+            corner_speeds: &self.corner_speeds,
+            slide_bounds: self.slide_bounds(),
             listed: &listed,
             // The querying vertex's, set per vertex.
             thickness,

@@ -385,6 +385,40 @@ fn the_kept_groups_find_what_a_second_walk_finds() {
     );
 }
 
+/// The own neighbourhood's triangles are first tested against a bound on how far the vertex
+/// can slide within the step (from the speeds of the triangles' first corners and of the
+/// corners around them); the lists are those of the bound by the whole margin, in a crumpled
+/// sheet whose vertices move at random speeds from a hundredth of a thickness a step to
+/// several (so the slides lie on both sides of what the bound cuts off).
+#[test]
+fn the_slide_bound_leaves_out_no_triangle_the_margin_keeps() {
+    let (pos, vel, rest, tris, params) = crumpled_sheet();
+    let dt = 1.0 / 60.0;
+    let t = params.thickness;
+    let mut found = 0;
+    for scale in [0.02f32, 0.3, 1.0, 3.0, 20.0] {
+        let vel: Vec<Vec4> = vel.iter().map(|v| *v * scale).collect();
+        let motion = motion_margin(&vel, params, dt, &Serial).unwrap();
+        let mut bound = SelfCollisionScratch::default();
+        bound.find::<false>(&pos, &vel, dt, &rest, &tris, &[], t, motion, &Serial);
+        let mut margin = SelfCollisionScratch {
+            margin_slides: true,
+            ..SelfCollisionScratch::default()
+        };
+        margin.find::<false>(&pos, &vel, dt, &rest, &tris, &[], t, motion, &Serial);
+        let differ = (0..pos.len())
+            .filter(|&i| {
+                let slots = i * MAX_SELF_TRIANGLES..(i + 1) * MAX_SELF_TRIANGLES;
+                bound.triangle_count[i] != margin.triangle_count[i]
+                    || bound.triangles[slots.clone()] != margin.triangles[slots]
+            })
+            .count();
+        assert_eq!(differ, 0, "speeds × {scale}: vertices whose lists differ");
+        found += bound.triangle_count.iter().sum::<u32>();
+    }
+    assert!(found > 5000, "only {found} triangles found");
+}
+
 /// The lists kept from one mesh (triangles by first corner, longest edge) are rebuilt for
 /// another: a scratch that stepped the whole sheet, then the sheet with half its triangles
 /// gone (as after a tear), finds what a fresh scratch finds.
