@@ -31,10 +31,10 @@ fn fmix(mut h: u32) -> u32 {
 
 /// The bucket of cell `c` in a table of `size` buckets, for [`count_self_crossings`]; the
 /// GPU's `sc_hash` is the same function. Each coordinate goes through [`fmix`] in turn: the
-/// sum or xor of the coordinates times three odd constants, which this replaced, put a few
-/// times more nearby cells into one bucket than chance would (about two in five of the rows
-/// of a 10 × 10 block of cells shared their bucket with another), and every such cell's
-/// vertices are read by every query through the bucket.
+/// xor of the coordinates times three odd constants (its sign dropped), which this replaced,
+/// put two and a half to three times as many nearby cells into a shared bucket as chance
+/// would (of the rows of a 10 × 10 block, two in five started where another of them did),
+/// and a query reads every cell's vertices in a bucket it reads.
 #[inline]
 pub(super) fn hash(c: IVec3, size: usize) -> usize {
     fmix(fmix(fmix(c.z as u32).wrapping_add(c.y as u32)).wrapping_add(c.x as u32)) as usize % size

@@ -45,8 +45,9 @@
 //! and its triangles after it, and a triangle is first tested against a bound from its
 //! centroid (most of those looked at lie beside the vertex, farther than it can slide; for
 //! the own neighbourhood's, the slide bounded from the speed of the first corner and the
-//! fastest corner around it) before it is projected. The GPU's (`contact.wgsl`, `sc_query`) is a linked list per bucket.
-//! Both find the same vertices and triangles and keep the same lowest-numbered ones.
+//! fastest corner around it) before it is projected. The GPU's (`contact.wgsl`, `sc_query`)
+//! is a linked list per bucket. Both find the same vertices and triangles and keep the same
+//! lowest-numbered ones.
 //!
 //! Parts of the cloth that rest close together (a vertex and a vertex or triangle corner
 //! closer than 2.5 thicknesses in the rest shape) are left to the distance and bending
