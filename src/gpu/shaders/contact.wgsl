@@ -603,8 +603,8 @@ fn sc_correction(i: u32) -> vec3<f32> {
     return vec3<f32>(0.0);
 }
 
-// One vertex against one collider (`collider::touch`, after `collide_vertices`' reach test): the corrected
-// position in xyz, w = 1 when it was pushed.
+// One vertex against one collider (`collider::touch`, after `collide_vertices`' reach test):
+// the corrected position in xyz, w = 1 when it was pushed.
 fn collide_one(c: Collider, p: vec3<f32>, prev: vec3<f32>) -> vec4<f32> {
     let off = p - c.to_t.xyz;
     if dot(off, off) > c.misc.z {
@@ -687,8 +687,8 @@ var<workgroup> imp_lin: array<vec3<f32>, 64>;
 var<workgroup> imp_ang: array<vec3<f32>, 64>;
 
 // The end of a substep for every vertex: tethers, the self-collision correction, the motion
-// targets (skinned clothing), then the colliders (`collider::collide_vertices`). Each workgroup also sums the momentum its vertices
-// gave each collider (−m·Δx/h, and its moment about the collider's origin) into its own slot
+// targets (skinned clothing), then the colliders (`collider::collide_vertices`). Each
+// workgroup also sums the momentum its vertices gave each collider (−m·Δx/h, and its moment about the collider's origin) into its own slot
 // (by the collider's frame slot), over every substep and step of the frame; the host adds the
 // slots up after reading them back. Every invocation reaches every barrier.
 @compute @workgroup_size(64)

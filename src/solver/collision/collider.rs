@@ -117,6 +117,7 @@ const CORE_SLACK: f32 = 1e-5;
 /// end of one substep is the start of the next.
 pub(crate) fn substep_poses(colliders: &[Collider], n: u32, out: &mut Vec<SubstepPose>) {
     out.clear();
+    let finite2 = |r: f32| if r.is_finite() { r * r } else { f32::INFINITY };
     for s in 0..n {
         let t1 = (s + 1) as f32 / n as f32;
         for (i, c) in colliders.iter().enumerate() {
@@ -125,11 +126,11 @@ pub(crate) fn substep_poses(colliders: &[Collider], n: u32, out: &mut Vec<Subste
                 None => c.start.lerp(&c.end, 0.0),
             };
             let to = c.start.lerp(&c.end, t1);
-            let reach = c.shape.bounding_radius() * to.scale + c.thickness;
-            let finite2 = |r: f32| if r.is_finite() { r * r } else { f32::INFINITY };
+            let bounding = c.shape.bounding_radius();
+            let reach = bounding * to.scale + c.thickness;
             let own = c.thickness / to.scale;
             let core = c.shape.core_radius() + own;
-            let ball = c.shape.bounding_radius() + own;
+            let ball = bounding + own;
             let turn = Mat3::from_quat(to.rotation.inverse()) * (1.0 / to.scale);
             out.push(SubstepPose {
                 from,

@@ -371,7 +371,8 @@ pub fn step(
             h,
             (params.bending_solve, params.gravity.length()),
         );
-    let motion = if input.motion.applies_to(state.len()) {
+    let has_motion = input.motion.applies_to(state.len());
+    let motion = if has_motion {
         input.motion
     } else {
         MotionConstraints::default()
@@ -387,7 +388,7 @@ pub fn step(
         bending: batches.bending && !implicit,
         accumulate: batches.mode_is_xpbd && params.iterations > 1,
         substeps,
-        motion: motion.applies_to(state.len()),
+        motion: has_motion,
     };
     let air_velocities = if input.air_velocities.len() == state.len() {
         input.air_velocities

@@ -37,7 +37,7 @@ fn fmix(mut h: u32) -> u32 {
 /// and a query reads every cell's vertices in a bucket it reads.
 #[inline]
 pub(super) fn hash(c: IVec3, size: usize) -> usize {
-    fmix(fmix(fmix(c.z as u32).wrapping_add(c.y as u32)).wrapping_add(c.x as u32)) as usize % size
+    fmix((row_base(c.y, c.z) as u32).wrapping_add(c.x as u32)) as usize % size
 }
 
 /// The query grid's bucket of cell `c` in a table of `mask + 1` (a power of two) buckets: the

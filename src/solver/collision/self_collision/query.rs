@@ -504,12 +504,11 @@ impl Query<'_> {
         // Every mask needs the entry within the radius: a group with none there is done
         // before its rest and ahead positions are read (on the first frames of the 256²
         // `--scene-costs` scene a tenth of the self-collision frame).
-        let mut any = false;
-        for l in 0..LANES {
+        let d2: [f32; LANES] = core::array::from_fn(|l| {
             let (dx, dy, dz) = (x[l] - p.x, y[l] - p.y, z[l] - p.z);
-            any |= dx * dx + dy * dy + dz * dz < big2;
-        }
-        if !any {
+            dx * dx + dy * dy + dz * dz
+        });
+        if !d2.iter().any(|&d2| d2 < big2) {
             return Lanes {
                 far: 0,
                 near: 0,
@@ -519,9 +518,7 @@ impl Query<'_> {
         let (rx, ry, rz) = (at(&g.rx), at(&g.ry), at(&g.rz));
         let (ax, ay, az) = (at(&g.ax), at(&g.ay), at(&g.az));
         let (mut far, mut near, mut fold) = (0u32, 0u32, 0u32);
-        for l in 0..LANES {
-            let (dx, dy, dz) = (x[l] - p.x, y[l] - p.y, z[l] - p.z);
-            let d2 = dx * dx + dy * dy + dz * dz;
+        for (l, &d2) in d2.iter().enumerate() {
             let (ex, ey, ez) = (rx[l] - rest_i.x, ry[l] - rest_i.y, rz[l] - rest_i.z);
             let rest2 = ex * ex + ey * ey + ez * ez;
             let (fx, fy, fz) = (ax[l] - pa.x, ay[l] - pa.y, az[l] - pa.z);
@@ -723,7 +720,6 @@ impl SelfCollisionScratch {
             let first = &first_tris[first_start[j] as usize..first_start[j + 1] as usize];
             first
                 .iter()
-                .filter(|&&t| valid(&triangles[t as usize]))
                 .flat_map(|&t| triangles[t as usize])
                 .map(|k| (vel[k as usize] - vel[j]).xyz().length_squared())
                 .fold(0.0f32, f32::max)
