@@ -13,7 +13,7 @@
 //! The JSON line adds how far the banner's seam copies are apart (0: welded), how many
 //! particles the mesh's vertices became, the deepest penetration into the statue, the banner's
 //! edge–triangle pairs crossing (its self-collision holds: 0) and whether it is asleep (after
-//! about ten seconds, `--frames 600`).
+//! about half a minute, `--frames 1800`).
 
 #[path = "support/mod.rs"]
 mod support;
@@ -108,15 +108,7 @@ fn spawn_when_loaded(
                 substeps: 12,
                 ..default()
             },
-            // Thinner than the default (1.1 short edges, 0.045 m): wrapped tight over
-            // the small head, a vertex there lies over triangles with a corner one edge away,
-            // closer than the default thickness, so those contacts can never be met; they push
-            // every substep and the banner trembles and creeps round the head for as long as
-            // it runs. At 0.035 m it comes to rest and sleeps, no layer through another.
-            ClothSelfCollision {
-                thickness: Some(0.035),
-                ..default()
-            },
+            ClothSelfCollision::default(),
         ))
         .id();
     if let Some(mut materials) = materials {

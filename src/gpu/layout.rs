@@ -12,7 +12,7 @@ use glam::{Vec3, Vec4};
 
 use super::append_lists;
 use super::kernels::TILE;
-use crate::solver::collision::first_corner_reach;
+use crate::solver::collision::{first_corner_reach, limits_depenetration};
 use crate::solver::constraints::{ConstraintBatches, Part};
 use crate::solver::{Simulation, Solver, Tethers, Topology};
 
@@ -40,6 +40,10 @@ pub(crate) const FLAG_SYMMETRIC: u32 = 128;
 ///
 /// [`NEAR_CORNER_THICKNESS`]: crate::solver::NEAR_CORNER_THICKNESS
 pub(crate) const FLAG_CLOSED: u32 = 256;
+/// The cloth's edges are even: an open one's self-collision undoes an old overlap with a
+/// triangle only up to a distance a corner resting near the vertex allows
+/// ([`limits_depenetration`]; set whether the cloth is closed or not, since a tear opens it).
+pub(crate) const FLAG_EVEN: u32 = 512;
 
 /// The part count the GPU projects `sim` with: parts of at most [`TILE`] vertices (one
 /// workgroup each, in workgroup memory), fewer when the mesh's vertex order would leave
@@ -368,6 +372,9 @@ impl WorldLayout {
                 flags |= FLAG_SC;
                 if sim.topology().is_closed() {
                     flags |= FLAG_CLOSED;
+                }
+                if limits_depenetration(sim.topology()) {
+                    flags |= FLAG_EVEN;
                 }
             }
             let batches = choose_batches(sim);

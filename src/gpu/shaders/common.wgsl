@@ -186,6 +186,7 @@ const FLAG_TETHERS: u32 = 32u;
 const FLAG_TEARING: u32 = 64u;
 const FLAG_SYMMETRIC: u32 = 128u;
 const FLAG_CLOSED: u32 = 256u;
+const FLAG_EVEN: u32 = 512u;
 
 // Whether triangle `t` (global) of a cloth with record `flags` lost an edge to a tear
 // (`tear_check` flags it dead): until the host's tear removes it from the topology it counts

@@ -46,16 +46,22 @@ fn sc_triangle_thickness_of(i: u32, cl: Cloth) -> f32 {
 // `self_collision::NEAR_CORNER_THICKNESS`.
 const SC_NEAR_CORNER_THICKNESS: f32 = 0.9;
 
-// `self_collision::capped_thickness`: the thickness vertex `i` of a closed cloth keeps from
-// the triangle of corners `k0`, `k1`, `k2`: `thickness`, at most
-// `SC_NEAR_CORNER_THICKNESS` times its rest distance from the nearest corner.
-fn sc_capped_thickness(thickness: f32, i: u32, k0: u32, k1: u32, k2: u32) -> f32 {
+// `self_collision::near_corner_reach`: SC_NEAR_CORNER_THICKNESS times the rest distance from
+// vertex `i` to the nearest of the corners `k0`, `k1`, `k2`.
+fn sc_near_corner_reach(i: u32, k0: u32, k1: u32, k2: u32) -> f32 {
     let r = state[P.rest_at + i].xyz;
     let d0 = state[P.rest_at + k0].xyz - r;
     let d1 = state[P.rest_at + k1].xyz - r;
     let d2 = state[P.rest_at + k2].xyz - r;
     let near2 = min(min(dot(d0, d0), dot(d1, d1)), dot(d2, d2));
-    return min(thickness, SC_NEAR_CORNER_THICKNESS * sqrt(near2));
+    return SC_NEAR_CORNER_THICKNESS * sqrt(near2);
+}
+
+// `self_collision::capped_thickness`: the thickness vertex `i` of a closed cloth keeps from
+// the triangle of corners `k0`, `k1`, `k2`: `thickness`, at most
+// `SC_NEAR_CORNER_THICKNESS` times its rest distance from the nearest corner.
+fn sc_capped_thickness(thickness: f32, i: u32, k0: u32, k1: u32, k2: u32) -> f32 {
+    return min(thickness, sc_near_corner_reach(i, k0, k1, k2));
 }
 
 // `sdf::closest_point_on_triangle` (Ericson 5.1.5).
@@ -398,9 +404,9 @@ fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
 const SC_DEPENETRATION: f32 = 0.35;
 
 // `self_collision::limited_push`: the overlap, but of it at most what the pair closed within
-// the substep plus SC_DEPENETRATION thicknesses.
-fn sc_limited_push(overlap: f32, approach: f32, thickness: f32) -> f32 {
-    return min(overlap, max(approach, 0.0) + SC_DEPENETRATION * thickness);
+// the substep plus `depenetration` (usually SC_DEPENETRATION thicknesses).
+fn sc_limited_push(overlap: f32, approach: f32, depenetration: f32) -> f32 {
+    return min(overlap, max(approach, 0.0) + depenetration);
 }
 
 // `self_collision::pair_correction`: vertex a's share; w = 0 when the pair does not touch.
@@ -419,7 +425,7 @@ fn sc_pair(a: vec4<f32>, prev_a: vec3<f32>, b: vec4<f32>, prev_b: vec3<f32>, thi
     }
     let nrm = d / len;
     let approach = dot(nrm, prev_a - prev_b) - len;
-    let push = sc_limited_push(limit - len, approach, limit);
+    let push = sc_limited_push(limit - len, approach, SC_DEPENETRATION * limit);
     var da = nrm * (push * wa / w);
     let db = -nrm * (push * wb / w);
     let slide = (a.xyz + da - prev_a) - (b.xyz + db - prev_b);
@@ -443,8 +449,9 @@ struct ScContact {
 }
 
 // `self_collision::triangle_correction`: vertex a's correction from a triangle it keeps to
-// the side `code` of, with the weights of the point under it.
-fn sc_triangle(a: vec4<f32>, prev_a: vec3<f32>, x0: vec4<f32>, x1: vec4<f32>, x2: vec4<f32>, p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, code: u32, thickness: f32, friction: f32) -> ScContact {
+// the side `code` of, with the weights of the point under it (an overlap older than the
+// substep undone only up to `meet` from the plane where that is under the thickness).
+fn sc_triangle(a: vec4<f32>, prev_a: vec3<f32>, x0: vec4<f32>, x1: vec4<f32>, x2: vec4<f32>, p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, code: u32, thickness: f32, friction: f32, meet: f32) -> ScContact {
     let wa = a.w;
     if !(wa > 0.0) {
         return ScContact(vec4<f32>(0.0), vec3<f32>(0.0));
@@ -467,7 +474,11 @@ fn sc_triangle(a: vec4<f32>, prev_a: vec3<f32>, x0: vec4<f32>, x1: vec4<f32>, x2
     let q = x0.xyz * bary.x + x1.xyz * bary.y + x2.xyz * bary.z;
     let q_prev = p0 * bary.x + p1 * bary.y + p2 * bary.z;
     let approach = side * dot(r.n, (prev_a - q_prev) - (a.xyz - q));
-    let push = sc_limited_push(thickness - ds, approach, thickness);
+    var depenetration = SC_DEPENETRATION * thickness;
+    if meet < thickness {
+        depenetration = min(depenetration, max(meet - ds, 0.0));
+    }
+    let push = sc_limited_push(thickness - ds, approach, depenetration);
     var da = r.n * (side * push * share);
     let slide = (a.xyz + da - prev_a) - (q - q_prev);
     let tangential = slide - r.n * dot(r.n, slide);
@@ -513,6 +524,7 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
     let thickness = sc_thickness_of(i, cl);
     let triangle_thickness = sc_triangle_thickness_of(i, cl);
     let closed = cloth_closed(c, cl.flags);
+    let even = (cl.flags & FLAG_EVEN) != 0u;
     var sum = vec3<f32>(0.0);
     var touching = 0.0;
     let count = atomicLoad(&scratch[P.ncount_at + i]);
@@ -533,14 +545,20 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
         let x0 = sc_read(k0, tethers);
         let x1 = sc_read(k1, tethers);
         let x2 = sc_read(k2, tethers);
+        // `self_collision::NearCorner`: capped on a closed cloth, the old overlap limited on
+        // an open one of even edges.
         var tt = triangle_thickness;
+        var meet = tt;
         if closed {
             tt = sc_capped_thickness(tt, i, k0, k1, k2);
+            meet = tt;
+        } else if even {
+            meet = sc_near_corner_reach(i, k0, k1, k2);
         }
         let contact = sc_triangle(
             a, prev_a, x0, x1, x2,
             state[P.prev_at + k0].xyz, state[P.prev_at + k1].xyz, state[P.prev_at + k2].xyz,
-            slot & 3u, tt, cl.sc_friction,
+            slot & 3u, tt, cl.sc_friction, meet,
         );
         let r = contact.da;
         sum += r.xyz;

@@ -17,6 +17,7 @@ pub use self_collision::{
     SelfCollisionScratch, count_self_crossings, triangle_reach,
 };
 pub(crate) use self_collision::{
-    Scales, find_self_collision_candidates, first_corner_reach, self_collide,
+    Scales, find_self_collision_candidates, first_corner_reach, limits_depenetration,
+    near_corner_rule, self_collide,
 };
 pub use shape::{Pose, Shape};

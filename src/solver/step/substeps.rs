@@ -43,7 +43,8 @@ use super::state::ClothState;
 use crate::solver::air::{Aerodynamics, air_velocity_changes4, vertex_area_vectors};
 use crate::solver::collision::{
     Collider, ContactImpulse, Scales, SelfCollision, SelfCollisionScratch, SubstepPose,
-    collide_vertices, find_self_collision_candidates, self_collide, substep_poses,
+    collide_vertices, find_self_collision_candidates, near_corner_rule, self_collide,
+    substep_poses,
 };
 use crate::solver::constraints::{
     ConstraintBatches, ImplicitBending, Mode, MotionConstraints, Part, Solver, Tethers,
@@ -528,11 +529,8 @@ pub fn step(
                 Scales {
                     vertices: topology.self_collision_scales(),
                     triangles: topology.self_collision_triangle_scales(),
-                    closed_rest: if topology.is_closed() {
-                        topology.rest_positions()
-                    } else {
-                        &[]
-                    },
+                    rest: topology.rest_positions(),
+                    near_corner: near_corner_rule(topology),
                 },
                 sc,
                 &mut scratch.self_collision,

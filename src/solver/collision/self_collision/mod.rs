@@ -61,7 +61,10 @@
 //! through within the step. Both with friction on the sliding, and both undoing all of what
 //! the pair closed within the substep but at most [`DEPENETRATION`] thicknesses of an overlap
 //! the substep began with (a vertex found deep in or through a layer comes out over a few
-//! substeps instead of jumping out at once). A vertex pair's other vertex moves by its own
+//! substeps instead of jumping out at once); against a triangle with a corner resting nearer
+//! the vertex than the thickness allows, a closed cloth keeps a thinner layer and an open one
+//! of even edges undoes the older overlap only as far as its edges allow
+//! ([`NEAR_CORNER_THICKNESS`]). A vertex pair's other vertex moves by its own
 //! list (the pair pushes both apart). A triangle the vertex was over when the step began
 //! takes the reaction at its corners (`−Δa · w_c b_c / wₐ`, `b_c` the corner's weight at the
 //! point under the vertex), so that the contact moves no momentum: without it a pile of cloth
@@ -98,7 +101,7 @@ mod tests;
 pub use crossings::count_self_crossings;
 use grid::*;
 use pass::*;
-pub(crate) use pass::{Scales, self_collide};
+pub(crate) use pass::{Scales, limits_depenetration, near_corner_rule, self_collide};
 pub use query::triangle_reach;
 use query::*;
 pub(crate) use query::{find_self_collision_candidates, first_corner_reach};
@@ -317,7 +320,11 @@ const DEPENETRATION: f32 = 0.35;
 const TRIANGLE_SKIP: f32 = 0.5;
 
 /// The most a vertex of a closed cloth is kept off a triangle, in rest distances from the
-/// triangle's nearest corner ([`Topology::is_closed`](crate::solver::Topology::is_closed)).
+/// triangle's nearest corner ([`Topology::is_closed`](crate::solver::Topology::is_closed));
+/// on an open cloth of even edges, the farthest from the triangle's plane an overlap older
+/// than the substep is pushed out to (what the pair closed within the substep is undone up to
+/// the whole thickness, which opens a crumpled sheet's tight folds; pushing on from there
+/// every substep kept a cloth draped over a collider trembling for ever).
 /// A vertex over a triangle through its own neighbour (a corner one edge away, under a
 /// thickness at the default) can get no farther from that triangle's plane than from that
 /// corner, so a whole thickness is more than its edges allow: the contact pushed it out every

@@ -84,10 +84,11 @@ fn to_fixed(x: f32) -> i32 {
 
 /// How far a contact pushes its pair apart: the `overlap` with the contact's thickness
 /// (`thickness - distance`), but of it at most what the pair closed within the substep
-/// (`approach`, along the contact's normal) plus [`DEPENETRATION`] thicknesses.
+/// (`approach`, along the contact's normal) plus `depenetration` (usually [`DEPENETRATION`]
+/// thicknesses).
 #[inline]
-fn limited_push(overlap: f32, approach: f32, thickness: f32) -> f32 {
-    overlap.min(approach.max(0.0) + DEPENETRATION * thickness)
+fn limited_push(overlap: f32, approach: f32, depenetration: f32) -> f32 {
+    overlap.min(approach.max(0.0) + depenetration)
 }
 
 /// Coulomb friction on a contact pushed `push` along `n`: the tangential part of `slide` and
@@ -124,7 +125,7 @@ fn pair_correction(
     }
     let n = d / len;
     let approach = n.dot(prev_a.xyz() - prev_b.xyz()) - len;
-    let push = limited_push(limit - len, approach, limit);
+    let push = limited_push(limit - len, approach, DEPENETRATION * limit);
     let mut da = n * (push * wa / w);
     let db = -n * (push * wb / w);
     // Friction on the relative sliding of the pair during the substep.
@@ -139,10 +140,11 @@ fn pair_correction(
 /// `prev`; `plane` its [`Plane`] at `read`) and the side code it keeps to: when `a` is
 /// over the triangle and closer than `thickness` on its side, or through it to the other side
 /// (by less than 2.5 thicknesses), pushed out to `thickness` on its side along the normal (at
-/// most what it closed on the triangle within the substep plus [`DEPENETRATION`] thicknesses), its
-/// share by the inverse masses (the triangle's at the point under `a`), with friction on the
-/// sliding; with the barycentric weights of the point under `a`. `None` when it does not
-/// touch. (The GPU's `sc_triangle` projects the same way.)
+/// most what it closed on the triangle within the substep plus [`DEPENETRATION`] thicknesses,
+/// that share only up to `meet` from the plane when `meet` is under the thickness: see
+/// [`NearCorner::Depenetration`]), its share by the inverse masses (the triangle's at the
+/// point under `a`), with friction on the sliding; with the barycentric weights of the point
+/// under `a`. `None` when it does not touch. (The GPU's `sc_triangle` projects the same way.)
 #[inline]
 #[expect(clippy::too_many_arguments)]
 fn triangle_correction(
@@ -154,6 +156,7 @@ fn triangle_correction(
     prev: &[Vec4],
     code: u32,
     params: SelfCollision,
+    meet: f32,
 ) -> Option<(Vec3, Vec3)> {
     let wa = a.w;
     if wa.is_nan() || wa <= 0.0 {
@@ -189,7 +192,12 @@ fn triangle_correction(
     // What the vertex closed on the triangle's point under it within the substep (or went
     // through by).
     let approach = side * n.dot((prev_a.xyz() - q_prev) - (a.xyz() - q));
-    let push = limited_push(thickness - ds, approach, thickness);
+    let depenetration = if meet < thickness {
+        (DEPENETRATION * thickness).min((meet - ds).max(0.0))
+    } else {
+        DEPENETRATION * thickness
+    };
+    let push = limited_push(thickness - ds, approach, depenetration);
     let mut da = n * (side * push * share);
     let slide = (a.xyz() + da - prev_a.xyz()) - (q - q_prev);
     if let Some((tangential, keep)) = sliding(slide, n, push, params.friction) {
@@ -217,14 +225,68 @@ struct PassChunk<'a> {
 /// Per vertex, the thickness it keeps from other vertices and from triangles over the
 /// cloth's ([`Topology::self_collision_scales`](crate::solver::Topology::self_collision_scales)
 /// and [`Topology::self_collision_triangle_scales`](crate::solver::Topology::self_collision_triangle_scales));
-/// empty: the cloth's; and the rest positions of a closed cloth, which cap the thickness a
-/// vertex keeps from a triangle with a corner resting near it ([`capped_thickness`]; empty:
-/// no cap, as on an open cloth).
+/// empty: the cloth's; and the rest positions, with what they limit of a contact against a
+/// triangle with a corner resting near the vertex (`near_corner`; empty: nothing).
 #[derive(Clone, Copy, Default)]
 pub(crate) struct Scales<'a> {
     pub vertices: &'a [f32],
     pub triangles: &'a [f32],
-    pub closed_rest: &'a [Vec3],
+    pub rest: &'a [Vec3],
+    pub near_corner: NearCorner,
+}
+
+/// What a vertex–triangle contact keeps to where a corner of the triangle rests nearer the
+/// vertex than the thickness over [`NEAR_CORNER_THICKNESS`]: no vertex gets farther from a
+/// plane through a corner than from that corner, so the whole thickness cannot be met there.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) enum NearCorner {
+    /// The whole thickness (a cloth of uneven edges).
+    #[default]
+    Thickness,
+    /// A closed cloth ([`Topology::is_closed`](crate::solver::Topology::is_closed)): the
+    /// thickness capped at [`NEAR_CORNER_THICKNESS`] times the rest distance from the
+    /// triangle's nearest corner ([`capped_thickness`]).
+    Capped,
+    /// An open cloth of even edges: the whole thickness against what the pair closed within
+    /// the substep, but an overlap older than the substep undone only up to
+    /// [`NEAR_CORNER_THICKNESS`] times that rest distance from the plane. The contact keeps a
+    /// fold that closes from closing through (what opens a crumpled sheet's tight folds) but
+    /// does not push on a fold held shut (a cloth wrapped over a collider), which it did every
+    /// substep for ever: draped over a ball, box or capsule, a cloth with self-collision never
+    /// came to rest (docs/experiments.md).
+    Depenetration,
+}
+
+/// Whether an open cloth of `topology` takes [`NearCorner::Depenetration`]: its edges are even
+/// ([`EVEN_EDGE_SPREAD`](crate::solver::limits::EVEN_EDGE_SPREAD)). On uneven meshes (per-vertex
+/// thicknesses) the crumpled cloths of `tests/self_collision.rs` crossed more with it. The
+/// GPU's `FLAG_EVEN`.
+pub(crate) fn limits_depenetration(topology: &crate::solver::mesh::Topology) -> bool {
+    topology.rest_edge_spread() <= crate::solver::limits::EVEN_EDGE_SPREAD
+}
+
+/// The [`NearCorner`] rule of a cloth of `topology`.
+pub(crate) fn near_corner_rule(topology: &crate::solver::mesh::Topology) -> NearCorner {
+    if topology.is_closed() {
+        NearCorner::Capped
+    } else if limits_depenetration(topology) {
+        NearCorner::Depenetration
+    } else {
+        NearCorner::Thickness
+    }
+}
+
+/// [`NEAR_CORNER_THICKNESS`] times the rest distance from vertex `i` to triangle `tri`'s
+/// nearest corner (`rest`: the rest positions); `None` without them.
+#[inline]
+fn near_corner_reach(rest: &[Vec3], i: usize, tri: [u32; 3]) -> Option<f32> {
+    let &rest_i = rest.get(i)?;
+    let mut near2 = f32::INFINITY;
+    for k in tri {
+        let &c = rest.get(k as usize)?;
+        near2 = near2.min((c - rest_i).length_squared());
+    }
+    Some(NEAR_CORNER_THICKNESS * near2.sqrt())
 }
 
 /// The thickness vertex `i` of a closed cloth (`rest`: its rest positions) keeps from
@@ -233,17 +295,7 @@ pub(crate) struct Scales<'a> {
 /// `sc_capped_thickness`.
 #[inline]
 fn capped_thickness(thickness: f32, rest: &[Vec3], i: usize, tri: [u32; 3]) -> f32 {
-    let Some(&rest_i) = rest.get(i) else {
-        return thickness;
-    };
-    let mut near2 = f32::INFINITY;
-    for k in tri {
-        let Some(&c) = rest.get(k as usize) else {
-            return thickness;
-        };
-        near2 = near2.min((c - rest_i).length_squared());
-    }
-    thickness.min(NEAR_CORNER_THICKNESS * near2.sqrt())
+    near_corner_reach(rest, i, tri).map_or(thickness, |reach| thickness.min(reach))
 }
 
 /// One self-collision pass (Jacobi): every vertex sums its corrections from its touching
@@ -264,7 +316,8 @@ pub(crate) fn self_collide(
     let Scales {
         vertices: scales,
         triangles: triangle_scales,
-        closed_rest,
+        rest,
+        near_corner,
     } = scales;
     let n = pos.len();
     if scratch.neighbour_count.len() != n || scratch.triangle_count.len() != n {
@@ -331,13 +384,32 @@ pub(crate) fn self_collide(
                     continue;
                 };
                 let code = slot & 3;
+                let (thickness, meet) = match near_corner {
+                    NearCorner::Thickness => (triangle_params.thickness, triangle_params.thickness),
+                    NearCorner::Capped => {
+                        let capped = capped_thickness(triangle_params.thickness, rest, i, tri);
+                        (capped, capped)
+                    }
+                    NearCorner::Depenetration => (
+                        triangle_params.thickness,
+                        near_corner_reach(rest, i, tri).unwrap_or(triangle_params.thickness),
+                    ),
+                };
                 let triangle_params = SelfCollision {
-                    thickness: capped_thickness(triangle_params.thickness, closed_rest, i, tri),
+                    thickness,
                     ..triangle_params
                 };
-                if let Some((da, bary)) =
-                    triangle_correction(a, prev_a, plane, tri, read, prev, code, triangle_params)
-                {
+                if let Some((da, bary)) = triangle_correction(
+                    a,
+                    prev_a,
+                    plane,
+                    tri,
+                    read,
+                    prev,
+                    code,
+                    triangle_params,
+                    meet,
+                ) {
                     sum += da;
                     touching += 1;
                     // A triangle the vertex was over when the step began pushes back; one it
