@@ -449,9 +449,11 @@ struct ScContact {
 }
 
 // `self_collision::triangle_correction`: vertex a's correction from a triangle it keeps to
-// the side `code` of, with the weights of the point under it (an overlap older than the
-// substep undone only up to `meet` from the plane where that is under the thickness).
-fn sc_triangle(a: vec4<f32>, prev_a: vec3<f32>, x0: vec4<f32>, x1: vec4<f32>, x2: vec4<f32>, p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, code: u32, thickness: f32, friction: f32, meet: f32) -> ScContact {
+// the side `code` of, with the weights of the point under it. With `near_corner`, an overlap
+// older than the substep is undone only up to `sc_near_corner_reach` from the plane where
+// that is under the thickness (`i`: the vertex, `k`: the corners; asked only of a contact
+// that touches).
+fn sc_triangle(a: vec4<f32>, prev_a: vec3<f32>, x0: vec4<f32>, x1: vec4<f32>, x2: vec4<f32>, p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, code: u32, thickness: f32, friction: f32, near_corner: bool, i: u32, k: vec3<u32>) -> ScContact {
     let wa = a.w;
     if !(wa > 0.0) {
         return ScContact(vec4<f32>(0.0), vec3<f32>(0.0));
@@ -475,8 +477,11 @@ fn sc_triangle(a: vec4<f32>, prev_a: vec3<f32>, x0: vec4<f32>, x1: vec4<f32>, x2
     let q_prev = p0 * bary.x + p1 * bary.y + p2 * bary.z;
     let approach = side * dot(r.n, (prev_a - q_prev) - (a.xyz - q));
     var depenetration = SC_DEPENETRATION * thickness;
-    if meet < thickness {
-        depenetration = min(depenetration, max(meet - ds, 0.0));
+    if near_corner {
+        let meet = sc_near_corner_reach(i, k.x, k.y, k.z);
+        if meet < thickness {
+            depenetration = min(depenetration, max(meet - ds, 0.0));
+        }
     }
     let push = sc_limited_push(thickness - ds, approach, depenetration);
     var da = r.n * (side * push * share);
@@ -548,17 +553,13 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
         // `self_collision::NearCorner`: capped on a closed cloth, the old overlap limited on
         // an open one of even edges.
         var tt = triangle_thickness;
-        var meet = tt;
         if closed {
             tt = sc_capped_thickness(tt, i, k0, k1, k2);
-            meet = tt;
-        } else if even {
-            meet = sc_near_corner_reach(i, k0, k1, k2);
         }
         let contact = sc_triangle(
             a, prev_a, x0, x1, x2,
             state[P.prev_at + k0].xyz, state[P.prev_at + k1].xyz, state[P.prev_at + k2].xyz,
-            slot & 3u, tt, cl.sc_friction, meet,
+            slot & 3u, tt, cl.sc_friction, even && !closed, i, vec3<u32>(k0, k1, k2),
         );
         let r = contact.da;
         sum += r.xyz;

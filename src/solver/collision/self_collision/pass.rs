@@ -141,13 +141,14 @@ fn pair_correction(
 /// over the triangle and closer than `thickness` on its side, or through it to the other side
 /// (by less than 2.5 thicknesses), pushed out to `thickness` on its side along the normal (at
 /// most what it closed on the triangle within the substep plus [`DEPENETRATION`] thicknesses,
-/// that share only up to `meet` from the plane when `meet` is under the thickness: see
-/// [`NearCorner::Depenetration`]), its share by the inverse masses (the triangle's at the
-/// point under `a`), with friction on the sliding; with the barycentric weights of the point
-/// under `a`. `None` when it does not touch. (The GPU's `sc_triangle` projects the same way.)
+/// that share only up to `meet()` from the plane when that is under the thickness: see
+/// [`NearCorner::Depenetration`]; asked only of a contact that touches), its share by the
+/// inverse masses (the triangle's at the point under `a`), with friction on the sliding; with
+/// the barycentric weights of the point under `a`. `None` when it does not touch. (The GPU's
+/// `sc_triangle` projects the same way.)
 #[inline]
 #[expect(clippy::too_many_arguments)]
-fn triangle_correction(
+pub(super) fn triangle_correction(
     a: Vec4,
     prev_a: Vec4,
     plane: &Plane,
@@ -156,7 +157,7 @@ fn triangle_correction(
     prev: &[Vec4],
     code: u32,
     params: SelfCollision,
-    meet: f32,
+    meet: impl FnOnce() -> f32,
 ) -> Option<(Vec3, Vec3)> {
     let wa = a.w;
     if wa.is_nan() || wa <= 0.0 {
@@ -192,6 +193,7 @@ fn triangle_correction(
     // What the vertex closed on the triangle's point under it within the substep (or went
     // through by).
     let approach = side * n.dot((prev_a.xyz() - q_prev) - (a.xyz() - q));
+    let meet = meet();
     let depenetration = if meet < thickness {
         (DEPENETRATION * thickness).min((meet - ds).max(0.0))
     } else {
@@ -236,8 +238,8 @@ pub(crate) struct Scales<'a> {
 }
 
 /// What a vertex–triangle contact keeps to where a corner of the triangle rests nearer the
-/// vertex than the thickness over [`NEAR_CORNER_THICKNESS`]: no vertex gets farther from a
-/// plane through a corner than from that corner, so the whole thickness cannot be met there.
+/// vertex than the thickness divided by [`NEAR_CORNER_THICKNESS`]: no vertex gets farther from
+/// a plane through a corner than from that corner, so the whole thickness cannot be met there.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) enum NearCorner {
     /// The whole thickness (a cloth of uneven edges).
@@ -384,16 +386,15 @@ pub(crate) fn self_collide(
                     continue;
                 };
                 let code = slot & 3;
-                let (thickness, meet) = match near_corner {
-                    NearCorner::Thickness => (triangle_params.thickness, triangle_params.thickness),
-                    NearCorner::Capped => {
-                        let capped = capped_thickness(triangle_params.thickness, rest, i, tri);
-                        (capped, capped)
+                let thickness = match near_corner {
+                    NearCorner::Capped => capped_thickness(triangle_params.thickness, rest, i, tri),
+                    NearCorner::Thickness | NearCorner::Depenetration => triangle_params.thickness,
+                };
+                let meet = || match near_corner {
+                    NearCorner::Depenetration => {
+                        near_corner_reach(rest, i, tri).unwrap_or(thickness)
                     }
-                    NearCorner::Depenetration => (
-                        triangle_params.thickness,
-                        near_corner_reach(rest, i, tri).unwrap_or(triangle_params.thickness),
-                    ),
+                    NearCorner::Thickness | NearCorner::Capped => thickness,
                 };
                 let triangle_params = SelfCollision {
                     thickness,

@@ -727,3 +727,62 @@ fn self_collision_chunks_follow_the_threads_within_64_to_512_vertices() {
         }
     }
 }
+
+/// Against a triangle with a corner resting nearer the vertex than the thickness allows
+/// (`NearCorner::Depenetration`), an overlap older than the substep is undone only up to
+/// `meet` from the plane, what the pair closed within the substep still up to the whole
+/// thickness; `meet` is asked only of a contact that touches.
+#[test]
+fn an_old_overlap_near_a_corner_is_undone_only_as_far_as_the_edges_allow() {
+    let tri = [0u32, 1, 2];
+    let read = [
+        Vec4::new(0.0, 0.0, 0.0, 1.0),
+        Vec4::new(1.0, 0.0, 0.0, 1.0),
+        Vec4::new(0.0, 1.0, 0.0, 1.0),
+    ];
+    let plane = Plane::of(read.map(|x| x.xyz()));
+    let params = SelfCollision {
+        thickness: 0.1,
+        friction: 0.0,
+    };
+    let a = Vec4::new(0.25, 0.25, 0.02, 1.0);
+    // Equal masses: the vertex takes half of each push.
+    let pushed = |prev_a: Vec4, meet: f32| {
+        let (da, _) = triangle_correction(
+            a,
+            prev_a,
+            &plane,
+            tri,
+            &read,
+            &read,
+            SIDE_FRONT,
+            params,
+            || meet,
+        )
+        .expect("it touches");
+        2.0 * da.z
+    };
+    let share = DEPENETRATION * params.thickness;
+    // 0.02 off the plane since before the substep: a share of the overlap where the whole
+    // thickness can be met, up to `meet` where it cannot, nothing past it.
+    assert!((pushed(a, 0.1) - share).abs() < 1e-6);
+    assert!((pushed(a, 0.05) - 0.03).abs() < 1e-6);
+    assert_eq!(pushed(a, 0.01), 0.0);
+    // Come from 0.2 off within the substep: out to the thickness whatever `meet` is.
+    let from = Vec4::new(0.25, 0.25, 0.2, 1.0);
+    assert!((pushed(from, 0.01) - 0.08).abs() < 1e-6);
+    // Not touching: `meet` is not asked.
+    let far = Vec4::new(0.25, 0.25, 0.5, 1.0);
+    let none = triangle_correction(
+        far,
+        far,
+        &plane,
+        tri,
+        &read,
+        &read,
+        SIDE_FRONT,
+        params,
+        || panic!("asked"),
+    );
+    assert!(none.is_none());
+}
