@@ -745,21 +745,15 @@ fn an_old_overlap_near_a_corner_is_undone_only_as_far_as_the_edges_allow() {
         thickness: 0.1,
         friction: 0.0,
     };
+    let correct = |a: Vec4, prev_a: Vec4, meet: &dyn Fn() -> f32| {
+        triangle_correction(
+            a, prev_a, &plane, tri, &read, &read, SIDE_FRONT, params, meet,
+        )
+    };
     let a = Vec4::new(0.25, 0.25, 0.02, 1.0);
     // Equal masses: the vertex takes half of each push.
     let pushed = |prev_a: Vec4, meet: f32| {
-        let (da, _) = triangle_correction(
-            a,
-            prev_a,
-            &plane,
-            tri,
-            &read,
-            &read,
-            SIDE_FRONT,
-            params,
-            || meet,
-        )
-        .expect("it touches");
+        let (da, _) = correct(a, prev_a, &|| meet).expect("it touches");
         2.0 * da.z
     };
     let share = DEPENETRATION * params.thickness;
@@ -773,16 +767,5 @@ fn an_old_overlap_near_a_corner_is_undone_only_as_far_as_the_edges_allow() {
     assert!((pushed(from, 0.01) - 0.08).abs() < 1e-6);
     // Not touching: `meet` is not asked.
     let far = Vec4::new(0.25, 0.25, 0.5, 1.0);
-    let none = triangle_correction(
-        far,
-        far,
-        &plane,
-        tri,
-        &read,
-        &read,
-        SIDE_FRONT,
-        params,
-        || panic!("asked"),
-    );
-    assert!(none.is_none());
+    assert!(correct(far, far, &|| panic!("asked")).is_none());
 }
