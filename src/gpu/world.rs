@@ -131,8 +131,7 @@ pub(crate) struct WorldUniform {
     sc_triangle_scale_at: u32,
     react_at: u32,
     opened_at: u32,
-    // The uniform's size a multiple of 16 bytes.
-    pad: u32,
+    unmoving_at: u32,
 }
 
 #[repr(C)]
@@ -380,6 +379,7 @@ struct Regions {
     air: u32,
     corr: u32,
     rest: u32,
+    unmoving: u32,
     pin_start: u32,
     status: u32,
     lambda: u32,
@@ -599,7 +599,8 @@ impl GpuWorld {
         if sc {
             r.corr = at;
             r.rest = at + n;
-            at += 2 * n;
+            r.unmoving = at + 2 * n;
+            at += 3 * n;
         }
         r.pin_start = at;
         at += layout.pins;
@@ -1051,7 +1052,7 @@ impl GpuWorld {
             settle_edges: l.settle_edges,
             sc_triangle_scale_at: l.sc_triangle_scale_at,
             opened_at: s.opened,
-            pad: 0,
+            unmoving_at: r.unmoving,
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
         // The per-frame words of every cloth's record: gravity·h and the damping factor (the

@@ -8,7 +8,8 @@
 // shared buffers: cloth `c` owns the vertices `[vbase, vbase + n)` of every per-vertex region.
 //
 // `state` (vec4): positions (w: inverse mass, 0 when pinned) | substep starts | velocities |
-// area vectors | air velocities | [self-collision: corrections | rest positions] | each pin's
+// area vectors | air velocities | [self-collision: corrections | rest positions | the
+// corrections' old-overlap parts from vertex–vertex contacts] | each pin's
 // position at the step's start | per cloth its status (x: 1 once a position or velocity went
 // NaN or infinite, y: 1 once an edge was stretched past the tear threshold, z: steps left in
 // which a settings change settles, w: the largest strain after its last settling step) |
@@ -98,7 +99,9 @@ struct World {
     react_at: u32,
     // Per cloth, 1 once an edge of a closed cloth tore (with tearing): it is closed no more.
     opened_at: u32,
-    pad: u32,
+    // With self-collision, per vertex the part of its vertex–vertex corrections that undoes
+    // an old overlap (`sc_collide`), moved without velocity (`finish_substep`).
+    unmoving_at: u32,
 }
 
 // One substep of one step (binding 1, a dynamic offset per substep).

@@ -409,23 +409,33 @@ fn sc_limited_push(overlap: f32, approach: f32, depenetration: f32) -> f32 {
     return min(overlap, max(approach, 0.0) + depenetration);
 }
 
-// `self_collision::pair_correction`: vertex a's share; w = 0 when the pair does not touch.
-fn sc_pair(a: vec4<f32>, prev_a: vec3<f32>, b: vec4<f32>, prev_b: vec3<f32>, thickness: f32, friction: f32) -> vec4<f32> {
+// A vertex–vertex contact: the vertex's correction (w = 1 when it touches, 0 when not) and
+// the part of it that undoes the overlap the pair began the substep with (moved without
+// velocity by `finish_substep`).
+struct ScPair {
+    da: vec4<f32>,
+    old: vec3<f32>,
+}
+
+// `self_collision::pair_correction`: vertex a's share.
+fn sc_pair(a: vec4<f32>, prev_a: vec3<f32>, b: vec4<f32>, prev_b: vec3<f32>, thickness: f32, friction: f32) -> ScPair {
+    let none = ScPair(vec4<f32>(0.0), vec3<f32>(0.0));
     let limit = thickness;
     let wa = a.w;
     let wb = b.w;
     let w = wa + wb;
     if w <= 0.0 {
-        return vec4<f32>(0.0);
+        return none;
     }
     let d = a.xyz - b.xyz;
     let len = length(d);
     if len >= limit || len <= 1e-9 {
-        return vec4<f32>(0.0);
+        return none;
     }
     let nrm = d / len;
     let approach = dot(nrm, prev_a - prev_b) - len;
     let push = sc_limited_push(limit - len, approach, SC_DEPENETRATION * limit);
+    let old = nrm * (max(push - max(approach, 0.0), 0.0) * wa / w);
     var da = nrm * (push * wa / w);
     let db = -nrm * (push * wb / w);
     let slide = (a.xyz + da - prev_a) - (b.xyz + db - prev_b);
@@ -435,10 +445,10 @@ fn sc_pair(a: vec4<f32>, prev_a: vec3<f32>, b: vec4<f32>, prev_b: vec3<f32>, thi
         let keep = min(friction * push / t_len, 1.0);
         da -= tangential * (keep * wa / w);
     }
-    if !finite3(da) {
-        return vec4<f32>(0.0);
+    if !(finite3(da) && finite3(old)) {
+        return none;
     }
-    return vec4<f32>(da, 1.0);
+    return ScPair(vec4<f32>(da, 1.0), old);
 }
 
 // A vertex–triangle contact: the vertex's correction (w = 1 when it touches, 0 when not)
@@ -531,14 +541,16 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
     let closed = cloth_closed(c, cl.flags);
     let even = (cl.flags & FLAG_EVEN) != 0u;
     var sum = vec3<f32>(0.0);
+    var unmoving = vec3<f32>(0.0);
     var touching = 0.0;
     let count = atomicLoad(&scratch[P.ncount_at + i]);
     for (var k = 0u; k < count; k++) {
         let j = atomicLoad(&scratch[P.nlist_at + i * SC_MAX + k]);
         let b = sc_read(j, tethers);
         let r = sc_pair(a, prev_a, b, state[P.prev_at + j].xyz, thickness, cl.sc_friction);
-        sum += r.xyz;
-        touching += r.w;
+        sum += r.da.xyz;
+        unmoving += r.old;
+        touching += r.da.w;
     }
     let tcount = atomicLoad(&scratch[P.tcount_at + i]);
     for (var k = 0u; k < tcount; k++) {
@@ -574,6 +586,7 @@ fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     // The sum and the count: `finish_substep` adds the reactions and takes the mean.
     state[P.corr_at + i] = vec4<f32>(sum, touching);
+    state[P.unmoving_at + i] = vec4<f32>(unmoving, 0.0);
 }
 
 // `self_collision::REACTION_UNITS`: fixed-point units a metre of the reactions' sums, whose
@@ -601,8 +614,8 @@ fn sc_react(v: u32, wc: f32, b: f32, da: vec3<f32>, wa: f32) {
 
 // Vertex `i`'s self-collision correction: the mean of its own contacts' corrections (summed
 // in `corr_at` by `sc_collide`) and the reactions it took as a corner, which it leaves at zero
-// (`self_collision::Reactions::take`).
-fn sc_correction(i: u32) -> vec3<f32> {
+// (`self_collision::Reactions::take`); w: how many they are.
+fn sc_correction(i: u32) -> vec4<f32> {
     let own = state[P.corr_at + i];
     let at = P.react_at + 4u * i;
     var sum = own.xyz;
@@ -617,9 +630,9 @@ fn sc_correction(i: u32) -> vec3<f32> {
         count += f32(n);
     }
     if count > 0.0 {
-        return sum / count;
+        return vec4<f32>(sum / count, count);
     }
-    return vec3<f32>(0.0);
+    return vec4<f32>(0.0);
 }
 
 // One vertex against one collider (`collider::touch`, after `collide_vertices`' reach test):
@@ -731,7 +744,15 @@ fn finish_substep(
                 x = tethered(i, x);
             }
             if (cl.flags & FLAG_SC) != 0u {
-                x = vec4<f32>(x.xyz + sc_correction(i), x.w);
+                let correction = sc_correction(i);
+                x = vec4<f32>(x.xyz + correction.xyz, x.w);
+                // The same share of what its pairs pushed out of an old overlap moves the
+                // substep's start too: no velocity from it (`self_collision::self_collide`).
+                let old = state[P.unmoving_at + i].xyz;
+                if any(old != vec3<f32>(0.0)) && correction.w > 0.0 {
+                    prev = prev + old / correction.w;
+                    state[P.prev_at + i] = vec4<f32>(prev, state[P.prev_at + i].w);
+                }
             }
             if (u32(frame[cloth_step(c)].w + 0.5) & 8u) != 0u {
                 x = motion_held(i, x);

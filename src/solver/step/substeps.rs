@@ -524,7 +524,7 @@ pub fn step(
             }
             self_collide(
                 &mut state.positions,
-                &state.prev,
+                &mut state.prev,
                 topology.triangles(),
                 Scales {
                     vertices: topology.self_collision_scales(),

@@ -146,6 +146,9 @@ pub struct SelfCollisionScratch {
     /// their number.
     corrections: Vec<Vec3>,
     touching: Vec<u32>,
+    /// Per active vertex, the part of its vertex–vertex contacts' corrections that undoes an
+    /// overlap older than the substep (moved without velocity: see [`self_collide`]).
+    unmoving: Vec<Vec3>,
     /// Per vertex, the reactions of the vertex–triangle contacts it is a corner of.
     reactions: Reactions,
     /// The triangles in some vertex's list: one bit a triangle, and per word of bits the

@@ -28,6 +28,12 @@ impl Reactions {
         at[3].fetch_add(1, Ordering::Relaxed);
     }
 
+    /// How many reactions vertex `v` has taken so far.
+    #[inline]
+    fn count(&self, v: usize) -> u32 {
+        self.0[4 * v + 3].load(Ordering::Relaxed).cast_unsigned()
+    }
+
     /// Vertex `v`'s reactions summed and their number; leaves them at zero.
     #[inline]
     fn take(&self, v: usize) -> (Vec3, u32) {
@@ -102,8 +108,9 @@ fn sliding(slide: Vec3, n: Vec3, push: f32, friction: f32) -> Option<(Vec3, f32)
 
 /// The correction of vertex `a` (with `prev_a`) from its pair with `b`: pushed apart to
 /// `thickness` (at most what they closed within the substep plus [`DEPENETRATION`]
-/// thicknesses), mass-weighted, with friction on the pair's sliding. `None` when the pair does
-/// not touch or the result is not finite.
+/// thicknesses), mass-weighted, with friction on the pair's sliding; and the part of it that
+/// undoes the overlap the pair began the substep with, which [`self_collide`] moves without
+/// velocity (see there). `None` when the pair does not touch or the result is not finite.
 #[inline]
 fn pair_correction(
     a: Vec4,
@@ -111,7 +118,7 @@ fn pair_correction(
     b: Vec4,
     prev_b: Vec4,
     params: SelfCollision,
-) -> Option<Vec3> {
+) -> Option<(Vec3, Vec3)> {
     let limit = params.thickness;
     let (wa, wb) = (a.w, b.w);
     let w = wa + wb;
@@ -126,6 +133,7 @@ fn pair_correction(
     let n = d / len;
     let approach = n.dot(prev_a.xyz() - prev_b.xyz()) - len;
     let push = limited_push(limit - len, approach, DEPENETRATION * limit);
+    let old = n * ((push - approach.max(0.0)).max(0.0) * wa / w);
     let mut da = n * (push * wa / w);
     let db = -n * (push * wb / w);
     // Friction on the relative sliding of the pair during the substep.
@@ -133,7 +141,7 @@ fn pair_correction(
     if let Some((tangential, keep)) = sliding(slide, n, push, params.friction) {
         da -= tangential * (keep * wa / w);
     }
-    da.is_finite().then_some(da)
+    (da.is_finite() && old.is_finite()).then_some((da, old))
 }
 
 /// The correction of vertex `a` (with `prev_a`) from triangle `tri` (its corners in `read`,
@@ -221,6 +229,7 @@ fn reaction(da: Vec3, wa: f32, wc: f32, b: f32) -> Vec3 {
 struct PassChunk<'a> {
     active: &'a [u32],
     corrections: &'a mut [Vec3],
+    unmoving: &'a mut [Vec3],
     touching: &'a mut [u32],
 }
 
@@ -306,9 +315,18 @@ fn capped_thickness(thickness: f32, rest: &[Vec3], i: usize, tri: [u32; 3]) -> f
 /// ([`reaction`], summed per corner in [`Reactions`]); every vertex then moves by the mean
 /// of its corrections and reactions, all at once (`prev`: positions at the substep's start).
 /// The vertices run in parallel; the result does not depend on how they are split.
+///
+/// What its vertex–vertex contacts push out of an overlap the pair began the substep with
+/// moves `prev` too (by the same share of the mean), so it gives the vertex no velocity: the
+/// two vertices are put apart, not thrown apart (as in Macklin et al., *Unified particle
+/// physics for real-time applications*, 2014, §4.4). Turned into velocity, those pushes
+/// kept a cloth draped over a ball or a statue trembling where its layers touch (two of six
+/// drapes never came to rest; docs/experiments.md). Vertex–triangle contacts keep theirs:
+/// moved without velocity too, a crumpled cloth's folds stayed shut and crossed (7 of 15 runs
+/// instead of 1).
 pub(crate) fn self_collide(
     pos: &mut [Vec4],
-    prev: &[Vec4],
+    prev: &mut [Vec4],
     triangles: &[[u32; 3]],
     scales: Scales<'_>,
     params: SelfCollision,
@@ -326,6 +344,7 @@ pub(crate) fn self_collide(
         return;
     }
     let read: &[Vec4] = pos;
+    let before: &[Vec4] = prev;
     scratch
         .listed
         .planes(triangles, read, &mut scratch.pass_planes, par);
@@ -338,6 +357,8 @@ pub(crate) fn self_collide(
     scratch.corrections.resize(active.len(), Vec3::ZERO);
     scratch.touching.clear();
     scratch.touching.resize(active.len(), 0);
+    scratch.unmoving.clear();
+    scratch.unmoving.resize(active.len(), Vec3::ZERO);
     let (nc, nl) = (&scratch.neighbour_count, &scratch.neighbours);
     let (tc, tl) = (&scratch.triangle_count, &scratch.triangles);
     let chunk = chunk_for(active.len(), par.threads());
@@ -345,17 +366,21 @@ pub(crate) fn self_collide(
         .chunks(chunk)
         .zip(scratch.corrections.chunks_mut(chunk))
         .zip(scratch.touching.chunks_mut(chunk))
-        .map(|((active, corrections), touching)| PassChunk {
+        .zip(scratch.unmoving.chunks_mut(chunk))
+        .map(|(((active, corrections), touching), unmoving)| PassChunk {
             active,
             corrections,
+            unmoving,
             touching,
         })
         .collect();
     par.for_each_mut(&mut chunks, |c| {
-        let outs = c.corrections.iter_mut().zip(c.touching.iter_mut());
-        for (&i, (out, out_touching)) in c.active.iter().zip(outs) {
+        let outs = (c.corrections.iter_mut())
+            .zip(c.touching.iter_mut())
+            .zip(c.unmoving.iter_mut());
+        for (&i, ((out, out_touching), out_unmoving)) in c.active.iter().zip(outs) {
             let i = i as usize;
-            let (a, prev_a) = (read[i], prev[i]);
+            let (a, prev_a) = (read[i], before[i]);
             // The vertex keeps its own thickness from the others, and from triangles at most
             // its triangle thickness (`Topology::self_collision_triangle_scales`).
             let scale = scales.get(i).copied().unwrap_or(1.0);
@@ -368,12 +393,14 @@ pub(crate) fn self_collide(
                 ..params
             };
             let mut sum = Vec3::ZERO;
+            let mut unmoving = Vec3::ZERO;
             let mut touching = 0u32;
             let count = nc[i] as usize;
             for &j in &nl[i * MAX_SELF_NEIGHBOURS..i * MAX_SELF_NEIGHBOURS + count] {
                 let j = j as usize;
-                if let Some(da) = pair_correction(a, prev_a, read[j], prev[j], params) {
+                if let Some((da, old)) = pair_correction(a, prev_a, read[j], before[j], params) {
                     sum += da;
+                    unmoving += old;
                     touching += 1;
                 }
             }
@@ -406,7 +433,7 @@ pub(crate) fn self_collide(
                     plane,
                     tri,
                     read,
-                    prev,
+                    before,
                     code,
                     triangle_params,
                     meet,
@@ -428,13 +455,28 @@ pub(crate) fn self_collide(
                 }
             }
             *out = sum;
+            *out_unmoving = unmoving;
             *out_touching = touching;
         }
     });
     drop(chunks);
     // All move at once, by runs of vertices in parallel (`active` rises): each by the mean of
-    // its own corrections and its reactions.
+    // its own corrections and its reactions; `prev` first by the same share of what its pairs
+    // pushed out of an old overlap (the reactions' counts read, not taken).
     let (corrections, touching) = (&scratch.corrections, &scratch.touching);
+    let unmoving = &scratch.unmoving;
+    each_run(prev, par, |first, run| {
+        let mut k = active.partition_point(|&i| (i as usize) < first);
+        let end = first + run.len();
+        while let Some(&i) = active.get(k).filter(|&&i| (i as usize) < end) {
+            let v = i as usize;
+            let count = touching[k] + reactions.count(v);
+            if unmoving[k] != Vec3::ZERO && count > 0 && read[v].w > 0.0 {
+                run[v - first] += (unmoving[k] / count as f32).extend(0.0);
+            }
+            k += 1;
+        }
+    });
     each_run(pos, par, |first, run| {
         let mut k = active.partition_point(|&i| (i as usize) < first);
         for (v, x) in run.iter_mut().enumerate() {
