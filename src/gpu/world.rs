@@ -131,6 +131,7 @@ pub(crate) struct WorldUniform {
     sc_triangle_scale_at: u32,
     react_at: u32,
     opened_at: u32,
+    // The last field: with it the uniform's size is a multiple of 16 bytes.
     unmoving_at: u32,
 }
 

@@ -61,7 +61,9 @@
 //! through within the step. Both with friction on the sliding, and both undoing all of what
 //! the pair closed within the substep but at most [`DEPENETRATION`] thicknesses of an overlap
 //! the substep began with (a vertex found deep in or through a layer comes out over a few
-//! substeps instead of jumping out at once); against a triangle with a corner resting nearer
+//! substeps instead of jumping out at once; what a vertex pair undoes of such an overlap moves
+//! the substep's start too, so it puts them apart without throwing them apart, while a
+//! vertex–triangle contact keeps that velocity); against a triangle with a corner resting nearer
 //! the vertex than the thickness allows, a closed cloth keeps a thinner layer and an open one
 //! of even edges undoes the older overlap only as far as its edges allow
 //! ([`NEAR_CORNER_THICKNESS`]). A vertex pair's other vertex moves by its own

@@ -56,10 +56,9 @@ fn close_vertices_are_pushed_apart_to_thickness() {
     assert!((pos[0].y + 0.045).abs() < 1e-6 && (pos[1].y - 0.055).abs() < 1e-6);
 }
 
-/// An overlap a pair already had when the substep began is undone by `DEPENETRATION`
-/// thicknesses a substep, not at once; what the pair closed within the substep, at once.
-#[test]
-fn an_old_overlap_is_undone_a_little_each_substep() {
+/// Two vertices 0.01 apart, resting a metre apart, their thickness 0.1 without friction, and
+/// their lists: a pair with an old overlap.
+fn overlapping_pair() -> (Vec<Vec4>, SelfCollision, SelfCollisionScratch) {
     let start = vec![
         Vec4::new(0.0, 0.0, 0.0, 1.0),
         Vec4::new(0.0, 0.01, 0.0, 1.0),
@@ -69,8 +68,16 @@ fn an_old_overlap_is_undone_a_little_each_substep() {
         thickness: 0.1,
         friction: 0.0,
     };
+    let s = candidates(&start, &[Vec4::ZERO; 2], &rest, &[], params);
+    (start, params, s)
+}
+
+/// An overlap a pair already had when the substep began is undone by `DEPENETRATION`
+/// thicknesses a substep, not at once; what the pair closed within the substep, at once.
+#[test]
+fn an_old_overlap_is_undone_a_little_each_substep() {
+    let (start, params, mut s) = overlapping_pair();
     let step = DEPENETRATION * params.thickness;
-    let mut s = candidates(&start, &[Vec4::ZERO; 2], &rest, &[], params);
     // One pass from `prev`; how far apart the two are after it.
     let mut pass = |pos: &mut Vec<Vec4>, prev: &[Vec4]| {
         let prev = &mut prev.to_vec();
@@ -96,27 +103,13 @@ fn an_old_overlap_is_undone_a_little_each_substep() {
 /// substep is undone as a change of velocity, as before (an inelastic contact).
 #[test]
 fn a_pair_put_apart_from_an_old_overlap_gains_no_velocity() {
-    let start = vec![
-        Vec4::new(0.0, 0.0, 0.0, 1.0),
-        Vec4::new(0.0, 0.01, 0.0, 1.0),
-    ];
-    let rest = [Vec3::ZERO, Vec3::X];
-    let params = SelfCollision {
-        thickness: 0.1,
-        friction: 0.0,
-    };
+    let (start, params, mut s) = overlapping_pair();
     let step = DEPENETRATION * params.thickness;
-    let mut s = candidates(&start, &[Vec4::ZERO; 2], &rest, &[], params);
-    let (mut pos, mut prev) = (start.clone(), start.clone());
-    self_collide(
-        &mut pos,
-        &mut prev,
-        &[],
-        Scales::default(),
-        params,
-        &mut s,
-        &Serial,
-    );
+    let mut pass = |pos: &mut [Vec4], prev: &mut [Vec4]| {
+        self_collide(pos, prev, &[], Scales::default(), params, &mut s, &Serial);
+    };
+    let (mut pos, mut prev) = (start.clone(), start);
+    pass(&mut pos, &mut prev);
     // Apart by a share of the thickness, each vertex by half of it, and no velocity.
     assert!((pos[0].y + 0.5 * step).abs() < 1e-6 && (pos[1].y - 0.01 - 0.5 * step).abs() < 1e-6);
     for (x, p) in pos.iter().zip(&prev) {
@@ -127,15 +120,7 @@ fn a_pair_put_apart_from_an_old_overlap_gains_no_velocity() {
     // bounces).
     let mut prev = pos.clone();
     pos[1].y -= 0.02;
-    self_collide(
-        &mut pos,
-        &mut prev,
-        &[],
-        Scales::default(),
-        params,
-        &mut s,
-        &Serial,
-    );
+    pass(&mut pos, &mut prev);
     let apart = pos[0].xyz().distance(pos[1].xyz());
     assert!((apart - (0.01 + 2.0 * step)).abs() < 1e-6, "{apart}");
     for (x, p) in pos.iter().zip(&prev) {
