@@ -28,12 +28,6 @@ impl Reactions {
         at[3].fetch_add(1, Ordering::Relaxed);
     }
 
-    /// How many reactions vertex `v` has taken so far.
-    #[inline]
-    fn count(&self, v: usize) -> u32 {
-        self.0[4 * v + 3].load(Ordering::Relaxed).cast_unsigned()
-    }
-
     /// Vertex `v`'s reactions summed and their number; leaves them at zero.
     #[inline]
     fn take(&self, v: usize) -> (Vec3, u32) {
@@ -462,34 +456,33 @@ pub(crate) fn self_collide(
     });
     drop(chunks);
     // All move at once, by runs of vertices in parallel (`active` rises): each by the mean of
-    // its own corrections and its reactions; `prev` first by the same share of what its pairs
-    // pushed out of an old overlap (the reactions' counts read, not taken).
+    // its own corrections and its reactions, and its substep start by the same share of what
+    // its pairs pushed out of an old overlap.
     let (corrections, touching) = (&scratch.corrections, &scratch.touching);
     let unmoving = &scratch.unmoving;
-    each_run(prev, par, |first, run| {
+    let mut runs: Vec<(usize, &mut [Vec4], &mut [Vec4])> = (pos.chunks_mut(4 * CHUNK))
+        .zip(prev.chunks_mut(4 * CHUNK))
+        .enumerate()
+        .map(|(k, (xs, ps))| (k * 4 * CHUNK, xs, ps))
+        .collect();
+    par.for_each_mut(&mut runs, |(first, xs, ps)| {
+        let first = *first;
         let mut k = active.partition_point(|&i| (i as usize) < first);
-        let end = first + run.len();
-        while let Some(&i) = active.get(k).filter(|&&i| (i as usize) < end) {
-            let v = i as usize;
-            let count = touching[k] + reactions.count(v);
-            if unmoving[k] != Vec3::ZERO && count > 0 && read[v].w > 0.0 {
-                run[v - first] += (unmoving[k] / count as f32).extend(0.0);
-            }
-            k += 1;
-        }
-    });
-    each_run(pos, par, |first, run| {
-        let mut k = active.partition_point(|&i| (i as usize) < first);
-        for (v, x) in run.iter_mut().enumerate() {
+        for (v, (x, p)) in xs.iter_mut().zip(ps.iter_mut()).enumerate() {
             let v = first + v;
             let (mut sum, mut count) = reactions.take(v);
+            let mut old = Vec3::ZERO;
             if active.get(k).is_some_and(|&i| i as usize == v) {
                 sum += corrections[k];
+                old = unmoving[k];
                 count += touching[k];
                 k += 1;
             }
             if count > 0 && x.w > 0.0 {
                 *x += (sum / count as f32).extend(0.0);
+                if old != Vec3::ZERO {
+                    *p += (old / count as f32).extend(0.0);
+                }
             }
         }
     });
