@@ -403,6 +403,158 @@ fn a_gpu_cloth_teleports_with_its_pins() {
     assert!(strain.max < 0.3, "dragged across: {strain:?}");
 }
 
+/// Frames `app` runs (at most `limit`) until `e` sleeps; `None` if it never does.
+fn frames_until_asleep(app: &mut App, e: Entity, limit: usize) -> Option<usize> {
+    (1..=limit).find(|_| {
+        common::run(app, 1);
+        app.world()
+            .get::<ClothSim>(e)
+            .is_some_and(ClothSim::is_sleeping)
+    })
+}
+
+/// Every particle's position `e`'s `ClothSim` holds.
+fn positions(app: &App, e: Entity) -> Vec<Vec3> {
+    let s = app.world().get::<ClothSim>(e).unwrap().simulation().state();
+    (0..s.len()).map(|i| s.position(i)).collect()
+}
+
+/// A GPU cloth that comes to rest sleeps, as a CPU cloth does: read back or not, it stops
+/// taking steps (its state read back stays the same bit for bit, and the GPU world takes no
+/// step while every cloth in it sleeps), and a pin moved by a few centimetres wakes it. One
+/// with sleeping switched off keeps stepping.
+#[test]
+fn a_gpu_cloth_at_rest_sleeps_and_a_moved_pin_wakes_it() {
+    if common::gpu_or_skip("a_gpu_cloth_at_rest_sleeps_and_a_moved_pin_wakes_it").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    let read = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    app.world_mut().entity_mut(read).insert(ClothReadback);
+    let blind = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    let never = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    app.world_mut().entity_mut(never).insert((
+        ClothReadback,
+        ClothConfig {
+            sleep: Sleep::NEVER,
+            ..default()
+        },
+    ));
+    let frames = frames_until_asleep(&mut app, read, 1800);
+    eprintln!("the read-back GPU cloth fell asleep after {frames:?} frames");
+    assert!(frames.is_some(), "a hanging GPU cloth never slept in 30 s");
+    assert!(in_use(&app, read).gpu && in_use(&app, blind).gpu);
+    // The one not read back sleeps too, in the state read back for it; a few frames for the
+    // state each stopped in.
+    assert!(frames_until_asleep(&mut app, blind, 300).is_some());
+    common::run(&mut app, 10);
+    let y = centre_y(&app, blind);
+    assert!(y < 0.7, "the sleeping cloth kept its start: {y}");
+    let asleep = positions(&app, read);
+    let steps = app.world().get::<ClothSim>(read).unwrap().steps();
+    common::run(&mut app, 30);
+    let sim = app.world().get::<ClothSim>(read).unwrap();
+    assert!(sim.is_sleeping());
+    assert!(
+        sim.steps() >= steps + 30,
+        "the steps it sleeps through count"
+    );
+    assert_eq!(positions(&app, read), asleep, "a sleeping GPU cloth moved");
+    assert!(!app.world().get::<ClothSim>(never).unwrap().is_sleeping());
+    // Its entity (which carries its pins) moves 5 cm: it wakes and follows.
+    app.world_mut()
+        .get_mut::<Transform>(read)
+        .unwrap()
+        .translation
+        .x += 0.05;
+    common::run(&mut app, 10);
+    assert!(!app.world().get::<ClothSim>(read).unwrap().is_sleeping());
+    let moved = positions(&app, read);
+    let shift = moved
+        .iter()
+        .zip(&asleep)
+        .map(|(a, b)| a.x - b.x)
+        .fold(0.0f32, f32::max);
+    assert!(shift > 0.02, "woken, it moved by {shift} m");
+    assert!(
+        app.world().get::<ClothSim>(blind).unwrap().is_sleeping(),
+        "the other cloth slept on"
+    );
+}
+
+/// A GPU cloth falls asleep and sleeps on while a collider keeps moving far away (a game's
+/// physics elsewhere), and wakes (and is pushed) when one comes to it.
+#[test]
+fn a_sleeping_gpu_cloth_wakes_for_a_collider_that_comes_near() {
+    if common::gpu_or_skip("a_sleeping_gpu_cloth_wakes_for_a_collider_that_comes_near").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    let e = spawn(&mut app, Some(ClothBackend::Gpu), false);
+    app.world_mut().entity_mut(e).insert(ClothReadback);
+    let far = app
+        .world_mut()
+        .spawn((
+            Transform::from_xyz(10.0, 1.0, 0.0),
+            ClothCollider::sphere(0.2),
+        ))
+        .id();
+    let roll = |app: &mut App, k: usize| {
+        app.world_mut()
+            .get_mut::<Transform>(far)
+            .unwrap()
+            .translation
+            .z = 0.5 * (0.05 * k as f32).sin();
+        common::run(app, 1);
+    };
+    let asleep_after = (0..1800).find(|&k| {
+        roll(&mut app, k);
+        app.world()
+            .get::<ClothSim>(e)
+            .is_some_and(ClothSim::is_sleeping)
+    });
+    assert!(
+        asleep_after.is_some(),
+        "never slept beside a moving collider"
+    );
+    // A few frames for the state it stopped in.
+    for k in 0..10 {
+        roll(&mut app, k);
+    }
+    let asleep = positions(&app, e);
+    for k in 0..60 {
+        roll(&mut app, k);
+    }
+    assert!(
+        app.world().get::<ClothSim>(e).unwrap().is_sleeping(),
+        "a collider moving 10 m away woke it"
+    );
+    assert_eq!(positions(&app, e), asleep);
+    // The ball moves into the hanging cloth, from the side it hangs towards.
+    let lowest = asleep.iter().map(|p| p.y).fold(f32::INFINITY, f32::min);
+    let centre = asleep.iter().copied().sum::<Vec3>() / asleep.len() as f32;
+    app.world_mut()
+        .get_mut::<Transform>(far)
+        .unwrap()
+        .translation = Vec3::new(centre.x, lowest - 0.5, centre.z);
+    common::run(&mut app, 3);
+    for _ in 0..40 {
+        app.world_mut()
+            .get_mut::<Transform>(far)
+            .unwrap()
+            .translation
+            .y += 0.02;
+        common::run(&mut app, 1);
+    }
+    assert!(!app.world().get::<ClothSim>(e).unwrap().is_sleeping());
+    let pushed = positions(&app, e)
+        .iter()
+        .zip(&asleep)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0f32, f32::max);
+    assert!(pushed > 0.05, "the ball moved the cloth by {pushed} m");
+}
+
 /// The plugin keeps its renderer's wgpu instance for the rest of the process, also after the
 /// app is gone, so that the graphics driver is never unloaded under its own threads (NVIDIA's
 /// Linux driver crashed processes so, and after about thirty loads no longer loaded).

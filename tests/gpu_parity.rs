@@ -276,6 +276,12 @@ struct Outcome {
     /// Per cloth, the frames that rounding alone split beyond the bound on the CPU
     /// ([`rounding_splits`]): not compared beyond bit identity on llvmpipe.
     split: Vec<Vec<usize>>,
+    /// The largest difference between the GPU's largest speed of a frame (`note_speed`, read
+    /// back) and the CPU twin's (`ClothState::max_free_speed_squared` after each step), over
+    /// what the rounding bound allows, in the frames not split.
+    speed_ratio: f32,
+    /// The largest speed compared, m/s.
+    speed_max: f32,
 }
 
 /// How many ulp of each coordinate [`rounding_splits`] nudges a frame's start by: more than a
@@ -383,6 +389,7 @@ fn compare(
         let mut motions: Vec<Vec<MotionTargets>> = vec![Vec::new(); cases.len()];
         let slots = step_colliders.first().map_or(0, Vec::len);
         let mut cpu_impulses = vec![ContactImpulse::default(); slots];
+        let mut cpu_speeds = vec![0.0f32; cases.len()];
         for (s, cols) in step_colliders.iter().enumerate() {
             for (i, (case, twin)) in cases.iter().zip(&mut twins).enumerate() {
                 let t = (case.targets)(k + s);
@@ -394,11 +401,12 @@ fn compare(
                 let carry = (case.carry)(k + s);
                 let m = (case.motion)(k + s);
                 let impulses = twin.step_carried(&carry, &t, jump, cols, &a, m.as_ref());
-                motions[i].push(m.unwrap_or_default());
                 for (sum, imp) in cpu_impulses.iter_mut().zip(impulses) {
                     sum.linear += imp.linear;
                     sum.angular += imp.angular;
                 }
+                cpu_speeds[i] = cpu_speeds[i].max(twin.state.max_free_speed_squared());
+                motions[i].push(m.unwrap_or_default());
                 targets[i].push(t);
                 jumps[i].push(jump);
                 carries[i].push(carry);
@@ -424,6 +432,7 @@ fn compare(
         };
         common::run_gpu_frame(&mut world, &g.device, &g.queue, &g.kernels, &frame);
         k += steps_per_frame;
+        let gpu_speeds = world.read_frame_speeds(&g.device, &g.queue);
         for (i, twin) in twins.iter().enumerate() {
             let (pos, vel) = world.read_state(&g.device, &g.queue, i);
             assert!(
@@ -461,6 +470,15 @@ fn compare(
             });
             if split {
                 out.split[i].push(frame_index);
+            } else {
+                // Velocities from positions within the bound at the step's end and start
+                // (h apart), and the speed's own rounding.
+                let p = cases[i].sim.params();
+                let h = DT / p.substeps as f32;
+                let (gs, cs) = (gpu_speeds[i].sqrt(), cpu_speeds[i].sqrt());
+                let allowed = 2.0 * bound / h + 4.0 * f32::EPSILON * cs + 1e-12;
+                out.speed_ratio = out.speed_ratio.max((gs - cs).abs() / allowed);
+                out.speed_max = out.speed_max.max(cs);
             }
             out.errors[i].push(worst);
             out.ratios[i].push(if split { 0.0 } else { worst / bound });
@@ -521,6 +539,16 @@ fn check(g: &Gpu, what: &str, out: &Outcome, bitwise: bool) {
         "{what}: the cloth hardly moved ({} m)",
         out.moved
     );
+    eprintln!(
+        "{what}: largest speed {} m/s, {} of what rounding allows",
+        out.speed_max, out.speed_ratio
+    );
+    assert!(
+        out.speed_ratio <= 1.0,
+        "{what}: the frame's largest speed is {} × what rounding allows",
+        out.speed_ratio
+    );
+    assert!(out.speed_max > 0.0, "{what}: no speed compared");
 }
 
 /// Vertical cloth, two pinned corners that move, XPBD 10×1 with isometric bending, air with
@@ -1439,6 +1467,59 @@ fn packed_cloths_match_their_twins() {
     );
     // The dihedral cloth's `atan2` differs by an ulp or two (not bit for bit anywhere).
     check(&g, "packed cloths", &out, false);
+}
+
+/// Cloths at rest (asleep, `first_step` past the frame's steps) take no step: a world whose
+/// cloths all rest records no dispatch, one with a cloth awake as many as when all step (the
+/// rest sit out in their invocations); the resting cloth's state stays as it was, bit for
+/// bit, while the other moves.
+#[test]
+fn cloths_at_rest_take_no_dispatch() {
+    let Some(g) = gpu("cloths_at_rest_take_no_dispatch") else {
+        return;
+    };
+    let sims: Vec<Simulation> = (0..3)
+        .map(|_| HangingCloth::new(24).build().unwrap())
+        .collect();
+    let refs: Vec<&Simulation> = sims.iter().collect();
+    let mut world = GpuWorld::new(&g.device, &g.queue, &g.kernels, &refs).unwrap();
+    let targets: Vec<Vec<Vec<Vec3>>> = sims
+        .iter()
+        .map(|s| vec![s.state().pins().iter().map(|p| p.target).collect(); 2])
+        .collect();
+    let frame = |resting: &[bool]| {
+        let mut f = GpuFrame::uniform(DT, 2, &[], &targets);
+        for (c, &r) in f.cloths.iter_mut().zip(resting) {
+            if r {
+                c.first_step = u32::MAX;
+            }
+        }
+        f
+    };
+    world.prepare(&g.device, &g.queue, &g.kernels, &frame(&[false; 3]));
+    let all = world.dispatches(&g.kernels);
+    world.prepare(&g.device, &g.queue, &g.kernels, &frame(&[true; 3]));
+    let none = world.dispatches(&g.kernels);
+    assert_eq!(none.per_frame, 0, "all at rest: {none:?}");
+    let start = world.read_state(&g.device, &g.queue, 0);
+    let other = world.read_state(&g.device, &g.queue, 1);
+    let one = frame(&[true, false, true]);
+    common::run_gpu_frame(&mut world, &g.device, &g.queue, &g.kernels, &one);
+    assert_eq!(world.dispatches(&g.kernels), all, "one awake");
+    assert_eq!(
+        world.read_state(&g.device, &g.queue, 0),
+        start,
+        "a resting cloth moved"
+    );
+    assert_ne!(
+        world.read_state(&g.device, &g.queue, 1).0,
+        other.0,
+        "the awake one stood still"
+    );
+    // The resting cloths' largest speeds are not measured; the awake one's is.
+    let speeds = world.read_frame_speeds(&g.device, &g.queue);
+    assert_eq!((speeds[0], speeds[2]), (0.0, 0.0));
+    assert!(speeds[1] > 0.0, "{speeds:?}");
 }
 
 /// A world issues a few dispatches a substep however many colours, parts and cloths it holds:

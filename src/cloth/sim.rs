@@ -9,7 +9,8 @@ use super::ClothError;
 use super::ClothTorn;
 use crate::foundation::EntityName;
 use crate::solver::{
-    Carry, MeshBinding, Simulation, Weld, WindField, max_stretch, ray_hit, teleport_offset,
+    Carry, Environment, MeshBinding, Simulation, Weld, WindField, max_stretch, ray_hit,
+    teleport_offset,
 };
 
 /// The running simulation of a cloth entity, inserted by the plugin on its first step.
@@ -294,6 +295,35 @@ impl ClothSim {
         self.sim.motion_step_taken();
     }
 
+    /// A cloth stepped elsewhere came to rest there: it sleeps as its state is now
+    /// ([`Simulation::sleep_in`]); not an edit.
+    pub(crate) fn sleep_in(&mut self, env: &Environment<'_>, dt: f32) {
+        self.sim.sleep_in(env, dt);
+    }
+
+    /// Before a step taken elsewhere while the cloth sleeps: wakes it if anything in `env`
+    /// changed ([`Simulation::stays_asleep_in`]); returns whether it still sleeps. Not an edit.
+    pub(crate) fn stays_asleep_in(&mut self, env: &Environment<'_>, dt: f32) -> bool {
+        self.sim.stays_asleep_in(env, dt)
+    }
+
+    /// Wakes the cloth ([`Simulation::wake`]); not an edit.
+    pub(crate) fn wake_up(&mut self) {
+        self.sim.wake();
+    }
+
+    /// A state read back from a backend that steps the cloth elsewhere, after `steps` steps
+    /// of `dt`, counted towards rest ([`Simulation::count_rest`]); returns whether the cloth
+    /// has come to rest. Not an edit.
+    pub(crate) fn count_rest(&mut self, steps: u32, dt: f32) -> bool {
+        self.sim.count_rest(steps, dt)
+    }
+
+    /// Steps taken elsewhere that were not at rest ([`Simulation::reset_rest_count`]).
+    pub(crate) fn reset_rest_count(&mut self) {
+        self.sim.reset_rest_count();
+    }
+
     /// Takes a state computed elsewhere: positions (`xyz`; the inverse masses stay as they are)
     /// and velocities of every particle. Ignored unless both have one entry per particle.
     pub fn receive_state(&mut self, positions: &[Vec4], velocities: &[Vec4]) {
@@ -555,7 +585,10 @@ impl ClothSim {
 
     /// Whether the cloth is asleep: it came to rest, its steps are skipped and its mesh is not
     /// rewritten until a pin, a collider near it, the wind at it or its settings change
-    /// ([`ClothConfig::sleep`](super::ClothConfig) sets when).
+    /// ([`ClothConfig::sleep`](super::ClothConfig) sets when). A GPU cloth sleeps by the same
+    /// rules a few frames late, once no vertex moves faster than
+    /// [`Simulation::may_be_at_rest`] allows (its mesh is still written every frame, from the
+    /// same state).
     #[must_use]
     pub fn is_sleeping(&self) -> bool {
         self.sim.is_sleeping()

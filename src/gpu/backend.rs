@@ -25,7 +25,9 @@ use super::world::{GpuWorld, MotionTargets};
 use crate::cloth::{Cloth, ClothSim, ClothSteppedElsewhere, ClothTorn};
 use crate::collider::{ClothColliders, ClothContactImpulse};
 use crate::foundation::EntityName;
-use crate::solver::{Carry, Collider, ContactImpulse, DEFAULT_TELEPORT_DISTANCE, Simulation};
+use crate::solver::{
+    Carry, Collider, ContactImpulse, DEFAULT_TELEPORT_DISTANCE, Environment, Simulation,
+};
 use crate::wind::ClothWindField;
 
 /// Which solver steps a cloth.
@@ -97,8 +99,10 @@ pub(crate) struct GpuUpload {
 /// Copies a GPU cloth's positions and velocities into its [`ClothSim`] every frame, a frame
 /// or two after the GPU computed them (opt-in: the copy costs bus bandwidth and CPU time).
 ///
-/// Without it a GPU cloth's [`ClothSim`] keeps the state the cloth started from: gameplay that
-/// reads vertex positions, strain or sleep state of a GPU cloth needs this component.
+/// Without it a GPU cloth's [`ClothSim`] keeps the state the cloth started from (and, while
+/// it may be coming to rest, the states read back to tell when it sleeps, then the one it
+/// sleeps in: [`ClothSim::is_sleeping`] works either way): gameplay that reads vertex
+/// positions or strain of a moving GPU cloth needs this component.
 #[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[reflect(Component)]
 pub struct ClothReadback;
@@ -137,6 +141,11 @@ pub(crate) struct GpuResult {
     pub torn: Option<Vec<[u32; 2]>>,
     /// Positions and velocities, when asked for.
     pub state: Option<(Vec<Vec4>, Vec<Vec4>)>,
+    /// Steps the cloth took in the frame (0: it was at rest, or not on the GPU).
+    pub steps: u32,
+    /// The largest squared speed a free vertex ended one of those steps with, for a cloth that
+    /// may sleep (`None` when it took no step).
+    pub max_speed_squared: Option<f32>,
 }
 
 /// GPU cloths' impulses on colliders, waiting for the next fixed step's
@@ -195,6 +204,33 @@ pub struct ClothOnGpu {
     pub(crate) air: Vec<Vec4>,
     /// Per queued step, the motion targets (skinned clothing; empty entries for none).
     pub(crate) motion: Vec<MotionTargets>,
+    /// Where it is on its way to sleep.
+    rest: GpuRest,
+    /// Its state is read back every frame to count its steps towards rest: the last frame
+    /// read back found no vertex faster than [`Simulation::may_be_at_rest`] allows.
+    watch: bool,
+}
+
+/// A GPU cloth on its way to sleep (main world). The GPU measures each frame the largest
+/// speed a free vertex ends a step with ([`GpuResult::max_speed_squared`]); while that is
+/// slow enough for the cloth to be coming to rest ([`Simulation::may_be_at_rest`]: 0.1 m/s
+/// at the default [`Sleep`]) its state is read back every frame and counted by the CPU's
+/// rules ([`Simulation::count_rest`]). At rest, its [`ClothSim`] falls asleep in the state
+/// read back last ([`Simulation::sleep_in`]: what would wake it, the CPU's rules) and the
+/// cloth stops taking steps; the state it stopped in is read back once more and it sleeps
+/// in that, until something that could move it changes.
+///
+/// [`Sleep`]: crate::solver::Sleep
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+enum GpuRest {
+    /// Stepping.
+    #[default]
+    Awake,
+    /// At rest and asleep, waiting for the state it stopped in (read back from a frame it sat
+    /// out).
+    Stopping,
+    /// Asleep ([`ClothSim::is_sleeping`]): it takes no step until something wakes it.
+    Asleep,
 }
 
 impl ClothOnGpu {
@@ -202,6 +238,93 @@ impl ClothOnGpu {
     #[must_use]
     pub fn queued_steps(&self) -> usize {
         self.pending.len()
+    }
+
+    /// Whether it takes no step now (at rest).
+    pub(crate) fn is_frozen(&self) -> bool {
+        !matches!(self.rest, GpuRest::Awake)
+    }
+
+    /// Whether its state is read back this frame, `asked` for it or not (`ClothReadback`,
+    /// tearing): to count towards rest, or to sleep in; not while it sleeps (its state on the
+    /// GPU stays as it was read back).
+    pub(crate) fn reads_back(&self, asked: bool) -> bool {
+        match self.rest {
+            GpuRest::Awake => asked || self.watch,
+            GpuRest::Stopping => true,
+            GpuRest::Asleep => false,
+        }
+    }
+
+    /// Counts a frame read back towards rest ([`GpuRest`]): a slow frame (no vertex faster
+    /// than [`Simulation::may_be_at_rest`] allows) has the state read back from the next one
+    /// on, and a read-back state is counted by the CPU's rules; at rest, the cloth falls
+    /// asleep in it among `env` and stops. A frame it stepped that was not slow, read back
+    /// after it stopped (it was taken before), wakes it again.
+    fn count_rest(&mut self, r: &GpuResult, cloth: &mut ClothSim, env: &Environment<'_>, dt: f32) {
+        if r.steps == 0 || self.rest == GpuRest::Asleep {
+            return;
+        }
+        let slow = r
+            .max_speed_squared
+            .is_some_and(|s2| cloth.simulation().may_be_at_rest(s2));
+        match (self.rest, slow) {
+            (GpuRest::Awake, true) => {
+                self.watch = true;
+                // The first slow frame was not read back: counted from the next one.
+                let Some((positions, velocities)) = &r.state else {
+                    return;
+                };
+                cloth.receive_state(positions, velocities);
+                if cloth.count_rest(r.steps, dt) {
+                    cloth.sleep_in(env, dt);
+                    if cloth.is_sleeping() {
+                        self.rest = GpuRest::Stopping;
+                        self.watch = false;
+                    }
+                }
+            }
+            (GpuRest::Awake, false) => {
+                self.watch = false;
+                cloth.reset_rest_count();
+            }
+            (_, false) => self.wake(cloth),
+            // Taken before it stopped, and slow: it stays stopped.
+            (_, true) => {}
+        }
+    }
+
+    /// The state the cloth stopped in came back (`r`, from a frame it sat out, already in
+    /// `cloth`): it sleeps in that among `env`.
+    fn stopped(&mut self, r: &GpuResult, cloth: &mut ClothSim, env: &Environment<'_>, dt: f32) {
+        if r.steps == 0 && r.state.is_some() && self.rest == GpuRest::Stopping {
+            cloth.wake_up();
+            cloth.sleep_in(env, dt);
+            self.rest = if cloth.is_sleeping() {
+                GpuRest::Asleep
+            } else {
+                GpuRest::Awake
+            };
+        }
+    }
+
+    /// Before a fixed step of a cloth at rest: whether anything that could move it changed,
+    /// by the CPU's rules ([`Simulation::stays_asleep_in`]: its pins, the colliders near it,
+    /// the air at it; a teleport, a carried motion or the skin holding it come in as
+    /// `moved`). Wakes it if so.
+    fn wakes(&mut self, cloth: &mut ClothSim, env: &Environment<'_>, dt: f32, moved: bool) -> bool {
+        let woken = self.rest == GpuRest::Awake || moved || !cloth.stays_asleep_in(env, dt);
+        if woken {
+            self.wake(cloth);
+        }
+        woken
+    }
+
+    /// Wakes it: it steps, and counts towards rest afresh.
+    fn wake(&mut self, cloth: &mut ClothSim) {
+        cloth.wake_up();
+        self.rest = GpuRest::Awake;
+        self.watch = false;
     }
 
     /// Drops the steps queued so far this frame (the GPU cloth sits them out).
@@ -350,6 +473,11 @@ pub(crate) fn choose_backends(
                     g.key = key;
                     g.edits = cloth.edit_count();
                     g.restart = false;
+                    // Built again, it steps (and counts towards rest) afresh.
+                    if g.is_frozen() {
+                        g.wake(cloth.bypass_change_detection());
+                    }
+                    g.watch = false;
                     if edited {
                         // This frame's earlier steps were queued for a state that is gone: the
                         // new one starts now and sits them out.
@@ -373,6 +501,10 @@ pub(crate) fn choose_backends(
                 }
                 let first = Arc::new(upload(&cloth, layout, false));
                 hand_over_settle(&mut cloth);
+                // Asleep on the CPU, it starts awake on the GPU (and sleeps there once at rest).
+                if cloth.is_sleeping() {
+                    cloth.bypass_change_detection().wake_up();
+                }
                 commands.entity(entity).insert((
                     ClothOnGpu {
                         generation: *generation,
@@ -387,6 +519,8 @@ pub(crate) fn choose_backends(
                         carries: Vec::new(),
                         air: Vec::new(),
                         motion: Vec::new(),
+                        rest: GpuRest::Awake,
+                        watch: false,
                     },
                     ClothSteppedElsewhere,
                     // The mesh's bounds are those of the rest shape it was made with.
@@ -481,7 +615,12 @@ fn upload(cloth: &ClothSim, layout: VertexLayout, carry: bool) -> GpuUpload {
 )]
 pub(crate) fn apply_gpu_results(
     mut commands: Commands,
-    time: Res<Time>,
+    (time, fixed, colliders, wind): (
+        Res<Time>,
+        Res<Time<Fixed>>,
+        Option<Res<ClothColliders>>,
+        Option<Res<ClothWindField>>,
+    ),
     mut results: ResMut<GpuClothResults>,
     mut meshes: Option<ResMut<Assets<Mesh>>>,
     mut torn_messages: MessageWriter<ClothTorn>,
@@ -497,6 +636,23 @@ pub(crate) fn apply_gpu_results(
 ) {
     // Every frame's impulses happened, whichever result per cloth is the latest.
     impulses.0.append(&mut results.impulses);
+    // Every frame's steps count towards rest, in the order they were taken, among the last
+    // fixed step's colliders and air.
+    let dt = fixed.timestep().as_secs_f32();
+    let env = Environment {
+        colliders: colliders.as_deref().map_or(&[], |c| &c.colliders),
+        wind: wind.as_deref().map(|w| &w.field),
+        time: wind.as_deref().map_or(0.0, |w| w.time),
+    };
+    for r in &results.cloths {
+        if let Ok((_, mut cloth, Some(mut g), ..)) = cloths.get_mut(r.entity)
+            && g.generation == r.generation
+            && g.edits == cloth.edit_count()
+            && !r.failed
+        {
+            g.count_rest(r, &mut cloth, &env, dt);
+        }
+    }
     let mut results = core::mem::take(&mut results.cloths);
     // The latest result per cloth (a slow frame can bring two).
     results.reverse();
@@ -506,7 +662,7 @@ pub(crate) fn apply_gpu_results(
             continue;
         }
         seen.push(r.entity);
-        let Ok(((entity, name), mut cloth, on_gpu, leaving, transform, settings)) =
+        let Ok(((entity, name), mut cloth, mut on_gpu, leaving, transform, settings)) =
             cloths.get_mut(r.entity)
         else {
             continue;
@@ -535,6 +691,9 @@ pub(crate) fn apply_gpu_results(
         } else if let Some((positions, velocities)) = &r.state {
             cloth.receive_state(positions, velocities);
             cloth.watch_stretch(time.delta_secs(), EntityName::new(entity, name));
+            if let Some(g) = on_gpu.as_deref_mut() {
+                g.stopped(&r, cloth, &env, dt);
+            }
             if leaving.is_some() {
                 // The last GPU state is some steps old; an anchor that teleported since
                 // takes the cloth along, as it would have on either backend.
@@ -642,8 +801,28 @@ pub(crate) fn queue_gpu_steps(
         return;
     }
     let step = queue.steps.len().saturating_sub(1) as u32;
+    let (field, t) = wind
+        .as_deref()
+        .map_or((None, 0.0), |w| (Some(&w.field), w.time));
+    let env = Environment {
+        colliders: queue.steps.last().map_or(&[], |s| &s.colliders),
+        wind: field,
+        time: t,
+    };
     for (mut cloth, mut g) in &mut cloths {
         let g = &mut *g;
+        let teleport = cloth.take_teleport();
+        let carry = cloth.take_carry();
+        if g.is_frozen() {
+            // At rest: the step is sat out unless something could move the cloth.
+            let moved = teleport.is_some()
+                || carry.is_some_and(|c| c != Carry::IDENTITY)
+                || cloth.simulation().motion_targets().is_some();
+            if !g.wakes(&mut cloth, &env, dt, moved) {
+                cloth.count_external_steps(1);
+                continue;
+            }
+        }
         if g.pending.is_empty() {
             g.first_step = step;
         }
@@ -660,10 +839,8 @@ pub(crate) fn queue_gpu_steps(
         }
         g.pending.push(targets);
         cloth.count_external_steps(1);
-        g.teleports
-            .push(cloth.take_teleport().unwrap_or(Vec3::ZERO));
-        g.carries
-            .push(cloth.take_carry().unwrap_or(Carry::IDENTITY));
+        g.teleports.push(teleport.unwrap_or(Vec3::ZERO));
+        g.carries.push(carry.unwrap_or(Carry::IDENTITY));
         g.motion.push(
             cloth
                 .simulation()
@@ -671,9 +848,6 @@ pub(crate) fn queue_gpu_steps(
                 .map_or_else(MotionTargets::default, |m| MotionTargets::of(&m)),
         );
         cloth.motion_step_taken();
-        let (field, t) = wind
-            .as_deref()
-            .map_or((None, 0.0), |w| (Some(&w.field), w.time));
         cloth.step_air(field, t + 0.5 * f64::from(dt), dt, &mut g.air);
     }
 }

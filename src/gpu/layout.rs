@@ -44,6 +44,12 @@ pub(crate) const FLAG_CLOSED: u32 = 256;
 /// triangle only up to a distance a corner resting near the vertex allows
 /// ([`limits_depenetration`]; set whether the cloth is closed or not, since a tear opens it).
 pub(crate) const FLAG_EVEN: u32 = 512;
+/// The cloth may sleep ([`Sleep::enabled`]): each step's end takes its free vertices'
+/// largest squared speed into the frame's (`frame_speed_at`), which the host reads back to
+/// tell when it has come to rest.
+///
+/// [`Sleep::enabled`]: crate::solver::Sleep::enabled
+pub(crate) const FLAG_SLEEP: u32 = 1024;
 
 /// The part count the GPU projects `sim` with: parts of at most [`TILE`] vertices (one
 /// workgroup each, in workgroup memory), fewer when the mesh's vertex order would leave
@@ -358,6 +364,9 @@ impl WorldLayout {
             let features = sim.features();
             let xpbd = matches!(params.solver, Solver::Xpbd { .. });
             let mut flags = 0;
+            if params.sleep.enabled() {
+                flags |= FLAG_SLEEP;
+            }
             if !params.air.is_none() && !key.lab {
                 flags |= FLAG_AIR;
             }

@@ -67,6 +67,9 @@ struct ExtractedGpuCloth {
     carried: Option<CarriedVelocity>,
     /// Read positions and velocities back this frame.
     readback: bool,
+    /// At rest (asleep, or falling asleep): it keeps its place and state in its world and its
+    /// mesh is written, but it takes no step.
+    frozen: bool,
 }
 
 impl ExtractedGpuCloth {
@@ -86,6 +89,7 @@ impl ExtractedGpuCloth {
             shift: 0.0,
             carried: None,
             readback,
+            frozen: false,
         }
     }
 }
@@ -136,8 +140,9 @@ pub(crate) fn extract_gpu_cloths(
             ));
             continue;
         }
-        // A tearing cloth is always read back: the CPU tears it.
-        let readback = readback || g.upload.sim.features().tear_threshold.is_some();
+        // A tearing cloth is always read back: the CPU tears it; one coming to rest, to count
+        // its steps and for the state it sleeps in; not one asleep.
+        let readback = g.reads_back(readback || g.upload.sim.features().tear_threshold.is_some());
         out.cloths.push(ExtractedGpuCloth {
             entity,
             generation: g.generation,
@@ -155,6 +160,7 @@ pub(crate) fn extract_gpu_cloths(
             },
             carried: sim.simulation().carried_velocity(),
             readback,
+            frozen: g.is_frozen(),
         });
     }
     for (entity, l, transform) in &leaving {
@@ -173,8 +179,10 @@ struct Member {
     entity: Entity,
     generation: u64,
     upload: Arc<GpuUpload>,
-    /// Stepped this frame (not leaving the GPU).
+    /// On the GPU (not leaving it).
     on_gpu: bool,
+    /// Steps it takes this frame (none while at rest, leaving or disabled).
+    steps: u32,
     /// Read its positions and velocities back this frame.
     readback: bool,
 }
@@ -208,8 +216,11 @@ struct WriterEntry {
 
 /// A copy of a world's statuses, read-back states and impulses on its way to the main world.
 pub(crate) struct Readback {
-    /// Per member: entity, generation, vertices, where its state is in the copy (if read).
-    cloths: Vec<(Entity, u64, usize, Option<u64>)>,
+    /// Per member: entity, generation, vertices, where its state is in the copy (if read),
+    /// steps it took in the frame.
+    cloths: Vec<(Entity, u64, usize, Option<u64>, u32)>,
+    /// Where the members' largest squared speeds are in the copy (when the frame stepped).
+    speeds_at: Option<u64>,
     /// Per member that tears: where its torn-edge flags are in the copy, and their edges.
     torn: Vec<Option<TornFlags>>,
     /// The collider entities of the impulse slots after the states (empty: none copied).
@@ -276,6 +287,11 @@ pub(crate) fn prepare_gpu_worlds(
                 generation: x.generation,
                 upload,
                 on_gpu: x.upload.is_some(),
+                steps: if x.upload.is_some() && !x.frozen {
+                    x.pin_targets.len() as u32
+                } else {
+                    0
+                },
                 readback: x.readback,
             });
     }
@@ -353,7 +369,7 @@ pub(crate) fn prepare_gpu_worlds(
             .iter()
             .map(|m| {
                 let x = extracted.cloths.iter().find(|x| x.entity == m.entity);
-                match x.filter(|_| m.on_gpu) {
+                match x.filter(|_| m.steps > 0) {
                     Some(x) => ClothFrame {
                         first_step: x.first_step,
                         pin_targets: &x.pin_targets,
@@ -362,7 +378,7 @@ pub(crate) fn prepare_gpu_worlds(
                         air_velocities: &x.air,
                         motion: &x.motion,
                     },
-                    // Leaving: not stepped.
+                    // Leaving, disabled or at rest: not stepped.
                     None => ClothFrame {
                         first_step: u32::MAX,
                         ..Default::default()
@@ -370,7 +386,7 @@ pub(crate) fn prepare_gpu_worlds(
                 }
             })
             .collect();
-        let stepped = w.members.iter().any(|m| m.on_gpu);
+        let stepped = w.members.iter().any(|m| m.steps > 0);
         let frame = GpuFrame {
             dt,
             steps: if stepped { steps.clone() } else { Vec::new() },
@@ -494,7 +510,7 @@ pub(crate) fn run_gpu_worlds(
             continue;
         }
         // [statuses | per read-back cloth: positions, velocities | per read-back tearing
-        // cloth: its torn-edge flags | impulse slots].
+        // cloth: its torn-edge flags | largest speeds | impulse slots].
         let members = w.members.len() as u64;
         let mut cloths = Vec::with_capacity(w.members.len());
         let mut at = 16 * members;
@@ -505,7 +521,7 @@ pub(crate) fn run_gpu_worlds(
                 at += 32 * n as u64;
                 here
             });
-            cloths.push((m.entity, m.generation, n, state_at));
+            cloths.push((m.entity, m.generation, n, state_at, m.steps));
         }
         let mut torn = Vec::with_capacity(w.members.len());
         let mut torn_copies = Vec::new();
@@ -518,6 +534,12 @@ pub(crate) fn run_gpu_worlds(
                 TornFlags { at: here, ..f }
             }));
         }
+        let (speeds_from, speed_bytes) = w.world.frame_speed_region();
+        let speeds_at = (w.stepped && speed_bytes > 0).then(|| {
+            let here = at;
+            at += speed_bytes;
+            here
+        });
         let impulses_at = at;
         let (impulse_from, impulse_bytes) = if w.stepped {
             w.world.impulse_region()
@@ -549,6 +571,10 @@ pub(crate) fn run_gpu_worlds(
         for (from, to, bytes) in torn_copies {
             encoder.copy_buffer_to_buffer(w.world.scratch_buffer(), from, &buffer, to, bytes);
         }
+        if let Some(to) = speeds_at {
+            let scratch = w.world.scratch_buffer();
+            encoder.copy_buffer_to_buffer(scratch, speeds_from, &buffer, to, speed_bytes);
+        }
         if impulse_bytes > 0 {
             encoder.copy_buffer_to_buffer(
                 w.world.scratch_buffer(),
@@ -565,6 +591,7 @@ pub(crate) fn run_gpu_worlds(
         };
         worlds.requested.push(Readback {
             cloths,
+            speeds_at,
             torn,
             colliders,
             impulses_at,
@@ -615,8 +642,13 @@ pub(crate) fn send_gpu_results(
         let Some(data) = &r.data else {
             continue;
         };
-        for (i, &(entity, generation, n, state_at)) in r.cloths.iter().enumerate() {
+        for (i, &(entity, generation, n, state_at, steps)) in r.cloths.iter().enumerate() {
             let status: Vec4 = bytemuck::pod_read_unaligned(&data[16 * i..16 * i + 16]);
+            // The largest squared speed of the steps it took (none: not measured).
+            let max_speed_squared = r.speeds_at.filter(|_| steps > 0).map(|at| {
+                let at = at as usize + 4 * i;
+                f32::from_bits(bytemuck::pod_read_unaligned(&data[at..at + 4]))
+            });
             let state = state_at.map(|at| {
                 let at = at as usize;
                 let values: Vec<Vec4> = bytemuck::pod_collect_to_vec(&data[at..at + 32 * n]);
@@ -633,6 +665,8 @@ pub(crate) fn send_gpu_results(
                 tear: status.y != 0.0,
                 torn,
                 state,
+                steps,
+                max_speed_squared,
             });
         }
         if !r.colliders.is_empty() {

@@ -131,8 +131,10 @@ pub(crate) struct WorldUniform {
     sc_triangle_scale_at: u32,
     react_at: u32,
     opened_at: u32,
-    // The last field: with it the uniform's size is a multiple of 16 bytes.
     unmoving_at: u32,
+    frame_speed_at: u32,
+    // With these the uniform's size is a multiple of 16 bytes.
+    pad: [u32; 3],
 }
 
 #[repr(C)]
@@ -278,7 +280,9 @@ impl<'a> StepColliders<'a> {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ClothFrame<'a> {
     /// The first step of the frame the cloth takes (a cloth that joined mid-frame takes the
-    /// last ones only); it takes every step from there on.
+    /// last ones only); it takes every step from there on. The number of steps or more: it
+    /// takes none (asleep, or held in the world); a frame in which no cloth takes a step
+    /// records no step at all.
     pub first_step: u32,
     /// Per step it takes, every pin's target at the step's end (in the simulation's pin
     /// order).
@@ -404,6 +408,8 @@ struct ScratchRegions {
     opened: u32,
     settle_speed: u32,
     settle_strain: u32,
+    /// Per cloth, the largest squared speed a free vertex ended a step of the frame with.
+    frame_speed: u32,
     impulse: u32,
 }
 
@@ -639,6 +645,8 @@ impl GpuWorld {
             s.settle_strain = words + n;
             words = s.settle_strain + c;
         }
+        s.frame_speed = words;
+        words += c;
         s.impulse = words;
         let limit = device.limits().max_storage_buffer_binding_size;
         let state_bytes = u64::from(r.len) * 16;
@@ -900,7 +908,14 @@ impl GpuWorld {
     ) {
         let cloths = self.layout.cloths.len();
         assert_eq!(frame.cloths.len(), cloths, "one frame entry per cloth");
-        let steps = frame.steps.len() as u32;
+        // A frame in which no cloth takes a step (all asleep, or held) takes none: no
+        // dispatch but the carries.
+        let taken = frame
+            .cloths
+            .iter()
+            .any(|f| (f.first_step as usize) < frame.steps.len());
+        let frame_steps: &[StepColliders<'_>] = if taken { &frame.steps } else { &[] };
+        let steps = frame_steps.len() as u32;
         let substeps = self.layout.substeps;
         let dt = frame.dt;
         let h = dt / substeps as f32;
@@ -908,8 +923,7 @@ impl GpuWorld {
         let mut rebind = false;
         // Colliders (the lab solver ignores them, as on the CPU).
         let no_colliders = StepColliders::default();
-        let step_colliders: Vec<&StepColliders<'_>> = frame
-            .steps
+        let step_colliders: Vec<&StepColliders<'_>> = frame_steps
             .iter()
             .map(|s| if lab { &no_colliders } else { s })
             .collect();
@@ -1054,8 +1068,18 @@ impl GpuWorld {
             sc_triangle_scale_at: l.sc_triangle_scale_at,
             opened_at: s.opened,
             unmoving_at: r.unmoving,
+            frame_speed_at: s.frame_speed,
+            pad: [0; 3],
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&uniform));
+        // The frame's largest speeds start from zero.
+        if !l.cloths.is_empty() {
+            queue.write_buffer(
+                &self.scratch,
+                u64::from(s.frame_speed) * 4,
+                &vec![0u8; 4 * l.cloths.len()],
+            );
+        }
         // The per-frame words of every cloth's record: gravity·h and the damping factor (the
         // lab solver: the velocity it keeps).
         for (i, c) in l.cloths.iter().enumerate() {
@@ -1687,6 +1711,28 @@ impl GpuWorld {
             u64::from(self.scratch_regions.impulse) * 4,
             u64::from(self.impulse_words) * 4,
         )
+    }
+
+    /// Where the cloths' largest squared speeds of the last prepared frame sit in
+    /// [`Self::scratch_buffer`] (one `f32` per cloth, in the world's order, 0 for a cloth that
+    /// cannot sleep or took no step): byte offset and size.
+    #[must_use]
+    pub fn frame_speed_region(&self) -> (u64, u64) {
+        (
+            u64::from(self.scratch_regions.frame_speed) * 4,
+            self.layout.cloths.len() as u64 * 4,
+        )
+    }
+
+    /// Reads back (blocking) every cloth's largest squared speed of a free vertex at the end
+    /// of a step of the last frame (0 for a cloth that cannot sleep or took no step; the CPU
+    /// twin's [`ClothState::max_free_speed_squared`](crate::solver::ClothState::max_free_speed_squared)).
+    pub fn read_frame_speeds(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Vec<f32> {
+        let (offset, size) = self.frame_speed_region();
+        if size == 0 {
+            return Vec::new();
+        }
+        bytemuck::pod_collect_to_vec(&self.read_bytes(device, queue, &self.scratch, offset, size))
     }
 
     /// Collider slots of the last prepared frame (what [`sum_impulses`] sums into).

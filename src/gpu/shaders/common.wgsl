@@ -38,7 +38,9 @@
 // left without a triangle (either way the constraint holds nothing), then per triangle 1 once
 // an edge of it tore, then per cloth 1 once an edge of a closed cloth tore | while a cloth
 // settles a settings change, per vertex its speed when the change was made (bits), then per
-// cloth the step's largest strain (bits) | the colliders' impulse slots.
+// cloth the step's largest strain (bits) | per cloth the largest squared speed (bits) a free
+// vertex of a cloth that may sleep ended a step of the frame with | the colliders' impulse
+// slots.
 //
 // `frame` (vec4): per step every pin's target | per step and cloth a record (xyz: teleport
 // offset; w: 0 not stepped, else 1 + 2 teleporting + 4 carried + 8 held by motion targets;
@@ -102,6 +104,13 @@ struct World {
     // With self-collision, per vertex the part of its vertex–vertex corrections that undoes
     // an old overlap (`sc_collide`), moved without velocity (`finish_substep`).
     unmoving_at: u32,
+    // Per cloth that may sleep, the largest squared speed (bits) a free vertex ended a step
+    // of this frame with (`note_speed`; the host zeroes it before each frame and reads it back).
+    frame_speed_at: u32,
+    // With these the uniform's size is a multiple of 16 bytes.
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 // One substep of one step (binding 1, a dynamic offset per substep).
@@ -190,6 +199,7 @@ const FLAG_TEARING: u32 = 64u;
 const FLAG_SYMMETRIC: u32 = 128u;
 const FLAG_CLOSED: u32 = 256u;
 const FLAG_EVEN: u32 = 512u;
+const FLAG_SLEEP: u32 = 1024u;
 
 // Whether triangle `t` (global) of a cloth with record `flags` lost an edge to a tear
 // (`tear_check` flags it dead): until the host's tear removes it from the topology it counts
@@ -286,6 +296,19 @@ fn within_range(p: vec3<f32>) -> bool {
 }
 
 // `step::substeps::clamp_speed`
+// The end of a step for free vertex `i` (velocity `v`) of cloth `c` with flags `flags`: a
+// cloth that may sleep takes its squared speed into the frame's largest (non-negative floats
+// order as their bits do; CPU twin: `ClothState::max_free_speed_squared`, the same maximum).
+fn note_speed(c: u32, flags: u32, v: vec3<f32>) {
+    if (flags & FLAG_SLEEP) != 0u {
+        var s2 = dot(v, v);
+        if !finite(s2) {
+            s2 = bitcast<f32>(0x7f800000u);
+        }
+        atomicMax(&scratch[P.frame_speed_at + c], bitcast<u32>(s2));
+    }
+}
+
 fn clamp_speed(v: vec4<f32>, m: f32) -> vec4<f32> {
     let s2 = dot(v, v);
     if s2 > m * m {

@@ -95,7 +95,8 @@ fn lab_finish(@builtin(global_invocation_id) id: vec3<u32>) {
     state[P.prev_at + i] = x;
 }
 
-// End of a lab step: the NaN guard alone (the lab step keeps its own velocities).
+// End of a lab step: the frame's largest speed and the NaN guard (the lab step keeps its
+// own velocities).
 @compute @workgroup_size(64)
 fn lab_guard(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -108,6 +109,9 @@ fn lab_guard(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let x = state[i];
     let v = state[P.vel_at + i];
+    if x.w > 0.0 {
+        note_speed(c, cloth_of(c).flags, v.xyz);
+    }
     if !(finite3(x.xyz) && finite(x.w) && finite3(v.xyz) && finite(v.w)) {
         state[P.status_at + cloth_of(c).status].x = 1.0;
     }

@@ -1,7 +1,8 @@
 // Once per step, after its substeps, and when a world is rebuilt.
 
 // The end of a step for every vertex: velocities (free vertices: `run_part` with
-// `finish_velocity`, clamped; pins: `finish_pin_velocities`), the NaN guard
+// `finish_velocity`, clamped; pins: `finish_pin_velocities`), the frame's largest speed
+// (`note_speed`), the NaN guard
 // (`ClothState::is_finite`: the cloth's status flags it, the host resets the cloth as the CPU
 // does), and the self-collision hash emptied for the next step.
 @compute @workgroup_size(64)
@@ -21,6 +22,7 @@ fn step_end(@builtin(global_invocation_id) id: vec3<u32>) {
     if x.w > 0.0 {
         v = clamp_speed((x - prev) * P.inv_h, cl.max_speed);
         state[P.vel_at + i] = v;
+        note_speed(c, cl.flags, v.xyz);
     } else if vertex_pin(i) != NO_PIN {
         v = vec4<f32>((x.xyz - prev.xyz) * P.inv_h, 0.0);
         state[P.vel_at + i] = v;

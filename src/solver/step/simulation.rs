@@ -5,7 +5,7 @@ use glam::{Vec3, Vec4};
 
 use super::inertia::{CarriedVelocity, Carry};
 use super::params::{Features, SolverParams};
-use super::sleep::SleepState;
+use super::sleep::{STILL_START_ENERGY, SleepState};
 use super::state::{ClothState, StateError};
 use super::substeps::{StepInput, StepScratch, step};
 use super::tear::overstretched_edges;
@@ -226,9 +226,7 @@ impl Simulation {
     /// Advances by `dt` seconds among `env`'s colliders and wind, with this cloth's
     /// [`Features`]; tears edges afterwards if tearing is on.
     pub fn step_in(&mut self, dt: f32, env: &Environment<'_>, par: &impl Parallel) -> StepReport {
-        let felt_wind = env
-            .wind
-            .filter(|w| !w.is_empty() && !self.params.air.is_none());
+        let felt_wind = self.felt_wind(env);
         let held = self.motion.is_some();
         // Carried through the air, a cloth with aerodynamics feels the air move past it.
         let carried_through_air = self.carried.is_some() && !self.params.air.is_none();
@@ -514,6 +512,95 @@ impl Simulation {
     /// before it can sleep.
     pub fn wake(&mut self) {
         self.sleep.wake();
+    }
+
+    /// For a backend that steps the cloth elsewhere (the GPU) and found it at rest: puts the
+    /// cloth to sleep as its state is now (read back from that backend), its free vertices'
+    /// velocities zeroed, remembering what in `env` would wake it, as [`Self::step_in`] does
+    /// when a step of `dt` seconds brings it to rest. Nothing happens with sleeping switched
+    /// off ([`Sleep::enabled`](crate::solver::Sleep::enabled)) or while a settings change
+    /// settles.
+    pub fn sleep_in(&mut self, env: &Environment<'_>, dt: f32) {
+        if !self.params.sleep.enabled() || self.settling > 0 || self.motion.is_some() {
+            return;
+        }
+        for (v, x) in self.state.velocities.iter_mut().zip(&self.state.positions) {
+            if x.w > 0.0 {
+                *v = Vec4::ZERO;
+            }
+        }
+        let wind = self.felt_wind(env);
+        let t = env.time + 0.5 * f64::from(dt);
+        self.sleep.fall_asleep(
+            &self.state.positions,
+            &self.state.pins,
+            env.colliders,
+            wind,
+            t,
+        );
+    }
+
+    /// For a backend that steps the cloth elsewhere (the GPU), which measures the largest
+    /// squared speed a free vertex ends its steps with: whether the cloth may be coming to
+    /// rest, so that its state is worth reading back for [`Self::count_rest`] (it can sleep,
+    /// nothing holds it, and no vertex is faster than the rms speed at which a run of still
+    /// steps may begin, 0.1 m/s at the default [`Sleep`](crate::solver::Sleep)).
+    #[must_use]
+    pub fn may_be_at_rest(&self, max_speed_squared: f32) -> bool {
+        let sleep = self.params.sleep;
+        sleep.enabled()
+            && self.settling == 0
+            && self.motion.is_none()
+            && max_speed_squared < 2.0 * STILL_START_ENERGY * sleep.energy
+    }
+
+    /// For a backend that steps the cloth elsewhere: counts `steps` steps of `dt` seconds that
+    /// ended in the state the cloth has now (read back from it) by the rules of
+    /// [`Sleep`](crate::solver::Sleep), as [`Self::step_in`] counts its own; returns whether
+    /// the cloth has come to rest ([`Self::sleep_in`] then puts it to sleep).
+    pub fn count_rest(&mut self, steps: u32, dt: f32) -> bool {
+        let sleep = self.params.sleep;
+        if !sleep.enabled() || self.settling > 0 || self.motion.is_some() {
+            self.reset_rest_count();
+            return false;
+        }
+        let energy = self.state.kinetic_energy_per_kg();
+        let mut rest = false;
+        for _ in 0..steps {
+            rest |= self.sleep.count(&self.state.positions, energy, sleep, dt);
+        }
+        rest
+    }
+
+    /// For a backend that steps the cloth elsewhere: its steps since the last count were not
+    /// at rest (a run of quiet or still steps begins again).
+    pub fn reset_rest_count(&mut self) {
+        self.sleep.quiet = 0;
+        self.sleep.forget_still();
+    }
+
+    /// For a backend that steps the cloth elsewhere, before each step while the cloth sleeps:
+    /// wakes it if anything in `env` (its pins, the colliders near it, the air at it) changed
+    /// as [`Self::step_in`] would, and returns whether it still sleeps.
+    pub fn stays_asleep_in(&mut self, env: &Environment<'_>, dt: f32) -> bool {
+        if !self.sleep.asleep {
+            return false;
+        }
+        let t = env.time + 0.5 * f64::from(dt);
+        if self
+            .sleep
+            .should_wake(&self.state.pins, env.colliders, self.felt_wind(env), t)
+        {
+            self.sleep.wake();
+            return false;
+        }
+        true
+    }
+
+    /// The wind of `env` this cloth feels (none without aerodynamics or wind).
+    fn felt_wind<'a>(&self, env: &Environment<'a>) -> Option<&'a WindField> {
+        env.wind
+            .filter(|w| !w.is_empty() && !self.params.air.is_none())
     }
 
     /// Puts every vertex back at its rest position with zero velocity, pins on their targets,

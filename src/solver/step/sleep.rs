@@ -92,7 +92,7 @@ impl Default for Sleep {
 /// A run of still steps (see [`Sleep::steps`]) begins only at a step whose kinetic energy is
 /// under this many times [`Sleep::energy`] (an rms speed of about 10 cm/s at the default),
 /// so that a moving cloth does not copy its positions every step for a run that cannot last.
-const STILL_START_ENERGY: f32 = 1000.0;
+pub(crate) const STILL_START_ENERGY: f32 = 1000.0;
 
 /// What a sleeping cloth remembers, to notice what would wake it.
 #[derive(Clone, Debug, Default)]
@@ -405,6 +405,56 @@ mod tests {
             plain.is_sleeping(),
             plain.strain().max
         );
+    }
+
+    /// A cloth stepped elsewhere (the GPU backend's path): its states, counted after each
+    /// step by [`Simulation::count_rest`], come to rest in the same step as the cloth that
+    /// steps itself; [`Simulation::sleep_in`] then puts it to sleep as that one sleeps, and
+    /// [`Simulation::stays_asleep_in`] wakes it for a moved pin as `step_in` would.
+    #[test]
+    fn a_cloth_stepped_elsewhere_counts_its_rest_as_one_that_steps_itself() {
+        let (mut own, _) = hanging();
+        let (mut stepper, _) = hanging();
+        stepper
+            .set_params(SolverParams {
+                sleep: Sleep::NEVER,
+                ..params()
+            })
+            .unwrap();
+        let (mut elsewhere, _) = hanging();
+        let env = Environment::default();
+        let steps = until_asleep(&mut own, &env, 1200);
+        for k in 1..=steps {
+            stepper.step_in(DT, &env, &Serial);
+            let (p, v) = (&stepper.state().positions, &stepper.state().velocities);
+            let speed2 = stepper.state().max_free_speed_squared();
+            assert!(speed2 >= 2.0 * stepper.state().kinetic_energy_per_kg());
+            let s = elsewhere.state_mut();
+            s.positions.clone_from(p);
+            s.velocities.clone_from(v);
+            let rest = elsewhere.count_rest(1, DT);
+            assert_eq!(rest, k == steps, "step {k} of {steps}");
+            if !elsewhere.may_be_at_rest(speed2) {
+                assert!(k < steps, "the last step was too fast to read back");
+            }
+        }
+        elsewhere.sleep_in(&env, DT);
+        assert!(elsewhere.is_sleeping());
+        assert_eq!(elsewhere.state().positions, own.state().positions);
+        assert_eq!(elsewhere.state().velocities, own.state().velocities);
+        assert!(elsewhere.stays_asleep_in(&env, DT));
+        let pins = elsewhere.state().pins.clone();
+        elsewhere
+            .state_mut()
+            .set_pin_targets(pins.iter().map(|p| p.target + Vec3::new(0.0, 0.0, 0.05)));
+        assert!(!elsewhere.stays_asleep_in(&env, DT));
+        assert!(!elsewhere.is_sleeping());
+        // Switched off, it neither counts nor sleeps.
+        let mut never = stepper.clone();
+        assert!(!never.count_rest(1000, DT));
+        never.sleep_in(&env, DT);
+        assert!(!never.is_sleeping());
+        assert!(!never.may_be_at_rest(0.0));
     }
 
     #[test]

@@ -392,6 +392,22 @@ impl ClothState {
             0.0
         }
     }
+
+    /// The largest squared speed of a free vertex (`w > 0`), m²/s² (0 with none free; a
+    /// non-finite velocity gives infinity). The GPU backend's measure of rest: the same
+    /// maximum over the same vertices, which any order of evaluation gives alike.
+    #[must_use]
+    pub fn max_free_speed_squared(&self) -> f32 {
+        self.positions
+            .iter()
+            .zip(&self.velocities)
+            .filter(|(p, _)| p.w > 0.0)
+            .map(|(_, v)| {
+                let s2 = v.xyz().length_squared();
+                if s2.is_finite() { s2 } else { f32::INFINITY }
+            })
+            .fold(0.0, f32::max)
+    }
 }
 
 #[cfg(test)]
