@@ -296,16 +296,21 @@ fn within_range(p: vec3<f32>) -> bool {
 }
 
 // `step::substeps::clamp_speed`
-// The end of a step for free vertex `i` (velocity `v`) of cloth `c` with flags `flags`: a
+// The end of a step for a free vertex (velocity `v`) of cloth `c` with flags `flags`: a
 // cloth that may sleep takes its squared speed into the frame's largest (non-negative floats
 // order as their bits do; CPU twin: `ClothState::max_free_speed_squared`, the same maximum).
+// Every vertex of a cloth writes the same word: one slower than the largest so far only reads
+// it, so that few of them queue for the atomic.
 fn note_speed(c: u32, flags: u32, v: vec3<f32>) {
     if (flags & FLAG_SLEEP) != 0u {
-        var s2 = dot(v, v);
-        if !finite(s2) {
-            s2 = bitcast<f32>(0x7f800000u);
+        var bits = bitcast<u32>(dot(v, v));
+        if !finite(bitcast<f32>(bits)) {
+            bits = 0x7f800000u;
         }
-        atomicMax(&scratch[P.frame_speed_at + c], bitcast<u32>(s2));
+        let at = P.frame_speed_at + c;
+        if bits > atomicLoad(&scratch[at]) {
+            atomicMax(&scratch[at], bits);
+        }
     }
 }
 
