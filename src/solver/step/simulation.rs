@@ -426,27 +426,32 @@ impl Simulation {
     fn count_quiet_step(&mut self, env: &Environment<'_>, wind: Option<&WindField>, dt: f32) {
         let sleep = self.params.sleep;
         if !sleep.enabled() || self.settling > 0 {
-            self.sleep.quiet = 0;
-            self.sleep.forget_still();
+            self.reset_rest_count();
             return;
         }
         let energy = self.state.kinetic_energy_per_kg();
         if self.sleep.count(&self.state.positions, energy, sleep, dt) {
-            for (v, x) in self.state.velocities.iter_mut().zip(&self.state.positions) {
-                if x.w > 0.0 {
-                    *v = Vec4::ZERO;
-                }
-            }
-            // The air sampled as `should_wake` samples it: at the middle of a step.
-            let t = env.time + 0.5 * f64::from(dt);
-            self.sleep.fall_asleep(
-                &self.state.positions,
-                &self.state.pins,
-                env.colliders,
-                wind,
-                t,
-            );
+            self.fall_asleep_in(env, wind, dt);
         }
+    }
+
+    /// Puts the cloth to sleep as it is, its free vertices still, remembering what in `env`
+    /// (and `wind`, the air it feels) would wake it after a step of `dt` seconds.
+    fn fall_asleep_in(&mut self, env: &Environment<'_>, wind: Option<&WindField>, dt: f32) {
+        for (v, x) in self.state.velocities.iter_mut().zip(&self.state.positions) {
+            if x.w > 0.0 {
+                *v = Vec4::ZERO;
+            }
+        }
+        // The air sampled as `should_wake` samples it: at the middle of a step.
+        let t = env.time + 0.5 * f64::from(dt);
+        self.sleep.fall_asleep(
+            &self.state.positions,
+            &self.state.pins,
+            env.colliders,
+            wind,
+            t,
+        );
     }
 
     /// The air each vertex meets over the coming step of `dt` seconds, into `out` (the GPU
@@ -524,20 +529,7 @@ impl Simulation {
         if !self.params.sleep.enabled() || self.settling > 0 || self.motion.is_some() {
             return;
         }
-        for (v, x) in self.state.velocities.iter_mut().zip(&self.state.positions) {
-            if x.w > 0.0 {
-                *v = Vec4::ZERO;
-            }
-        }
-        let wind = self.felt_wind(env);
-        let t = env.time + 0.5 * f64::from(dt);
-        self.sleep.fall_asleep(
-            &self.state.positions,
-            &self.state.pins,
-            env.colliders,
-            wind,
-            t,
-        );
+        self.fall_asleep_in(env, self.felt_wind(env), dt);
     }
 
     /// For a backend that steps the cloth elsewhere (the GPU), which measures the largest
