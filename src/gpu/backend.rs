@@ -209,6 +209,9 @@ pub struct ClothOnGpu {
     /// Its state is read back every frame to count its steps towards rest: the last frame
     /// read back found no vertex faster than [`Simulation::may_be_at_rest`] allows.
     watch: bool,
+    /// The length of its last queued step, seconds (0 before the first): what its steps read
+    /// back are counted with.
+    step_dt: f32,
 }
 
 /// A GPU cloth on its way to sleep (main world). The GPU measures each frame the largest
@@ -521,6 +524,7 @@ pub(crate) fn choose_backends(
                         motion: Vec::new(),
                         rest: GpuRest::Awake,
                         watch: false,
+                        step_dt: 0.0,
                     },
                     ClothSteppedElsewhere,
                     // The mesh's bounds are those of the rest shape it was made with.
@@ -637,8 +641,9 @@ pub(crate) fn apply_gpu_results(
     // Every frame's impulses happened, whichever result per cloth is the latest.
     impulses.0.append(&mut results.impulses);
     // Every frame's steps count towards rest, in the order they were taken, among the last
-    // fixed step's colliders and air.
-    let dt = fixed.timestep().as_secs_f32();
+    // fixed step's colliders and air, with the length of the cloth's steps.
+    let fixed_dt = fixed.timestep().as_secs_f32();
+    let dt_of = |g: &ClothOnGpu| if g.step_dt > 0.0 { g.step_dt } else { fixed_dt };
     let env = Environment {
         colliders: colliders.as_deref().map_or(&[], |c| &c.colliders),
         wind: wind.as_deref().map(|w| &w.field),
@@ -650,6 +655,7 @@ pub(crate) fn apply_gpu_results(
             && g.edits == cloth.edit_count()
             && !r.failed
         {
+            let dt = dt_of(&g);
             g.count_rest(r, &mut cloth, &env, dt);
         }
     }
@@ -692,6 +698,7 @@ pub(crate) fn apply_gpu_results(
             cloth.receive_state(positions, velocities);
             cloth.watch_stretch(time.delta_secs(), EntityName::new(entity, name));
             if let Some(g) = on_gpu.as_deref_mut() {
+                let dt = dt_of(g);
                 g.stopped(&r, cloth, &env, dt);
             }
             if leaving.is_some() {
@@ -811,6 +818,7 @@ pub(crate) fn queue_gpu_steps(
     };
     for (mut cloth, mut g) in &mut cloths {
         let g = &mut *g;
+        g.step_dt = dt;
         let teleport = cloth.take_teleport();
         let carry = cloth.take_carry();
         if g.is_frozen() {
