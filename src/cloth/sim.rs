@@ -9,8 +9,7 @@ use super::ClothError;
 use super::ClothTorn;
 use crate::foundation::EntityName;
 use crate::solver::{
-    Carry, Environment, MeshBinding, Simulation, Weld, WindField, max_stretch, ray_hit,
-    teleport_offset,
+    Carry, MeshBinding, Simulation, Weld, WindField, max_stretch, ray_hit, teleport_offset,
 };
 
 /// The running simulation of a cloth entity, inserted by the plugin on its first step.
@@ -295,33 +294,12 @@ impl ClothSim {
         self.sim.motion_step_taken();
     }
 
-    /// A cloth stepped elsewhere came to rest there: it sleeps as its state is now
-    /// ([`Simulation::sleep_in`]); not an edit.
-    pub(crate) fn sleep_in(&mut self, env: &Environment<'_>, dt: f32) {
-        self.sim.sleep_in(env, dt);
-    }
-
-    /// Before a step taken elsewhere while the cloth sleeps: wakes it if anything in `env`
-    /// changed ([`Simulation::stays_asleep_in`]); returns whether it still sleeps. Not an edit.
-    pub(crate) fn stays_asleep_in(&mut self, env: &Environment<'_>, dt: f32) -> bool {
-        self.sim.stays_asleep_in(env, dt)
-    }
-
-    /// Wakes the cloth ([`Simulation::wake`]); not an edit.
-    pub(crate) fn wake_up(&mut self) {
-        self.sim.wake();
-    }
-
-    /// A state read back from a backend that steps the cloth elsewhere, after `steps` steps
-    /// of `dt`, counted towards rest ([`Simulation::count_rest`]); returns whether the cloth
-    /// has come to rest. Not an edit.
-    pub(crate) fn count_rest(&mut self, steps: u32, dt: f32) -> bool {
-        self.sim.count_rest(steps, dt)
-    }
-
-    /// Steps taken elsewhere that were not at rest ([`Simulation::reset_rest_count`]).
-    pub(crate) fn reset_rest_count(&mut self) {
-        self.sim.reset_rest_count();
+    /// The simulation, for a backend that steps the cloth elsewhere to count its rest, put it
+    /// to sleep and wake it ([`Simulation::count_rest`], [`Simulation::sleep_in`],
+    /// [`Simulation::stays_asleep_in`]): inputs and results of steps taken there, not an edit
+    /// (unlike [`Self::simulation_mut`], the GPU cloth is not restarted).
+    pub(crate) fn stepped_elsewhere(&mut self) -> &mut Simulation {
+        &mut self.sim
     }
 
     /// Takes a state computed elsewhere: positions (`xyz`; the inverse masses stay as they are)

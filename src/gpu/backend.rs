@@ -279,8 +279,8 @@ impl ClothOnGpu {
                     return;
                 };
                 cloth.receive_state(positions, velocities);
-                if cloth.count_rest(r.steps, dt) {
-                    cloth.sleep_in(env, dt);
+                if cloth.stepped_elsewhere().count_rest(r.steps, dt) {
+                    cloth.stepped_elsewhere().sleep_in(env, dt);
                     if cloth.is_sleeping() {
                         self.rest = GpuRest::Stopping;
                         self.watch = false;
@@ -289,7 +289,7 @@ impl ClothOnGpu {
             }
             (GpuRest::Awake, false) => {
                 self.watch = false;
-                cloth.reset_rest_count();
+                cloth.stepped_elsewhere().reset_rest_count();
             }
             (_, false) => self.wake(cloth),
             // Taken before it stopped, and slow: it stays stopped.
@@ -301,8 +301,8 @@ impl ClothOnGpu {
     /// `cloth`): it sleeps in that among `env`.
     fn stopped(&mut self, r: &GpuResult, cloth: &mut ClothSim, env: &Environment<'_>, dt: f32) {
         if r.steps == 0 && r.state.is_some() && self.rest == GpuRest::Stopping {
-            cloth.wake_up();
-            cloth.sleep_in(env, dt);
+            cloth.stepped_elsewhere().wake();
+            cloth.stepped_elsewhere().sleep_in(env, dt);
             self.rest = if cloth.is_sleeping() {
                 GpuRest::Asleep
             } else {
@@ -316,7 +316,9 @@ impl ClothOnGpu {
     /// the air at it; a teleport, a carried motion or the skin holding it come in as
     /// `moved`). Wakes it if so.
     fn wakes(&mut self, cloth: &mut ClothSim, env: &Environment<'_>, dt: f32, moved: bool) -> bool {
-        let woken = self.rest == GpuRest::Awake || moved || !cloth.stays_asleep_in(env, dt);
+        let woken = self.rest == GpuRest::Awake
+            || moved
+            || !cloth.stepped_elsewhere().stays_asleep_in(env, dt);
         if woken {
             self.wake(cloth);
         }
@@ -325,7 +327,7 @@ impl ClothOnGpu {
 
     /// Wakes it: it steps, and counts towards rest afresh.
     fn wake(&mut self, cloth: &mut ClothSim) {
-        cloth.wake_up();
+        cloth.stepped_elsewhere().wake();
         self.rest = GpuRest::Awake;
         self.watch = false;
     }
@@ -506,7 +508,7 @@ pub(crate) fn choose_backends(
                 hand_over_settle(&mut cloth);
                 // Asleep on the CPU, it starts awake on the GPU (and sleeps there once at rest).
                 if cloth.is_sleeping() {
-                    cloth.bypass_change_detection().wake_up();
+                    cloth.bypass_change_detection().stepped_elsewhere().wake();
                 }
                 commands.entity(entity).insert((
                     ClothOnGpu {

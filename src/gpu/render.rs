@@ -386,14 +386,14 @@ pub(crate) fn prepare_gpu_worlds(
                 }
             })
             .collect();
-        let stepped = w.members.iter().any(|m| m.steps > 0);
+        // A frame in which none of its cloths steps records no step (`GpuWorld::prepare`).
         let frame = GpuFrame {
             dt,
-            steps: if stepped { steps.clone() } else { Vec::new() },
+            steps: steps.clone(),
             cloths,
         };
         w.world.prepare(device, &queue, &pipelines.kernels, &frame);
-        w.stepped = stepped && !frame.steps.is_empty();
+        w.stepped = w.world.steps() > 0;
         w.slots.clone_from(&extracted.queue.entities);
     }
     // Mesh writers for the cloths on the GPU.

@@ -1713,6 +1713,12 @@ impl GpuWorld {
         )
     }
 
+    /// Steps the last prepared frame records (0 when no cloth takes one).
+    #[must_use]
+    pub fn steps(&self) -> u32 {
+        self.steps
+    }
+
     /// Where the cloths' largest squared speeds of the last prepared frame sit in
     /// [`Self::scratch_buffer`] (one `f32` per cloth, in the world's order, 0 for a cloth that
     /// cannot sleep or took no step): byte offset and size.

@@ -295,7 +295,6 @@ fn within_range(p: vec3<f32>) -> bool {
     return finite3(p) && max(max(abs(p.x), abs(p.y)), abs(p.z)) <= MAX_COORDINATE;
 }
 
-// `step::substeps::clamp_speed`
 // The end of a step for a free vertex (velocity `v`) of cloth `c` with flags `flags`: a
 // cloth that may sleep takes its squared speed into the frame's largest (non-negative floats
 // order as their bits do; CPU twin: `ClothState::max_free_speed_squared`, the same maximum).
@@ -314,6 +313,7 @@ fn note_speed(c: u32, flags: u32, v: vec3<f32>) {
     }
 }
 
+// `step::substeps::clamp_speed`
 fn clamp_speed(v: vec4<f32>, m: f32) -> vec4<f32> {
     let s2 = dot(v, v);
     if s2 > m * m {

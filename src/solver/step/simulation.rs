@@ -526,7 +526,7 @@ impl Simulation {
     /// off ([`Sleep::enabled`](crate::solver::Sleep::enabled)) or while a settings change
     /// settles.
     pub fn sleep_in(&mut self, env: &Environment<'_>, dt: f32) {
-        if !self.params.sleep.enabled() || self.settling > 0 || self.motion.is_some() {
+        if !self.may_sleep_now() {
             return;
         }
         self.fall_asleep_in(env, self.felt_wind(env), dt);
@@ -539,11 +539,14 @@ impl Simulation {
     /// steps may begin, 0.1 m/s at the default [`Sleep`](crate::solver::Sleep)).
     #[must_use]
     pub fn may_be_at_rest(&self, max_speed_squared: f32) -> bool {
-        let sleep = self.params.sleep;
-        sleep.enabled()
-            && self.settling == 0
-            && self.motion.is_none()
-            && max_speed_squared < 2.0 * STILL_START_ENERGY * sleep.energy
+        self.may_sleep_now()
+            && max_speed_squared < 2.0 * STILL_START_ENERGY * self.params.sleep.energy
+    }
+
+    /// Whether the cloth may fall asleep now: sleeping is on, no settings change settles and
+    /// no skin holds it.
+    fn may_sleep_now(&self) -> bool {
+        self.params.sleep.enabled() && self.settling == 0 && self.motion.is_none()
     }
 
     /// For a backend that steps the cloth elsewhere: counts `steps` steps of `dt` seconds that
@@ -551,11 +554,11 @@ impl Simulation {
     /// [`Sleep`](crate::solver::Sleep), as [`Self::step_in`] counts its own; returns whether
     /// the cloth has come to rest ([`Self::sleep_in`] then puts it to sleep).
     pub fn count_rest(&mut self, steps: u32, dt: f32) -> bool {
-        let sleep = self.params.sleep;
-        if !sleep.enabled() || self.settling > 0 || self.motion.is_some() {
+        if !self.may_sleep_now() {
             self.reset_rest_count();
             return false;
         }
+        let sleep = self.params.sleep;
         let energy = self.state.kinetic_energy_per_kg();
         let mut rest = false;
         for _ in 0..steps {
