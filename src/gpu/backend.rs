@@ -207,8 +207,13 @@ pub struct ClothOnGpu {
     /// Where it is on its way to sleep.
     rest: GpuRest,
     /// Its state is read back every frame to count its steps towards rest: the last frame
-    /// read back found no vertex faster than [`Simulation::may_be_at_rest`] allows.
+    /// found it slow (no vertex faster than [`Simulation::may_be_at_rest`] allows, or a state
+    /// read back under the mean energy [`Simulation::may_be_at_rest_in`] allows), or it is
+    /// looked at ([`PROBE_FRAMES`]).
     watch: bool,
+    /// Frames stepped not slow, but with no vertex faster than [`PROBE_SPEED_RATIO`] times
+    /// the speed a slow one allows, until its state is looked at.
+    probe_in: u32,
     /// The length of its last queued step, seconds (0 before the first): what its steps read
     /// back are counted with.
     step_dt: f32,
@@ -217,11 +222,14 @@ pub struct ClothOnGpu {
 /// A GPU cloth on its way to sleep (main world). The GPU measures each frame the largest
 /// speed a free vertex ends a step with ([`GpuResult::max_speed_squared`]); while that is
 /// slow enough for the cloth to be coming to rest ([`Simulation::may_be_at_rest`]: 0.1 m/s
-/// at the default [`Sleep`]) its state is read back every frame and counted by the CPU's
-/// rules ([`Simulation::count_rest`]). At rest, its [`ClothSim`] falls asleep in the state
-/// read back last ([`Simulation::sleep_in`]: what would wake it, the CPU's rules) and the
-/// cloth stops taking steps; the state it stopped in is read back once more and it sleeps
-/// in that, until something that could move it changes.
+/// at the default [`Sleep`]), or while a state read back has the mean energy of one
+/// ([`Simulation::may_be_at_rest_in`]: a pile of cloth whose few trembling vertices are
+/// faster), its state is read back every frame and counted by the CPU's rules
+/// ([`Simulation::count_rest`]). A cloth whose fastest vertex is not far past the first rule
+/// has its state looked at every [`PROBE_FRAMES`] frames for the second. At rest, its
+/// [`ClothSim`] falls asleep in the state read back last ([`Simulation::sleep_in`]: what
+/// would wake it, the CPU's rules) and the cloth stops taking steps; the state it stopped in
+/// is read back once more and it sleeps in that, until something that could move it changes.
 ///
 /// [`Sleep`]: crate::solver::Sleep
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -236,6 +244,19 @@ enum GpuRest {
     Asleep,
 }
 
+/// Frames between two looks at the state of a GPU cloth whose fastest vertex is not slow
+/// but within [`PROBE_SPEED_RATIO`] of it (a quarter of a second at 60 frames a second): a
+/// pile of cloth with self-collision has a few vertices trembling at up to about 1 m/s while
+/// the mean is at rest (docs/experiments.md, *A GPU pile with self-collision never slept*).
+pub(crate) const PROBE_FRAMES: u32 = 15;
+
+/// How many times the speed [`Simulation::may_be_at_rest`] allows (2 m/s at the default
+/// [`Sleep`]) a GPU cloth's fastest vertex may move for its state to be looked at every
+/// [`PROBE_FRAMES`] frames: a cloth flapping faster is not read back for it.
+///
+/// [`Sleep`]: crate::solver::Sleep
+pub(crate) const PROBE_SPEED_RATIO: f32 = 20.0;
+
 impl ClothOnGpu {
     /// Steps queued for the GPU this frame.
     #[must_use]
@@ -248,32 +269,54 @@ impl ClothOnGpu {
         !matches!(self.rest, GpuRest::Awake)
     }
 
-    /// Whether its state is read back this frame, `asked` for it or not (`ClothReadback`,
-    /// tearing): to count towards rest, or to sleep in; not while it sleeps (its state on the
-    /// GPU stays as it was read back).
-    pub(crate) fn reads_back(&self, asked: bool) -> bool {
+    /// Whether its state is read back this frame, `readback` asked for or not
+    /// ([`ClothReadback`]; a tearing cloth always is): to count towards rest, or to sleep in;
+    /// not while it sleeps (its state on the GPU stays as it was read back).
+    pub(crate) fn reads_back(&self, readback: bool) -> bool {
         match self.rest {
-            GpuRest::Awake => asked || self.watch,
+            GpuRest::Awake => self.asks(readback) || self.watch,
             GpuRest::Stopping => true,
             GpuRest::Asleep => false,
         }
     }
 
-    /// Counts a frame read back towards rest ([`GpuRest`]): a slow frame (no vertex faster
-    /// than [`Simulation::may_be_at_rest`] allows) has the state read back from the next one
-    /// on, and a read-back state is counted by the CPU's rules; at rest, the cloth falls
-    /// asleep in it among `env` and stops. A frame it stepped that was not slow, read back
-    /// after it stopped (it was taken before), wakes it again.
+    /// Whether its [`ClothSim`] takes the state read back last, after the frame's results were
+    /// counted towards rest: asked for ([`ClothReadback`], tearing), or the cloth is coming
+    /// to rest; not a state only looked at ([`PROBE_FRAMES`]) that found it moving.
+    fn keeps_state(&self, readback: bool) -> bool {
+        self.asks(readback) || self.watch || self.rest != GpuRest::Awake
+    }
+
+    /// Whether its state is asked for every frame: `readback` ([`ClothReadback`]) or tearing
+    /// (the CPU tears it).
+    fn asks(&self, readback: bool) -> bool {
+        readback || self.upload.sim.features().tear_threshold.is_some()
+    }
+
+    /// Counts a frame read back towards rest ([`GpuRest`]): a slow frame has the state read
+    /// back from the next one on, and a read-back state is counted by the CPU's rules; at
+    /// rest, the cloth falls asleep in it among `env` and stops. A frame it stepped that was
+    /// not slow, read back after it stopped (it was taken before), wakes it again.
+    ///
+    /// Slow: with a state read back, by its mean energy ([`Simulation::may_be_at_rest_in`]);
+    /// without, by the fastest vertex ([`Simulation::may_be_at_rest`]). A frame not slow whose
+    /// fastest vertex is within [`PROBE_SPEED_RATIO`] of slow counts down to a look at its
+    /// state ([`PROBE_FRAMES`]).
     fn count_rest(&mut self, r: &GpuResult, cloth: &mut ClothSim, env: &Environment<'_>, dt: f32) {
         if r.steps == 0 || self.rest == GpuRest::Asleep {
             return;
         }
-        let slow = r
-            .max_speed_squared
-            .is_some_and(|s2| cloth.simulation().may_be_at_rest(s2));
+        let sim = cloth.simulation();
+        let fastest = r.max_speed_squared;
+        let slow = match &r.state {
+            Some((positions, velocities)) => sim.may_be_at_rest_in(positions, velocities),
+            None => fastest.is_some_and(|s2| sim.may_be_at_rest(s2)),
+        };
+        let near = fastest.is_some_and(|s2| sim.may_be_at_rest(s2 / PROBE_SPEED_RATIO.powi(2)));
         match (self.rest, slow) {
             (GpuRest::Awake, true) => {
                 self.watch = true;
+                self.probe_in = PROBE_FRAMES;
                 // The first slow frame was not read back: counted from the next one.
                 let Some((positions, velocities)) = &r.state else {
                     return;
@@ -288,8 +331,20 @@ impl ClothOnGpu {
                 }
             }
             (GpuRest::Awake, false) => {
-                self.watch = false;
                 cloth.stepped_elsewhere().reset_rest_count();
+                if self.watch && r.state.is_none() {
+                    // Taken before the watch began: the states read back decide.
+                    return;
+                }
+                self.watch = false;
+                if near && r.state.is_none() {
+                    self.probe_in = self.probe_in.saturating_sub(1);
+                    if self.probe_in == 0 {
+                        // Looked at from the next frame on, until a state comes back.
+                        self.watch = true;
+                        self.probe_in = PROBE_FRAMES;
+                    }
+                }
             }
             (_, false) => self.wake(cloth),
             // Taken before it stopped, and slow: it stays stopped.
@@ -526,6 +581,7 @@ pub(crate) fn choose_backends(
                         motion: Vec::new(),
                         rest: GpuRest::Awake,
                         watch: false,
+                        probe_in: PROBE_FRAMES,
                         step_dt: 0.0,
                     },
                     ClothSteppedElsewhere,
@@ -632,7 +688,7 @@ pub(crate) fn apply_gpu_results(
     mut torn_messages: MessageWriter<ClothTorn>,
     mut impulses: ResMut<GpuImpulses>,
     mut cloths: Query<(
-        (Entity, Option<&Name>),
+        (Entity, Option<&Name>, Has<ClothReadback>),
         &mut ClothSim,
         Option<&mut ClothOnGpu>,
         Option<&mut ClothLeavingGpu>,
@@ -670,7 +726,7 @@ pub(crate) fn apply_gpu_results(
             continue;
         }
         seen.push(r.entity);
-        let Ok(((entity, name), mut cloth, mut on_gpu, leaving, transform, settings)) =
+        let Ok(((entity, name, asked), mut cloth, mut on_gpu, leaving, transform, settings)) =
             cloths.get_mut(r.entity)
         else {
             continue;
@@ -694,9 +750,12 @@ pub(crate) fn apply_gpu_results(
             // Already recovered; the restart is on its way.
             continue;
         }
+        // A state looked at for rest that found the cloth moving stays out of a `ClothSim`
+        // that did not ask for it.
+        let looked_only = on_gpu.as_ref().is_some_and(|g| !g.keeps_state(asked));
         if r.failed {
             cloth.recover(EntityName::new(entity, name), transform.copied());
-        } else if let Some((positions, velocities)) = &r.state {
+        } else if let Some((positions, velocities)) = r.state.as_ref().filter(|_| !looked_only) {
             cloth.receive_state(positions, velocities);
             cloth.watch_stretch(time.delta_secs(), EntityName::new(entity, name));
             if let Some(g) = on_gpu.as_deref_mut() {
@@ -736,7 +795,7 @@ pub(crate) fn apply_gpu_results(
             g.restart = true;
         }
     }
-    for ((entity, name), mut cloth, _, leaving, _, _) in &mut cloths {
+    for ((entity, name, _), mut cloth, _, leaving, _, _) in &mut cloths {
         if let Some(mut l) = leaving {
             l.frames += 1;
             if l.frames > LEAVE_TIMEOUT_FRAMES {

@@ -142,7 +142,7 @@ pub(crate) fn extract_gpu_cloths(
         }
         // A tearing cloth is always read back: the CPU tears it; one coming to rest, to count
         // its steps and for the state it sleeps in; not one asleep.
-        let readback = g.reads_back(readback || g.upload.sim.features().tear_threshold.is_some());
+        let readback = g.reads_back(readback);
         out.cloths.push(ExtractedGpuCloth {
             entity,
             generation: g.generation,

@@ -6,7 +6,7 @@ use glam::{Vec3, Vec4};
 use super::inertia::{CarriedVelocity, Carry};
 use super::params::{Features, SolverParams};
 use super::sleep::{STILL_START_ENERGY, SleepState};
-use super::state::{ClothState, StateError};
+use super::state::{ClothState, StateError, kinetic_energy_per_kg};
 use super::substeps::{StepInput, StepScratch, step};
 use super::tear::overstretched_edges;
 use crate::solver::air::{AirGrid, WindField};
@@ -541,6 +541,20 @@ impl Simulation {
     pub fn may_be_at_rest(&self, max_speed_squared: f32) -> bool {
         self.may_sleep_now()
             && max_speed_squared < 2.0 * STILL_START_ENERGY * self.params.sleep.energy
+    }
+
+    /// For a backend that steps the cloth elsewhere, with a state of the cloth read back
+    /// from it (`positions` and `velocities` laid out as [`ClothState`]'s): whether the cloth
+    /// may be coming to rest, so that its state is worth reading back for [`Self::count_rest`]
+    /// (it can sleep, nothing holds it, and its mean kinetic energy is under that at which a
+    /// run of still steps may begin: an rms speed of 0.1 m/s at the default
+    /// [`Sleep`](crate::solver::Sleep)). Unlike [`Self::may_be_at_rest`] a few vertices
+    /// trembling faster (a pile of cloth with self-collision) leave it coming to rest.
+    #[must_use]
+    pub fn may_be_at_rest_in(&self, positions: &[Vec4], velocities: &[Vec4]) -> bool {
+        self.may_sleep_now()
+            && kinetic_energy_per_kg(positions, velocities)
+                < STILL_START_ENERGY * self.params.sleep.energy
     }
 
     /// Whether the cloth may fall asleep now: sleeping is on, no settings change settles and

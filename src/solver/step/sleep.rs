@@ -457,6 +457,44 @@ mod tests {
         assert!(!never.may_be_at_rest(0.0));
     }
 
+    /// The backend's two measures of a cloth that may be coming to rest: its fastest vertex
+    /// (what the GPU measures each frame) and the mean energy of a state read back. A few
+    /// vertices trembling fast in a cloth at rest pass the second and not the first; a whole
+    /// cloth moving at 0.2 m/s passes neither; pinned vertices do not count; a NaN is no rest.
+    #[test]
+    fn a_few_fast_vertices_leave_a_read_back_cloth_coming_to_rest() {
+        let (sim, grid) = hanging();
+        let (positions, mut velocities) = (
+            sim.state().positions.clone(),
+            sim.state().velocities.clone(),
+        );
+        let fastest = |v: &[Vec4]| {
+            v.iter()
+                .map(|v| v.xyz().length_squared())
+                .fold(0.0, f32::max)
+        };
+        // Two of 144 vertices at 0.5 m/s: mean ½v² = 0.25 · 2 / 144 / 2 ≈ 1.7e-3 J/kg, under
+        // the 5e-3 at which a still run may begin.
+        for v in [grid.index(5, 5), grid.index(6, 9)] {
+            velocities[v as usize].x = 0.5;
+        }
+        assert!(!sim.may_be_at_rest(fastest(&velocities)));
+        assert!(sim.may_be_at_rest_in(&positions, &velocities));
+        // All at 0.2 m/s: ½v² = 0.02 J/kg.
+        for v in &mut velocities {
+            v.x = 0.2;
+        }
+        assert!(!sim.may_be_at_rest_in(&positions, &velocities));
+        // Only the pinned corners move (w = 0): nothing free does.
+        for (p, v) in positions.iter().zip(&mut velocities) {
+            v.x = if p.w == 0.0 { 3.0 } else { 0.0 };
+        }
+        assert!(sim.may_be_at_rest_in(&positions, &velocities));
+        // A non-finite velocity is no rest.
+        velocities[grid.index(3, 3) as usize].y = f32::NAN;
+        assert!(!sim.may_be_at_rest_in(&positions, &velocities));
+    }
+
     #[test]
     fn a_moved_pin_wakes_it_and_a_pin_on_its_target_does_not() {
         let (mut sim, grid) = hanging();

@@ -368,29 +368,14 @@ impl ClothState {
     /// Kinetic energy `Σ ½ m |v|²` of the unpinned vertices, in joules.
     #[must_use]
     pub fn kinetic_energy(&self) -> f64 {
-        self.velocities
-            .iter()
-            .zip(&self.positions)
-            .filter(|(_, p)| p.w > 0.0)
-            .map(|(v, p)| 0.5 * f64::from(v.xyz().length_squared()) / f64::from(p.w))
-            .sum()
+        kinetic_energy(&self.positions, &self.velocities)
     }
 
     /// [`Self::kinetic_energy`] over the mass of the free vertices, J/kg (0 with none free):
     /// what [`Sleep::energy`](super::Sleep::energy) is compared with.
     #[must_use]
     pub fn kinetic_energy_per_kg(&self) -> f32 {
-        let mass: f64 = self
-            .positions
-            .iter()
-            .filter(|p| p.w > 0.0)
-            .map(|p| 1.0 / f64::from(p.w))
-            .sum();
-        if mass > 0.0 {
-            (self.kinetic_energy() / mass) as f32
-        } else {
-            0.0
-        }
+        kinetic_energy_per_kg(&self.positions, &self.velocities)
     }
 
     /// The largest squared speed of a free vertex (`w > 0`), m²/s² (0 with none free; a
@@ -407,6 +392,31 @@ impl ClothState {
                 if s2.is_finite() { s2 } else { f32::INFINITY }
             })
             .fold(0.0, f32::max)
+    }
+}
+
+/// [`ClothState::kinetic_energy`] of positions and velocities laid out as a state's.
+fn kinetic_energy(positions: &[Vec4], velocities: &[Vec4]) -> f64 {
+    velocities
+        .iter()
+        .zip(positions)
+        .filter(|(_, p)| p.w > 0.0)
+        .map(|(v, p)| 0.5 * f64::from(v.xyz().length_squared()) / f64::from(p.w))
+        .sum()
+}
+
+/// [`ClothState::kinetic_energy_per_kg`] of positions and velocities laid out as a state's
+/// (a state read back from another backend).
+pub(crate) fn kinetic_energy_per_kg(positions: &[Vec4], velocities: &[Vec4]) -> f32 {
+    let mass: f64 = positions
+        .iter()
+        .filter(|p| p.w > 0.0)
+        .map(|p| 1.0 / f64::from(p.w))
+        .sum();
+    if mass > 0.0 {
+        (kinetic_energy(positions, velocities) / mass) as f32
+    } else {
+        0.0
     }
 }
 
