@@ -8,8 +8,7 @@
 //! ```
 //! The JSON line adds `crossings` (edge–triangle pairs of the strip that cross at the end),
 //! `max_crossings` over the run and `asleep_after_steps`, the fixed step at which the pile
-//! came to rest and fell asleep (−1: still awake; a GPU cloth sleeps only once no vertex moves
-//! faster than 0.1 m/s).
+//! came to rest and fell asleep (−1: still awake).
 
 #[path = "support/mod.rs"]
 mod support;

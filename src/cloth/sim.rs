@@ -564,9 +564,9 @@ impl ClothSim {
     /// Whether the cloth is asleep: it came to rest, its steps are skipped and its mesh is not
     /// rewritten until a pin, a collider near it, the wind at it or its settings change
     /// ([`ClothConfig::sleep`](super::ClothConfig) sets when). A GPU cloth sleeps by the same
-    /// rules a few frames late, once no vertex moves faster than
-    /// [`Simulation::may_be_at_rest`] allows (its mesh is still written every frame, from the
-    /// same state).
+    /// rules a few frames late, counted from states read back while it may be coming to rest
+    /// ([`Simulation::may_be_at_rest`], [`Simulation::may_be_at_rest_in`]; its mesh is still
+    /// written every frame, from the same state).
     #[must_use]
     pub fn is_sleeping(&self) -> bool {
         self.sim.is_sleeping()
