@@ -552,27 +552,23 @@ fn a_gpu_pile_with_trembling_vertices_sleeps() {
     for (e, x) in piles {
         spin(&mut app, e, x);
     }
-    let asleep = |app: &App, e: Entity| {
-        app.world()
-            .get::<ClothSim>(e)
-            .is_some_and(ClothSim::is_sleeping)
-    };
     let read = piles[0].0;
-    // The fastest vertex of the read-back state, frame by frame while it is awake.
-    let mut fastest = Vec::new();
+    // Each pile's fastest vertex, frame by frame while it is awake, in the state its
+    // `ClothSim` holds: read back every frame for the one, every frame it may be coming to
+    // rest for the other (its last 30 frames awake among them).
+    let mut fastest = [Vec::new(), Vec::new()];
     let mut seen: [Option<usize>; 2] = [None; 2];
     let mut frames = 0;
     while frames < 1800 && seen.iter().any(Option::is_none) {
         common::run(&mut app, 1);
         frames += 1;
         for (k, (e, _)) in piles.into_iter().enumerate() {
-            if seen[k].is_none() && asleep(&app, e) {
+            let sim = app.world().get::<ClothSim>(e).unwrap();
+            if seen[k].is_none() && sim.is_sleeping() {
                 seen[k] = Some(frames);
+            } else if seen[k].is_none() {
+                fastest[k].push(sim.simulation().state().max_free_speed_squared().sqrt());
             }
-        }
-        if !asleep(&app, read) {
-            let sim = app.world().get::<ClothSim>(read).unwrap();
-            fastest.push(sim.simulation().state().max_free_speed_squared().sqrt());
         }
     }
     assert!(in_use(&app, read).gpu && in_use(&app, piles[1].0).gpu);
@@ -582,16 +578,22 @@ fn a_gpu_pile_with_trembling_vertices_sleeps() {
         seen[1].is_some(),
         "the pile not read back never slept in 30 s"
     );
-    // Its last 30 frames awake (the run of still steps that put it to sleep) had a vertex
-    // faster than the fastest-vertex rule allows: the pile tests the mean rule.
-    let last = fastest[fastest.len().saturating_sub(30)..]
-        .iter()
-        .copied()
-        .fold(0.0f32, f32::max);
-    eprintln!("its fastest vertex over its last 30 frames awake: {last} m/s");
+    // Their last 30 frames awake (the run of still steps that put them to sleep) had a vertex
+    // faster than the fastest-vertex rule allows: the piles test the mean rule. (A pile's
+    // trembling depends on its folds, which another GPU's rounding changes: of 12 such piles
+    // on the CPU the fastest vertex over the last second was 0.06–0.6 m/s, so one of the two
+    // may be slow and both rarely are.)
+    let last = fastest.map(|f| {
+        f[f.len().saturating_sub(30)..]
+            .iter()
+            .copied()
+            .fold(0.0f32, f32::max)
+    });
+    eprintln!("their fastest vertex over their last 30 frames awake: {last:?} m/s");
     assert!(
-        last > 0.1,
-        "the pile was slow by its fastest vertex ({last} m/s): it does not test the mean rule"
+        last.iter().any(|&v| v > 0.1),
+        "both piles were slow by their fastest vertex ({last:?} m/s): they do not test the \
+         mean rule"
     );
 }
 
