@@ -217,6 +217,9 @@ pub struct ClothOnGpu {
     /// The length of its last queued step, seconds (0 before the first): what its steps read
     /// back are counted with.
     step_dt: f32,
+    /// The velocities it fell asleep with this frame (its `ClothSim`'s, the free vertices'
+    /// zeroed), for its GPU state to take: extracted once, dropped the next frame.
+    pub(crate) sleep_velocities: Option<Arc<Vec<Vec4>>>,
 }
 
 /// A GPU cloth on its way to sleep (main world). The GPU measures each frame the largest
@@ -359,6 +362,8 @@ impl ClothOnGpu {
             cloth.stepped_elsewhere().wake();
             cloth.stepped_elsewhere().sleep_in(env, dt);
             self.rest = if cloth.is_sleeping() {
+                self.sleep_velocities =
+                    Some(Arc::new(cloth.simulation().state().velocities.clone()));
                 GpuRest::Asleep
             } else {
                 GpuRest::Awake
@@ -583,6 +588,7 @@ pub(crate) fn choose_backends(
                         watch: false,
                         probe_in: PROBE_FRAMES,
                         step_dt: 0.0,
+                        sleep_velocities: None,
                     },
                     ClothSteppedElsewhere,
                     // The mesh's bounds are those of the rest shape it was made with.
@@ -696,6 +702,12 @@ pub(crate) fn apply_gpu_results(
         Option<&Cloth>,
     )>,
 ) {
+    // Velocities handed to the GPU last frame were extracted with it.
+    for (_, _, g, ..) in &mut cloths {
+        if let Some(mut g) = g.filter(|g| g.sleep_velocities.is_some()) {
+            g.sleep_velocities = None;
+        }
+    }
     // Every frame's impulses happened, whichever result per cloth is the latest.
     impulses.0.append(&mut results.impulses);
     // Every frame's steps count towards rest, in the order they were taken, among the last

@@ -70,6 +70,9 @@ struct ExtractedGpuCloth {
     /// At rest (asleep, or falling asleep): it keeps its place and state in its world and its
     /// mesh is written, but it takes no step.
     frozen: bool,
+    /// Velocities its GPU state takes this frame: those it fell asleep with (free vertices'
+    /// zeroed, as the CPU's sleep leaves them).
+    velocities: Option<Arc<Vec<Vec4>>>,
 }
 
 impl ExtractedGpuCloth {
@@ -90,6 +93,7 @@ impl ExtractedGpuCloth {
             carried: None,
             readback,
             frozen: false,
+            velocities: None,
         }
     }
 }
@@ -161,6 +165,7 @@ pub(crate) fn extract_gpu_cloths(
             carried: sim.simulation().carried_velocity(),
             readback,
             frozen: g.is_frozen(),
+            velocities: g.sleep_velocities.clone(),
         });
     }
     for (entity, l, transform) in &leaving {
@@ -392,6 +397,20 @@ pub(crate) fn prepare_gpu_worlds(
             steps: steps.clone(),
             cloths,
         };
+        // A cloth that fell asleep sleeps with the velocities its `ClothSim` sleeps with (the
+        // free vertices' zeroed), so that it wakes from them as on the CPU; written after any
+        // carry into a rebuilt world (submitted above), before the frame's steps.
+        for (i, m) in w.members.iter().enumerate() {
+            let sleeping = extracted
+                .cloths
+                .iter()
+                .find(|x| x.entity == m.entity && x.generation == m.generation)
+                .and_then(|x| x.velocities.as_deref());
+            let (at, bytes) = w.world.velocities_range(i);
+            if let Some(v) = sleeping.filter(|v| v.len() as u64 * 16 == bytes) {
+                queue.write_buffer(w.world.state_buffer(), at, bytemuck::cast_slice(v));
+            }
+        }
         w.world.prepare(device, &queue, &pipelines.kernels, &frame);
         w.stepped = w.world.steps() > 0;
         w.slots.clone_from(&extracted.queue.entities);
