@@ -400,15 +400,19 @@ pub(crate) fn prepare_gpu_worlds(
         // A cloth that fell asleep sleeps with the velocities its `ClothSim` sleeps with (the
         // free vertices' zeroed), so that it wakes from them as on the CPU; written after any
         // carry into a rebuilt world (submitted above), before the frame's steps.
-        for (i, m) in w.members.iter().enumerate() {
-            let sleeping = extracted
-                .cloths
+        for x in &extracted.cloths {
+            let Some(v) = &x.velocities else {
+                continue;
+            };
+            let member = w
+                .members
                 .iter()
-                .find(|x| x.entity == m.entity && x.generation == m.generation)
-                .and_then(|x| x.velocities.as_deref());
-            let (at, bytes) = w.world.velocities_range(i);
-            if let Some(v) = sleeping.filter(|v| v.len() as u64 * 16 == bytes) {
-                queue.write_buffer(w.world.state_buffer(), at, bytemuck::cast_slice(v));
+                .position(|m| m.entity == x.entity && m.generation == x.generation);
+            if let Some(i) = member {
+                let (at, bytes) = w.world.velocities_range(i);
+                if v.len() as u64 * 16 == bytes {
+                    queue.write_buffer(w.world.state_buffer(), at, bytemuck::cast_slice(v));
+                }
             }
         }
         w.world.prepare(device, &queue, &pipelines.kernels, &frame);
