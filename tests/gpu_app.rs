@@ -126,6 +126,17 @@ fn render_app_with(cloth: ClothPlugins, pipelined: bool) -> ExitingApp {
 /// [`render_app_with`], the cloth plugins added before `DefaultPlugins` when `cloth_first`
 /// (the order a game must not use).
 fn render_app_in_order(cloth: ClothPlugins, pipelined: bool, cloth_first: bool) -> ExitingApp {
+    render_app_limited(cloth, pipelined, cloth_first, None)
+}
+
+/// [`render_app_in_order`] on a device that allows no more than `limits` (WgpuSettings'
+/// `constrained_limits`).
+fn render_app_limited(
+    cloth: ClothPlugins,
+    pipelined: bool,
+    cloth_first: bool,
+    limits: Option<wgpu::Limits>,
+) -> ExitingApp {
     let mut app = App::new();
     let mut plugins = DefaultPlugins
         .build()
@@ -135,6 +146,16 @@ fn render_app_in_order(cloth: ClothPlugins, pipelined: bool, cloth_first: bool) 
             exit_condition: bevy::window::ExitCondition::DontExit,
             ..default()
         });
+    if let Some(limits) = limits {
+        plugins = plugins.set(bevy::render::RenderPlugin {
+            render_creation: bevy::render::settings::WgpuSettings {
+                constrained_limits: Some(limits),
+                ..default()
+            }
+            .into(),
+            ..default()
+        });
+    }
     if !pipelined {
         plugins = plugins.disable::<bevy::render::pipelined_rendering::PipelinedRenderingPlugin>();
     }
@@ -2803,4 +2824,80 @@ fn a_painted_pin_rule_runs_on_the_gpu_as_the_same_pins_by_hand() {
     }
     let lowest = a.iter().map(|v| v.y).fold(f32::MAX, f32::min);
     assert!(lowest < -0.3, "it hangs (lowest local y {lowest})");
+}
+
+/// A GPU that binds buffers of at most 1 MiB and dispatches at most eight workgroups a
+/// dimension (a game sets such limits with `WgpuSettings::constrained_limits`; WebGPU's are
+/// 128 MiB and 65 535, which cloths of a million vertices pass): a cloth too large for it
+/// runs on the CPU and says why, two cloths that each fit but not together run in two
+/// worlds, and a tearing cloth and the mesh writes run with every dispatch split (wgpu's
+/// validation would fail an unsplit one, and the renderer would quit the app). Before, a
+/// cloth too large for the adapter's buffers stayed "on the GPU", never moved, and quit the
+/// app with a validation error.
+#[test]
+fn a_gpu_too_small_for_a_cloth_runs_it_on_the_cpu_and_the_rest_in_worlds_that_fit() {
+    let test = "a_gpu_too_small_for_a_cloth_runs_it_on_the_cpu_and_the_rest_in_worlds_that_fit";
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: 1 << 20,
+        max_compute_workgroups_per_dimension: 8,
+        ..wgpu::Limits::default()
+    };
+    let Some((_, device, queue, kernels)) =
+        common::gpu_kernels_with_limits_or_skip(test, limits.clone())
+    else {
+        return;
+    };
+    let mut app = render_app_limited(ClothPlugins::default(), false, false, Some(limits));
+    let extra = (ClothBackend::Gpu, ClothReadback);
+    let a = common::hung_grid(&mut app, 64, false, extra);
+    let b = common::hung_grid(&mut app, 64, false, extra);
+    let big = common::hung_grid(&mut app, 110, false, extra);
+    let torn = common::hung_grid(&mut app, 24, false, (extra, ClothTearing::default()));
+    common::run(&mut app, 2);
+    // What the device holds, by the public world API on a device with the same limits.
+    let sim = |e: Entity| app.world().get::<ClothSim>(e).unwrap().simulation().clone();
+    let (sa, sb, sbig) = (sim(a), sim(b), sim(big));
+    let fits = |sims: &[&bevy_cloth::solver::Simulation]| {
+        bevy_cloth::gpu::GpuWorld::new(&device, &queue, &kernels, sims).is_ok()
+    };
+    assert!(fits(&[&sa]) && fits(&[&sb]), "each 64² cloth fits alone");
+    assert!(
+        !fits(&[&sa, &sb]),
+        "the two 64² cloths do not fit one world"
+    );
+    assert!(!fits(&[&sbig]), "the 110² cloth does not fit");
+    let heights = |app: &App| -> Vec<f32> {
+        [a, b, big, torn]
+            .iter()
+            .map(|&e| {
+                let s = app.world().get::<ClothSim>(e).unwrap().simulation().state();
+                (0..s.len()).map(|i| s.position(i).y).sum::<f32>() / s.len() as f32
+            })
+            .collect()
+    };
+    let before = heights(&app);
+    common::run(&mut app, 40);
+    assert!(app.should_exit().is_none(), "the renderer quit the app");
+    for (e, what) in [
+        (a, "the first 64² cloth"),
+        (b, "the second"),
+        (torn, "the tearing cloth"),
+    ] {
+        let u = in_use(&app, e);
+        assert!(u.gpu, "{what}: {u:?}");
+    }
+    on_the_cpu_because(&app, big, "too large for this GPU", 10);
+    let after = heights(&app);
+    for (i, what) in ["first 64²", "second 64²", "110² (CPU)", "tearing"]
+        .iter()
+        .enumerate()
+    {
+        eprintln!("{what}: mean height {} -> {}", before[i], after[i]);
+        assert!(
+            after[i].is_finite() && after[i] < before[i] - 0.01,
+            "the {what} cloth did not fall: {} -> {}",
+            before[i],
+            after[i]
+        );
+    }
 }

@@ -47,7 +47,12 @@ struct Gpu {
 }
 
 fn gpu(test: &str) -> Option<Gpu> {
-    let (adapter, device, queue, kernels) = common::gpu_kernels_or_skip(test)?;
+    gpu_with_limits(test, wgpu::Limits::default())
+}
+
+/// [`gpu`] on a device that allows no more than `limits`.
+fn gpu_with_limits(test: &str, limits: wgpu::Limits) -> Option<Gpu> {
+    let (adapter, device, queue, kernels) = common::gpu_kernels_with_limits_or_skip(test, limits)?;
     let name = adapter.get_info().name;
     eprintln!("adapter: {name:?}");
     Some(Gpu {
@@ -1970,7 +1975,8 @@ fn the_mesh_kernel_matches_the_cpu_write_back() {
             .collect(),
         handedness: None,
     };
-    let writer = MeshWriter::new(&device, &weld, &drawn, layout, Some(&source), None);
+    let writer = MeshWriter::new(&device, &weld, &drawn, layout, Some(&source), None)
+        .expect("a small mesh fits");
     let first = 5u32;
     let m = positions.len();
     let bytes = u64::from(layout.stride) * (u64::from(first) + m as u64);
@@ -2306,6 +2312,72 @@ fn the_lab_solver_matches_the_cpu() {
     check(&g, "lab", &out, true);
 }
 
+/// A device that allows four workgroups per dimension (WebGPU allows 65 535, which a world of
+/// 4.2 million vertices, or 1.4 million with tearing, passes): every dispatch of more than four
+/// workgroups is split over y and z (`flat_groups`) and each kernel takes its linear index
+/// from all three (`flat_id`); the world's vertices, constraint groups and impulse slots
+/// must come out as with one row, so the cloths on colliders (impulses summed per
+/// workgroup), folded onto themselves (self-collision) and on the lab solver match their CPU
+/// twins as in the tests above (bit for bit on llvmpipe). A dispatch left unsplit fails
+/// wgpu's validation.
+#[test]
+fn kernels_dispatched_over_three_dimensions_match_the_cpu() {
+    let limits = wgpu::Limits {
+        max_compute_workgroups_per_dimension: 4,
+        ..wgpu::Limits::default()
+    };
+    let Some(g) = gpu_with_limits(
+        "kernels_dispatched_over_three_dimensions_match_the_cpu",
+        limits,
+    ) else {
+        return;
+    };
+    assert_eq!(g.device.limits().max_compute_workgroups_per_dimension, 4);
+    let params = SolverParams {
+        solver: Solver::Pbd {
+            stretch: 1.0,
+            shear: 0.5,
+            bending: 0.1,
+        },
+        substeps: 6,
+        iterations: 2,
+        ..Default::default()
+    };
+    // 1 600 vertices: 25 workgroups, dispatched as 4 × 4 × 2.
+    let s = sim(40, params, |p| p * 1.5 + Vec3::new(0.0, 0.45, 0.0));
+    let out = compare(&g, &[Case::new(s)], 20, 1, collider_shapes, true);
+    check(&g, "colliders, split dispatches", &out, true);
+    assert!(out.impulse_max > 1e-3, "the colliders were hardly touched");
+    assert!(
+        out.impulse_err < 1e-3,
+        "impulses differ by {}",
+        out.impulse_err
+    );
+    folded_cloth_self_collides(
+        &g,
+        Some(1.0),
+        false,
+        "self-collision, split dispatches",
+        0,
+        0,
+    );
+    let params = SolverParams {
+        solver: Solver::Lab {
+            velocity_keep: 0.99,
+        },
+        substeps: 2,
+        iterations: 32,
+        ..Default::default()
+    };
+    let n = 21;
+    let mut s = sim(n, params, |p| p + Vec3::Y);
+    let start = corners(&mut s, n);
+    let mut case = Case::new(s);
+    case.targets = sliding(start, Vec3::X * 0.005);
+    let out = compare(&g, &[case], 40, 1, |_| Vec::new(), true);
+    check(&g, "lab, split dispatches", &out, true);
+}
+
 /// The torn triangles a GPU cloth hides (`hide.wgsl`) against its CPU twin
 /// (`hide_torn_triangles`) and against what the CPU's tear removes from the drawn mesh
 /// (`Topology::without_edges`, `MeshBinding::retain`): a cloth pulled apart (and out of its
@@ -2385,7 +2457,8 @@ fn torn_triangles_leave_the_drawn_mesh_as_on_the_cpu() {
         layout,
         None,
         Some(&cloth_triangles),
-    );
+    )
+    .expect("a small mesh fits");
     // The vertex slab the writer writes its positions and normals into.
     let vertex_bytes = u64::from(layout.stride) * positions.len() as u64;
     let vertex_slab = g.device.create_buffer(&wgpu::BufferDescriptor {

@@ -159,6 +159,8 @@ pub(crate) struct GpuImpulses(pub Vec<(Entity, ContactImpulse)>);
 pub(crate) struct GpuClothResults {
     pub cloths: Vec<GpuResult>,
     pub impulses: Vec<(Entity, ContactImpulse)>,
+    /// Cloths the device cannot run (too large for its buffers): entity, generation, why.
+    pub refused: Vec<(Entity, u64, String)>,
 }
 
 /// The steps queued this frame for every GPU cloth: each step's length and colliders (with
@@ -469,11 +471,19 @@ pub(crate) fn choose_backends(
         Has<ClothReadback>,
     )>,
     fixed: Res<Time<Fixed>>,
+    mut results: ResMut<GpuClothResults>,
     mut generation: Local<u64>,
     // Per cloth: the settings the model was last checked with, and the verdict.
     mut checked: Local<HashMap<Entity, (String, Result<(), String>)>>,
 ) {
     let dt = fixed.timestep().as_secs_f32();
+    // Cloths the device turned down (by the generation it was given): they run on the CPU
+    // until their settings change.
+    let refused: HashMap<Entity, (u64, String)> = results
+        .refused
+        .drain(..)
+        .map(|(e, g, why)| (e, (g, why)))
+        .collect();
     let mut seen = std::collections::HashSet::new();
     // A software renderer (when the GPU backend is available at all).
     let software = support
@@ -486,6 +496,18 @@ pub(crate) fn choose_backends(
         if leaving {
             // Waits for its last GPU state (`apply_gpu_results`).
             continue;
+        }
+        let refusal = refused
+            .get(&entity)
+            .filter(|(g, _)| on_gpu.as_ref().is_some_and(|o| o.generation == *g));
+        if let Some((_, why)) = refusal {
+            checked.insert(
+                entity,
+                (
+                    settings_key(&cloth, dt),
+                    Err(format!("too large for this GPU: {why}")),
+                ),
+            );
         }
         let wanted = backend.copied().unwrap_or(default.0);
         let verdict: Result<(), String> = match (wanted, software) {
@@ -600,7 +622,14 @@ pub(crate) fn choose_backends(
                 ));
             }
             (Err(why), on_gpu) => {
-                if let Some(g) = on_gpu {
+                if on_gpu.is_some() && refusal.is_some() {
+                    // No world holds its GPU state (the one it was to join was not built):
+                    // the CPU goes on from its `ClothSim`.
+                    cloth.mark_changed();
+                    commands
+                        .entity(entity)
+                        .remove::<(ClothOnGpu, NoFrustumCulling, ClothSteppedElsewhere)>();
+                } else if let Some(g) = on_gpu {
                     // The CPU goes on from the GPU's state once it is read back.
                     commands
                         .entity(entity)

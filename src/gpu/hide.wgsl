@@ -49,8 +49,19 @@ fn clear(e: u32) {
     atomicAnd(&indices[e >> 1u], select(0xffff0000u, 0x0000ffffu, (e & 1u) == 1u));
 }
 
+// The linear index (in x) of an invocation of a 64-wide kernel dispatched over `groups`
+// workgroups: y and z > 1 only where x alone would pass the adapter's per-dimension limit
+// (`kernels::flat_groups`).
+fn flat_id(gid: vec3<u32>, groups: vec3<u32>) -> vec3<u32> {
+    return vec3<u32>(gid.x + (gid.y + gid.z * groups.y) * groups.x * 64u, 0u, 0u);
+}
+
 @compute @workgroup_size(64)
-fn hide_torn(@builtin(global_invocation_id) id: vec3<u32>) {
+fn hide_torn(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let t = id.x;
     if t >= H.triangles {
         return;

@@ -67,6 +67,65 @@ pub struct GpuKernels {
     pub(crate) lab_apply: wgpu::ComputePipeline,
     pub(crate) lab_finish: wgpu::ComputePipeline,
     pub(crate) lab_guard: wgpu::ComputePipeline,
+    /// The device's limits the worlds are sized and dispatched by.
+    pub(crate) limits: DeviceSizeLimits,
+}
+
+/// What a device allows a world or mesh writer: the largest storage buffer binding and the
+/// most workgroups a dispatch may have in one dimension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct DeviceSizeLimits {
+    pub storage_binding: u64,
+    pub buffer: u64,
+    pub groups_per_dimension: u32,
+    /// The alignment of a storage binding's offset, in bytes.
+    pub offset_alignment: u64,
+}
+
+impl DeviceSizeLimits {
+    pub fn of(device: &wgpu::Device) -> Self {
+        let l = device.limits();
+        Self {
+            storage_binding: l.max_storage_buffer_binding_size,
+            buffer: l.max_buffer_size,
+            groups_per_dimension: l.max_compute_workgroups_per_dimension.max(1),
+            offset_alignment: u64::from(l.min_storage_buffer_offset_alignment.max(4)),
+        }
+    }
+
+    /// Whether a storage buffer of `bytes` can be made and bound whole.
+    pub fn binds(&self, bytes: u64) -> bool {
+        bytes <= self.storage_binding.min(self.buffer)
+    }
+
+    /// Whether `groups` workgroups fit one dispatch split over three dimensions
+    /// ([`flat_groups`]).
+    pub fn dispatches(&self, groups: u64) -> bool {
+        groups <= u64::from(self.groups_per_dimension).pow(3)
+    }
+}
+
+/// The workgroups of a dispatch over `groups` 64-wide (or one-per-group) workgroups, within
+/// `max` per dimension: `(groups, 1, 1)` when that fits, else split over y (and z) so that
+/// x·y·z ≥ groups; the kernels take their linear index with `flat_id` and return past the
+/// end, as they do for the last workgroup's tail.
+#[must_use]
+pub(crate) fn flat_groups(groups: u32, max: u32) -> [u32; 3] {
+    let max = max.max(1);
+    if groups <= max {
+        return [groups, 1, 1];
+    }
+    let plane = max.saturating_mul(max);
+    let z = groups.div_ceil(plane);
+    let rest = groups.div_ceil(z);
+    let y = rest.div_ceil(max);
+    [rest.div_ceil(y), y, z]
+}
+
+/// Dispatches `groups` workgroups split by [`flat_groups`].
+pub(crate) fn dispatch_flat(pass: &mut wgpu::ComputePass<'_>, groups: u32, max: u32) {
+    let [x, y, z] = flat_groups(groups, max);
+    pass.dispatch_workgroups(x, y, z);
 }
 
 pub(super) fn uniform_entry(binding: u32, dynamic: bool, size: u64) -> wgpu::BindGroupLayoutEntry {
@@ -190,14 +249,56 @@ impl GpuKernels {
             lab_finish: pipeline("lab_finish"),
             lab_guard: pipeline("lab_guard"),
             layout,
+            limits: DeviceSizeLimits::of(device),
         }
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::STEP_WGSL;
+    use super::{STEP_WGSL, flat_groups};
     use crate::solver::{MAX_SETTLE_STEPS, SETTLE_SPEED, SETTLE_STEPS};
+
+    /// A dispatch split by `flat_groups` stays within the limit in every dimension, covers
+    /// every workgroup, wastes less than one row of x·y, and is `(groups, 1, 1)` when that fits.
+    #[test]
+    fn split_dispatches_cover_every_group_within_the_limit() {
+        let mut counts: Vec<u32> = (0..300).collect();
+        counts.extend([
+            65_535,
+            65_536,
+            65_537,
+            131_071,
+            1 << 20,
+            4_194_303,
+            u32::MAX / 64,
+        ]);
+        for max in [1, 2, 3, 4, 8, 65_535] {
+            for &groups in &counts {
+                let [x, y, z] = flat_groups(groups, max);
+                let limit = u64::from(max);
+                if u64::from(groups) > limit.pow(3) {
+                    continue;
+                }
+                assert!(
+                    x <= max && y <= max && z <= max,
+                    "{groups} in {max}: {x} {y} {z}"
+                );
+                let covered = u64::from(x) * u64::from(y) * u64::from(z);
+                assert!(
+                    covered >= u64::from(groups),
+                    "{groups} in {max}: {x} {y} {z}"
+                );
+                assert!(
+                    covered < u64::from(groups) + u64::from(x) * u64::from(y) || groups == 0,
+                    "{groups} in {max}: {x} {y} {z} wastes a plane"
+                );
+                if groups <= max {
+                    assert_eq!([x, y, z], [groups, 1, 1]);
+                }
+            }
+        }
+    }
 
     /// The settle kernels' constants are the CPU's.
     #[test]

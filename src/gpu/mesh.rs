@@ -7,7 +7,9 @@ use glam::{Affine3A, Mat3, Mat4, Vec2, Vec3};
 use wgpu::util::DeviceExt;
 
 use super::append_lists;
-use super::kernels::{storage_entry, uniform_entry};
+use super::kernels::{
+    DeviceSizeLimits, GpuUnsupported, dispatch_flat, storage_entry, uniform_entry,
+};
 use crate::solver::{CarriedVelocity, Weld};
 
 /// The WGSL of the mesh-writing kernel.
@@ -104,6 +106,8 @@ pub struct MeshKernel {
     pipeline: wgpu::ComputePipeline,
     hide_layout: wgpu::BindGroupLayout,
     hide_pipeline: wgpu::ComputePipeline,
+    /// The device's limits (dispatches split past its workgroups per dimension).
+    limits: DeviceSizeLimits,
 }
 
 impl MeshKernel {
@@ -140,6 +144,7 @@ impl MeshKernel {
             pipeline,
             hide_layout,
             hide_pipeline,
+            limits: DeviceSizeLimits::of(device),
         }
     }
 }
@@ -252,7 +257,10 @@ impl MeshWriter {
     /// ([`drawn_cloth_triangles`]): its torn triangles then leave the normals and tangents
     /// ([`Self::record`] with the dead-triangle flags) and the index slab
     /// ([`Self::record_hide_torn`]) before the host's tear.
-    #[must_use]
+    ///
+    /// # Errors
+    /// The mesh needs a table larger than the device can bind, or more vertices than a
+    /// 32-bit index reaches.
     pub fn new(
         device: &wgpu::Device,
         weld: &Weld,
@@ -260,7 +268,7 @@ impl MeshWriter {
         layout: VertexLayout,
         tangents: Option<&TangentSource>,
         cloth_triangles: Option<&[u32]>,
-    ) -> Self {
+    ) -> Result<Self, GpuUnsupported> {
         let m = weld.vertex_count();
         let (group, groups) = weld.normal_groups();
         let mut topo: Vec<u32> = weld.particles().to_vec();
@@ -319,6 +327,21 @@ impl MeshWriter {
                     triangles: c.len() as u32,
                 }
             });
+        let limits = DeviceSizeLimits::of(device);
+        let bytes = topo.len() as u64 * 4;
+        let floats = u64::from(layout.stride / 4) * m as u64;
+        let groups = (m as u64).max(drawn.len() as u64 / 3).div_ceil(64);
+        if !limits.binds(bytes) || floats > u64::from(u32::MAX) || !limits.dispatches(groups) {
+            return Err(GpuUnsupported(format!(
+                "its mesh of {m} vertices and {} triangles is too large to be written on the \
+                 GPU (a {} MB table; the adapter binds {} MB and dispatches {} workgroups a \
+                 dimension)",
+                drawn.len() / 3,
+                bytes.div_ceil(1 << 20),
+                limits.storage_binding.min(limits.buffer) >> 20,
+                limits.groups_per_dimension
+            )));
+        }
         let topo = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("cloth_mesh_topology"),
             contents: bytemuck::cast_slice(&topo),
@@ -330,7 +353,7 @@ impl MeshWriter {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        Self {
+        Ok(Self {
             params,
             topo,
             layout,
@@ -338,7 +361,7 @@ impl MeshWriter {
             header: [groups_at, offsets_at, triangles_at],
             tangent_header,
             hide,
-        }
+        })
     }
 
     /// Records the pass that turns each drawn triangle whose cloth triangle is dead (the flags
@@ -375,7 +398,7 @@ impl MeshWriter {
         let size = if u16_indices { 2u64 } else { 4 };
         let start = u64::from(first) * size;
         let end = start + u64::from(hide.triangles) * 3 * size;
-        let align = u64::from(device.limits().min_storage_buffer_offset_alignment);
+        let align = kernel.limits.offset_alignment;
         let offset = start / align * align;
         let bytes = (end - offset).div_ceil(4) * 4;
         if offset + bytes > slab.size() {
@@ -408,6 +431,7 @@ impl MeshWriter {
                 indices,
             ],
             hide.triangles.div_ceil(64),
+            kernel.limits.groups_per_dimension,
         );
     }
 
@@ -452,6 +476,21 @@ impl MeshWriter {
         };
         let normal = linear.transpose();
         let floats = self.layout.stride / 4;
+        // Bind only the mesh's vertices (from an aligned offset), as its indices above: a slab
+        // may be larger than a storage binding may be.
+        let start = u64::from(first) * u64::from(self.layout.stride);
+        let end = start + u64::from(self.vertices) * u64::from(self.layout.stride);
+        let align = kernel.limits.offset_alignment;
+        let offset = start / align * align;
+        let bytes = (end - offset).div_ceil(4) * 4;
+        if offset + bytes > slab.size() {
+            return;
+        }
+        let vertices = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer: slab,
+            offset,
+            size: std::num::NonZeroU64::new(bytes),
+        });
         let carried = shift.and_then(|s| s.carried).unwrap_or(CarriedVelocity {
             turn: Mat3::ZERO,
             pivot: Vec3::ZERO,
@@ -467,7 +506,7 @@ impl MeshWriter {
             carry_z: carried.turn.z_axis.extend(0.0).to_array(),
             carry_pivot: carried.pivot.extend(0.0).to_array(),
             carry_along: carried.along.extend(0.0).to_array(),
-            base: first * floats + self.layout.position / 4,
+            base: ((start - offset) / 4) as u32 + self.layout.position / 4,
             stride: floats,
             normal_offset: (self.layout.normal as i64 - self.layout.position as i64) as u32 / 4,
             vertices: self.vertices,
@@ -502,16 +541,18 @@ impl MeshWriter {
                 self.params.as_entire_binding(),
                 state.as_entire_binding(),
                 self.topo.as_entire_binding(),
-                slab.as_entire_binding(),
+                vertices,
                 dead.map_or(&self.topo, |(b, _)| b).as_entire_binding(),
             ],
             self.vertices.div_ceil(64),
+            kernel.limits.groups_per_dimension,
         );
     }
 }
 
 /// One compute pass: `resources` bound in order from binding 0 to the kernel's layout, then
-/// `groups` workgroups of its pipeline.
+/// `groups` workgroups of its pipeline (split by [`flat_groups`](super::kernels::flat_groups) within `max_groups` a
+/// dimension).
 fn dispatch<const N: usize>(
     device: &wgpu::Device,
     encoder: &mut wgpu::CommandEncoder,
@@ -519,6 +560,7 @@ fn dispatch<const N: usize>(
     (layout, pipeline): (&wgpu::BindGroupLayout, &wgpu::ComputePipeline),
     resources: [wgpu::BindingResource<'_>; N],
     groups: u32,
+    max_groups: u32,
 ) {
     let entries: Vec<wgpu::BindGroupEntry<'_>> = resources
         .into_iter()
@@ -539,5 +581,5 @@ fn dispatch<const N: usize>(
     });
     pass.set_pipeline(pipeline);
     pass.set_bind_group(0, &bind_group, &[]);
-    pass.dispatch_workgroups(groups, 1, 1);
+    dispatch_flat(&mut pass, groups, max_groups);
 }

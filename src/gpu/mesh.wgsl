@@ -146,8 +146,19 @@ fn tangent(v: u32, n: vec3<f32>) -> vec4<f32> {
     return vec4<f32>(t, w);
 }
 
+// The linear index (in x) of an invocation of a 64-wide kernel dispatched over `groups`
+// workgroups: y and z > 1 only where x alone would pass the adapter's per-dimension limit
+// (`kernels::flat_groups`).
+fn flat_id(gid: vec3<u32>, groups: vec3<u32>) -> vec3<u32> {
+    return vec3<u32>(gid.x + (gid.y + gid.z * groups.y) * groups.x * 64u, 0u, 0u);
+}
+
 @compute @workgroup_size(64)
-fn write_mesh(@builtin(global_invocation_id) id: vec3<u32>) {
+fn write_mesh(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let v = id.x;
     if v >= M.vertices {
         return;

@@ -195,6 +195,9 @@ struct Member {
 /// A world and its cloths, in the world's order.
 struct WorldEntry {
     key: WorldKey,
+    /// Which world it is (a key's cloths fill several worlds where one would not fit the
+    /// device), for its staging buffers.
+    id: u64,
     world: GpuWorld,
     members: Vec<Member>,
     /// The frame's collider entities (slot → entity), for the impulses.
@@ -235,7 +238,7 @@ pub(crate) struct Readback {
     /// The mapped bytes (`None` if mapping failed).
     data: Option<Vec<u8>>,
     /// The world the staging buffer goes back to.
-    key: WorldKey,
+    world: u64,
 }
 
 #[derive(Resource, Default)]
@@ -244,6 +247,26 @@ pub(crate) struct GpuWorlds {
     writers: HashMap<Entity, WriterEntry>,
     /// Copies recorded this frame, to map once submitted.
     requested: Vec<Readback>,
+    /// The last world id given.
+    last_id: u64,
+    /// Cloths (by generation) the device cannot run, not tried again.
+    refusing: HashMap<Entity, u64>,
+    /// Refusals for the main world (sent at the next extraction): entity, generation, why.
+    refused: Vec<(Entity, u64, String)>,
+}
+
+impl GpuWorlds {
+    /// Keeps generation `generation` of `entity` off the GPU (the main world moves it to the
+    /// CPU with `why`).
+    fn refuse(&mut self, entity: Entity, generation: u64, why: String) {
+        if self.refusing.insert(entity, generation) != Some(generation) {
+            self.refused.push((entity, generation, why));
+        }
+    }
+
+    fn refuses(&self, entity: Entity, generation: u64) -> bool {
+        self.refusing.get(&entity) == Some(&generation)
+    }
 }
 
 #[derive(Resource)]
@@ -266,10 +289,75 @@ pub(crate) fn prepare_gpu_worlds(
     };
     let device = device.wgpu_device();
     let worlds = &mut *worlds;
+    // Cloths refused in an earlier generation may try again.
+    worlds.refusing.retain(|e, generation| {
+        extracted
+            .cloths
+            .iter()
+            .any(|x| x.entity == *e && x.generation == *generation)
+    });
+    // Mesh writers for the cloths on the GPU (first: a mesh the device cannot write keeps
+    // its cloth out of the worlds).
+    worlds.writers.retain(|e, _| {
+        extracted
+            .cloths
+            .iter()
+            .any(|x| x.entity == *e && x.upload.is_some())
+    });
+    for x in &extracted.cloths {
+        let Some(upload) = &x.upload else {
+            continue;
+        };
+        if worlds.refuses(x.entity, x.generation) {
+            continue;
+        }
+        let fresh = worlds
+            .writers
+            .get(&x.entity)
+            .is_none_or(|w| w.generation != x.generation);
+        if fresh {
+            match MeshWriter::new(
+                device,
+                &upload.weld,
+                &upload.drawn,
+                upload.layout,
+                upload.tangents.as_ref(),
+                upload.drawn_cloth_triangles.as_deref(),
+            ) {
+                Ok(writer) => {
+                    worlds.writers.insert(
+                        x.entity,
+                        WriterEntry {
+                            generation: x.generation,
+                            writer,
+                            mesh: upload.mesh,
+                            transform: x.transform,
+                            shift: x.shift,
+                            carried: x.carried,
+                            u16_indices: upload.u16_indices,
+                        },
+                    );
+                }
+                Err(why) => {
+                    worlds.writers.remove(&x.entity);
+                    worlds.refuse(x.entity, x.generation, why.0);
+                    continue;
+                }
+            }
+        }
+        if let Some(w) = worlds.writers.get_mut(&x.entity) {
+            w.transform = x.transform;
+            w.shift = x.shift;
+            w.carried = x.carried;
+        }
+    }
     // The wanted members per key: cloths on the GPU with their upload; cloths leaving it keep
     // their place (and upload) in the world that holds them until their last readback.
     let mut wanted: BTreeMap<WorldKey, Vec<Member>> = BTreeMap::new();
     for x in &extracted.cloths {
+        if worlds.refuses(x.entity, x.generation) {
+            continue;
+        }
         let upload = match &x.upload {
             Some(u) => u.clone(),
             None => {
@@ -303,59 +391,82 @@ pub(crate) fn prepare_gpu_worlds(
     let mut old: Vec<WorldEntry> = core::mem::take(&mut worlds.worlds);
     for (key, mut members) in wanted {
         members.sort_by_key(|m| m.entity);
-        let same = |w: &WorldEntry| {
-            w.key == key
-                && w.members.len() == members.len()
-                && w.members
-                    .iter()
-                    .zip(&members)
-                    .all(|(a, b)| a.entity == b.entity && a.generation == b.generation)
-        };
-        let entry = match old.iter().position(same) {
-            Some(i) => {
+        // The worlds that held exactly these cloths go on (one, or several where one would
+        // not fit the device).
+        let held: Vec<usize> = (0..old.len()).filter(|&i| old[i].key == key).collect();
+        let held_members: HashMap<Entity, u64> = held
+            .iter()
+            .flat_map(|&i| old[i].members.iter().map(|o| (o.entity, o.generation)))
+            .collect();
+        let same = held_members.len() == members.len()
+            && members
+                .iter()
+                .all(|m| held_members.get(&m.entity) == Some(&m.generation));
+        if same {
+            let mut by_entity: HashMap<Entity, Member> =
+                members.into_iter().map(|m| (m.entity, m)).collect();
+            for i in held.into_iter().rev() {
                 let mut e = old.swap_remove(i);
-                e.members = members;
-                e
+                for o in &mut e.members {
+                    *o = by_entity.remove(&o.entity).expect("the same members");
+                }
+                worlds.worlds.push(e);
             }
-            None => {
-                let sims: Vec<&crate::solver::Simulation> =
-                    members.iter().map(|m| &m.upload.sim).collect();
-                let Ok(mut world) = GpuWorld::new(device, &queue, &pipelines.kernels, &sims) else {
-                    continue;
-                };
-                // Cloths that go on carry their GPU state over: the same upload, or new
-                // settings made to go on from where the GPU cloth is.
-                let mut encoder =
-                    device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
-                for (i, m) in members.iter().enumerate() {
-                    let from = old.iter().find_map(|w| {
-                        w.members
-                            .iter()
-                            .position(|o| {
-                                o.entity == m.entity
-                                    && (o.generation == m.generation || m.upload.carry)
-                            })
-                            .filter(|&k| w.world.cloth_len(k) == world.cloth_len(i))
-                            .map(|k| (w, k))
-                    });
-                    if let Some((w, k)) = from {
-                        // The same upload goes on with its settle; new settings start theirs.
-                        let same = w.members[k].generation == m.generation;
-                        world.record_carry(&mut encoder, &w.world, k, i, same);
+            continue;
+        }
+        // Built again: as many worlds as the device needs, halving a group of cloths that
+        // does not fit; a cloth that does not fit alone is refused.
+        let mut groups = vec![members];
+        while let Some(members) = groups.pop() {
+            let sims: Vec<&crate::solver::Simulation> =
+                members.iter().map(|m| &m.upload.sim).collect();
+            let mut world = match GpuWorld::new(device, &queue, &pipelines.kernels, &sims) {
+                Ok(world) => world,
+                Err(why) => {
+                    if members.len() > 1 {
+                        let mut first = members;
+                        let second = first.split_off(first.len() / 2);
+                        groups.push(second);
+                        groups.push(first);
+                    } else if let Some(m) = members.first() {
+                        worlds.writers.remove(&m.entity);
+                        worlds.refuse(m.entity, m.generation, why.0);
                     }
+                    continue;
                 }
-                queue.submit([encoder.finish()]);
-                WorldEntry {
-                    key,
-                    world,
-                    members,
-                    slots: Vec::new(),
-                    stepped: false,
-                    staging: Vec::new(),
+            };
+            // Cloths that go on carry their GPU state over: the same upload, or new
+            // settings made to go on from where the GPU cloth is.
+            let mut encoder =
+                device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+            for (i, m) in members.iter().enumerate() {
+                let from = old.iter().find_map(|w| {
+                    w.members
+                        .iter()
+                        .position(|o| {
+                            o.entity == m.entity && (o.generation == m.generation || m.upload.carry)
+                        })
+                        .filter(|&k| w.world.cloth_len(k) == world.cloth_len(i))
+                        .map(|k| (w, k))
+                });
+                if let Some((w, k)) = from {
+                    // The same upload goes on with its settle; new settings start theirs.
+                    let same = w.members[k].generation == m.generation;
+                    world.record_carry(&mut encoder, &w.world, k, i, same);
                 }
             }
-        };
-        worlds.worlds.push(entry);
+            queue.submit([encoder.finish()]);
+            worlds.last_id += 1;
+            worlds.worlds.push(WorldEntry {
+                key,
+                id: worlds.last_id,
+                world,
+                members,
+                slots: Vec::new(),
+                stepped: false,
+                staging: Vec::new(),
+            });
+        }
     }
     // Prepare every world for the frame.
     let steps: Vec<StepColliders<'_>> = extracted
@@ -416,51 +527,16 @@ pub(crate) fn prepare_gpu_worlds(
             }
         }
         w.world.prepare(device, &queue, &pipelines.kernels, &frame);
+        if w.world.impulses_dropped() {
+            warn_once!(
+                "bevy_cloth: {} GPU cloth vertices against {} colliders need more impulse \
+                 slots than the GPU's buffers hold; GPU cloths push no collider while that lasts",
+                w.world.len(),
+                extracted.queue.entities.len()
+            );
+        }
         w.stepped = w.world.steps() > 0;
         w.slots.clone_from(&extracted.queue.entities);
-    }
-    // Mesh writers for the cloths on the GPU.
-    worlds.writers.retain(|e, _| {
-        extracted
-            .cloths
-            .iter()
-            .any(|x| x.entity == *e && x.upload.is_some())
-    });
-    for x in &extracted.cloths {
-        let Some(upload) = &x.upload else {
-            continue;
-        };
-        let fresh = worlds
-            .writers
-            .get(&x.entity)
-            .is_none_or(|w| w.generation != x.generation);
-        if fresh {
-            let writer = MeshWriter::new(
-                device,
-                &upload.weld,
-                &upload.drawn,
-                upload.layout,
-                upload.tangents.as_ref(),
-                upload.drawn_cloth_triangles.as_deref(),
-            );
-            worlds.writers.insert(
-                x.entity,
-                WriterEntry {
-                    generation: x.generation,
-                    writer,
-                    mesh: upload.mesh,
-                    transform: x.transform,
-                    shift: x.shift,
-                    carried: x.carried,
-                    u16_indices: upload.u16_indices,
-                },
-            );
-        }
-        if let Some(w) = worlds.writers.get_mut(&x.entity) {
-            w.transform = x.transform;
-            w.shift = x.shift;
-            w.carried = x.carried;
-        }
     }
 }
 
@@ -620,7 +696,7 @@ pub(crate) fn run_gpu_worlds(
             impulses_at,
             buffer,
             data: None,
-            key: w.key,
+            world: w.id,
         });
     }
 }
@@ -644,8 +720,8 @@ pub(crate) fn map_readbacks(mut worlds: ResMut<GpuWorlds>, channel: Res<Readback
     }
 }
 
-/// Extraction: what the GPU finished goes to the main world; staging buffers return to their
-/// worlds.
+/// Extraction: what the GPU finished, and the cloths it cannot run, go to the main world;
+/// staging buffers return to their worlds.
 pub(crate) fn send_gpu_results(
     channel: Res<ReadbackChannel>,
     mut worlds: ResMut<GpuWorlds>,
@@ -657,7 +733,7 @@ pub(crate) fn send_gpu_results(
     let mut cloths = Vec::new();
     let mut impulses = Vec::new();
     for r in receiver.try_iter() {
-        if let Some(w) = worlds.worlds.iter_mut().find(|w| w.key == r.key)
+        if let Some(w) = worlds.worlds.iter_mut().find(|w| w.id == r.world)
             && w.staging.len() < 4
         {
             w.staging.push(r.buffer.clone());
@@ -698,11 +774,13 @@ pub(crate) fn send_gpu_results(
             impulses.extend(r.colliders.iter().copied().zip(sums));
         }
     }
-    if (!cloths.is_empty() || !impulses.is_empty())
+    let refused = core::mem::take(&mut worlds.refused);
+    if (!cloths.is_empty() || !impulses.is_empty() || !refused.is_empty())
         && let Some(mut results) = main_world.get_resource_mut::<GpuClothResults>()
     {
         results.cloths.extend(cloths);
         results.impulses.extend(impulses);
+        results.refused.extend(refused);
     }
 }
 

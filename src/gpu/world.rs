@@ -28,7 +28,9 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Vec3, Vec4};
 use wgpu::util::DeviceExt;
 
-use super::kernels::{GpuKernels, GpuUnsupported, TABLE_STRIDE, WORKGROUP};
+use super::kernels::{
+    DeviceSizeLimits, GpuKernels, GpuUnsupported, TABLE_STRIDE, WORKGROUP, dispatch_flat,
+};
 use super::layout::{ClothLayout, WorldKey, WorldLayout};
 use crate::solver::collision::substep_poses;
 use crate::solver::{
@@ -237,14 +239,19 @@ enum Cmd<'k> {
     Run(&'k wgpu::ComputePipeline, u32),
 }
 
-fn replay(pass: &mut wgpu::ComputePass<'_>, group: &wgpu::BindGroup, cmds: &[Cmd<'_>]) {
+fn replay(
+    pass: &mut wgpu::ComputePass<'_>,
+    group: &wgpu::BindGroup,
+    cmds: &[Cmd<'_>],
+    max_groups: u32,
+) {
     for c in cmds {
         match c {
             Cmd::Stage(_) | Cmd::Substep => {}
             Cmd::Bind(offsets) => pass.set_bind_group(0, group, offsets),
             Cmd::Run(pipeline, groups) => {
                 pass.set_pipeline(pipeline);
-                pass.dispatch_workgroups(*groups, 1, 1);
+                dispatch_flat(pass, *groups, max_groups);
             }
         }
     }
@@ -435,6 +442,42 @@ pub(crate) fn torn_edge_tables(layout: &WorldLayout) -> Vec<Option<Arc<[[u32; 2]
         .collect()
 }
 
+/// Whether a world of `layout` fits the device: each of its buffers (name, bytes) bound
+/// whole, its regions addressed by 32-bit indices.
+///
+/// # Errors
+/// The first buffer too large, in words, with the world's size.
+fn check_sizes(
+    limits: &DeviceSizeLimits,
+    layout: &WorldLayout,
+    buffers: &[(&str, u64)],
+) -> Result<(), GpuUnsupported> {
+    let limit = limits.storage_binding.min(limits.buffer);
+    let what = match layout.cloths.len() {
+        1 => format!("a cloth of {} vertices needs", layout.n),
+        c => format!("{c} cloths of {} vertices together need", layout.n),
+    };
+    // The most workgroups a dispatch of the world takes (vertices, edges, the settling's
+    // edges; the constraint groups of a level are fewer than the vertices).
+    let items = layout.n.max(layout.edges).max(layout.settle_edges);
+    if !limits.dispatches(u64::from(items.div_ceil(WORKGROUP))) {
+        return Err(GpuUnsupported(format!(
+            "{what} {} workgroups in one dispatch, more than the adapter's {} a dimension \
+             reach",
+            items.div_ceil(WORKGROUP),
+            limits.groups_per_dimension
+        )));
+    }
+    match buffers.iter().find(|(_, bytes)| !limits.binds(*bytes)) {
+        None => Ok(()),
+        Some((name, bytes)) => Err(GpuUnsupported(format!(
+            "{what} a {name} buffer of {} MB on the GPU, more than the adapter binds ({} MB)",
+            bytes.div_ceil(1 << 20),
+            limit >> 20
+        ))),
+    }
+}
+
 fn storage_init(device: &wgpu::Device, label: &str, bytes: &[u8]) -> wgpu::Buffer {
     // Bindings may not be empty: at least one 16-byte element.
     let zero = [0u8; 16];
@@ -540,6 +583,8 @@ pub struct GpuWorld {
     step_colliders: Vec<u32>,
     collider_slots: u32,
     impulse_words: u32,
+    /// The last frame's impulses did not fit the device.
+    impulses_dropped: bool,
     /// Carries recorded for this frame: (first vertex, vertices).
     carries: Vec<(u32, u32)>,
     /// Steps that still record the settle kernels (a cloth of the world settles a settings
@@ -648,16 +693,18 @@ impl GpuWorld {
         s.frame_speed = words;
         words += c;
         s.impulse = words;
-        let limit = device.limits().max_storage_buffer_binding_size;
         let state_bytes = u64::from(r.len) * 16;
         let scratch_bytes = u64::from(words) * 4;
-        if state_bytes > limit || scratch_bytes > limit {
-            return Err(GpuUnsupported(format!(
-                "{n} vertices need storage buffers of {} MB, the adapter allows {} MB",
-                state_bytes.max(scratch_bytes) >> 20,
-                limit >> 20
-            )));
-        }
+        check_sizes(
+            &kernels.limits,
+            &layout,
+            &[
+                ("state", state_bytes),
+                ("scratch", scratch_bytes),
+                ("constraint", layout.cons.len() as u64 * 16),
+                ("topology", layout.topo.len() as u64 * 4),
+            ],
+        )?;
         let mut world = Self {
             regions: r,
             scratch_regions: s,
@@ -698,6 +745,7 @@ impl GpuWorld {
             step_colliders: Vec::new(),
             collider_slots: 0,
             impulse_words: 0,
+            impulses_dropped: false,
             carries: Vec::new(),
             settle_left: layout.settle_steps,
             settle_started: false,
@@ -947,11 +995,21 @@ impl GpuWorld {
             );
             rebind = true;
         }
-        // Impulse slots: 6 words per finish workgroup and collider slot.
-        let workgroups = self.layout.n.div_ceil(WORKGROUP);
-        let impulse_words = workgroups * slots * 6;
-        let words = u64::from(self.scratch_regions.impulse) + u64::from(impulse_words);
-        if words > self.scratch_capacity {
+        // Impulse slots: 6 words per finish workgroup and collider slot; none where they would
+        // not fit the device (the cloths then push no collider this frame).
+        let workgroups = u64::from(self.layout.n.div_ceil(WORKGROUP));
+        let wanted_words = workgroups * u64::from(slots) * 6;
+        let limits = &kernels.limits;
+        let words = u64::from(self.scratch_regions.impulse) + wanted_words;
+        self.impulses_dropped = wanted_words > 0
+            && (!limits.binds(words.next_power_of_two() * 4)
+                || !limits.dispatches(wanted_words.div_ceil(u64::from(WORKGROUP))));
+        let (slots, impulse_words) = if self.impulses_dropped {
+            (0, 0)
+        } else {
+            (slots, wanted_words as u32)
+        };
+        if words > self.scratch_capacity && !self.impulses_dropped {
             // Keep the hash and lists: copy the old scratch into the bigger one.
             let bigger = empty(device, "cloth_scratch", words.next_power_of_two() * 4, RW);
             let mut encoder =
@@ -1380,7 +1438,7 @@ impl GpuWorld {
                 label: Some("cloth_world"),
                 timestamp_writes: None,
             });
-            replay(&mut pass, bg, &cmds);
+            replay(&mut pass, bg, &cmds, kernels.limits.groups_per_dimension);
         }
         self.recorded();
     }
@@ -1436,7 +1494,12 @@ impl GpuWorld {
                     end_of_pass_write_index: Some(2 * i + 1),
                 }),
             });
-            replay(&mut pass, bg, &cmds[start..end]);
+            replay(
+                &mut pass,
+                bg,
+                &cmds[start..end],
+                kernels.limits.groups_per_dimension,
+            );
             stages.push(stage);
         }
         self.recorded();
@@ -1701,6 +1764,13 @@ impl GpuWorld {
             return TornEdges::default();
         };
         flags.edges(&self.read_bytes(device, queue, &self.scratch, flags.at, flags.bytes))
+    }
+
+    /// Whether the last prepared frame left its colliders' impulses out: the slots (six words
+    /// per 64 vertices and collider) would not fit the device's buffers.
+    #[must_use]
+    pub fn impulses_dropped(&self) -> bool {
+        self.impulses_dropped
     }
 
     /// Where the impulse slots of the last prepared frame sit in [`Self::scratch_buffer`]:

@@ -112,6 +112,15 @@ pub fn placed_grid(grid: &Grid, place: impl Fn(Vec3) -> Vec3) -> Topology {
 /// thirty times in one process it could not be loaded any more (the plugin keeps its
 /// renderer's instance for the same reason: `gpu::plugin`'s `keep_graphics_driver_loaded`).
 pub fn gpu_or_skip(test: &str) -> Option<(wgpu::Adapter, wgpu::Device, wgpu::Queue)> {
+    gpu_with_limits_or_skip(test, wgpu::Limits::default())
+}
+
+/// [`gpu_or_skip`] with a device that allows no more than `limits` (each at most what the
+/// adapter has).
+pub fn gpu_with_limits_or_skip(
+    test: &str,
+    limits: wgpu::Limits,
+) -> Option<(wgpu::Adapter, wgpu::Device, wgpu::Queue)> {
     static INSTANCE: std::sync::OnceLock<wgpu::Instance> = std::sync::OnceLock::new();
     let instance = INSTANCE.get_or_init(|| {
         wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
@@ -120,7 +129,11 @@ pub fn gpu_or_skip(test: &str) -> Option<(wgpu::Adapter, wgpu::Device, wgpu::Que
         bevy::tasks::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
             .map_err(|e| e.to_string())
             .and_then(|adapter| {
-                bevy::tasks::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default()))
+                let descriptor = wgpu::DeviceDescriptor {
+                    required_limits: limits,
+                    ..Default::default()
+                };
+                bevy::tasks::block_on(adapter.request_device(&descriptor))
                     .map(|(device, queue)| (adapter, device, queue))
                     .map_err(|e| e.to_string())
             });
@@ -145,7 +158,15 @@ pub fn gpu_or_skip(test: &str) -> Option<(wgpu::Adapter, wgpu::Device, wgpu::Que
 pub fn gpu_kernels_or_skip(
     test: &str,
 ) -> Option<(wgpu::Adapter, wgpu::Device, wgpu::Queue, GpuKernels)> {
-    let (adapter, device, queue) = gpu_or_skip(test)?;
+    gpu_kernels_with_limits_or_skip(test, wgpu::Limits::default())
+}
+
+/// [`gpu_kernels_or_skip`] on a device that allows no more than `limits`.
+pub fn gpu_kernels_with_limits_or_skip(
+    test: &str,
+    limits: wgpu::Limits,
+) -> Option<(wgpu::Adapter, wgpu::Device, wgpu::Queue, GpuKernels)> {
+    let (adapter, device, queue) = gpu_with_limits_or_skip(test, limits)?;
     GpuKernels::check_limits(&device.limits()).expect("the adapter has the limits");
     let kernels = GpuKernels::new(&device);
     Some((adapter, device, queue, kernels))

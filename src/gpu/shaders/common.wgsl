@@ -470,4 +470,9 @@ fn air_velocity_change(area: vec3<f32>, v_rel: vec3<f32>, inv_mass: f32, h: f32,
     return dv / (1.0 + m / s);
 }
 
-
+// The linear index (in x) of an invocation of a 64-wide kernel dispatched over `groups`
+// workgroups: y and z > 1 only where x alone would pass the adapter's per-dimension limit
+// (`kernels::flat_groups`).
+fn flat_id(gid: vec3<u32>, groups: vec3<u32>) -> vec3<u32> {
+    return vec3<u32>(gid.x + (gid.y + gid.z * groups.y) * groups.x * 64u, 0u, 0u);
+}

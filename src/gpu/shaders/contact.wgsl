@@ -252,7 +252,11 @@ const SC_PEND: u32 = 32u;
 // `AHEAD`), the `SC_TRI_MAX` lowest-numbered ones with their side codes. The lists are sorted,
 // so the order vertices are met in does not matter.
 @compute @workgroup_size(64)
-fn sc_query(@builtin(global_invocation_id) id: vec3<u32>) {
+fn sc_query(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let i = id.x;
     if i >= P.n {
         return;
@@ -521,7 +525,11 @@ fn sc_read(i: u32, tethers: bool) -> vec4<f32> {
 // positions (each vertex tethers itself and the vertices it reads on the fly, so no pass has
 // to come between).
 @compute @workgroup_size(64)
-fn sc_collide(@builtin(global_invocation_id) id: vec3<u32>) {
+fn sc_collide(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let i = id.x;
     if i >= P.n {
         return;
@@ -725,11 +733,17 @@ var<workgroup> imp_ang: array<vec3<f32>, 64>;
 // slots up after reading them back. Every invocation reaches every barrier.
 @compute @workgroup_size(64)
 fn finish_substep(
-    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(global_invocation_id) gid: vec3<u32>,
     @builtin(local_invocation_id) lid: vec3<u32>,
     @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
 ) {
-    let i = id.x;
+    let i = flat_id(gid, groups).x;
+    // This workgroup's impulse slots; a workgroup past the vertices (a dispatch split over more
+    // dimensions rounds up) has none and writes nothing, nor does any where the frame's
+    // impulses did not fit the device (no slots).
+    let group = wid.x + (wid.y + wid.z * groups.y) * groups.x;
+    let has_slots = group * 64u < P.n && P.collider_slots > 0u;
     var x = vec4<f32>(0.0);
     var prev = vec3<f32>(0.0);
     var free = false;
@@ -782,8 +796,8 @@ fn finish_substep(
             }
             workgroupBarrier();
         }
-        if lid.x == 0u {
-            let slot = P.impulse_at + 6u * (wid.x * P.collider_slots + c.slot.x);
+        if lid.x == 0u && has_slots {
+            let slot = P.impulse_at + 6u * (group * P.collider_slots + c.slot.x);
             var add = array<f32, 6>(
                 imp_lin[0].x, imp_lin[0].y, imp_lin[0].z,
                 imp_ang[0].x, imp_ang[0].y, imp_ang[0].z,

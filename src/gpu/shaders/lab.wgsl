@@ -7,7 +7,11 @@
 // Pins to their place at this substep with no velocity; free vertices keep a share of their
 // velocity (the cloth's `damp`) and fall.
 @compute @workgroup_size(64)
-fn lab_begin(@builtin(global_invocation_id) id: vec3<u32>) {
+fn lab_begin(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let i = id.x;
     if i >= P.n {
         return;
@@ -36,7 +40,11 @@ fn lab_begin(@builtin(global_invocation_id) id: vec3<u32>) {
 
 // The averaged position, into the substep-start region (free during the lab step).
 @compute @workgroup_size(64)
-fn lab_gather(@builtin(global_invocation_id) id: vec3<u32>) {
+fn lab_gather(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let i = id.x;
     if i >= P.n || !cloth_active(vertex_cloth(i)) {
         return;
@@ -63,7 +71,11 @@ fn lab_gather(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 @compute @workgroup_size(64)
-fn lab_apply(@builtin(global_invocation_id) id: vec3<u32>) {
+fn lab_apply(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let i = id.x;
     if i >= P.n || !cloth_active(vertex_cloth(i)) {
         return;
@@ -79,7 +91,11 @@ fn lab_apply(@builtin(global_invocation_id) id: vec3<u32>) {
 
 // End of a lab substep: free vertices' speeds clamped, substep starts = positions.
 @compute @workgroup_size(64)
-fn lab_finish(@builtin(global_invocation_id) id: vec3<u32>) {
+fn lab_finish(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let i = id.x;
     if i >= P.n {
         return;
@@ -98,7 +114,11 @@ fn lab_finish(@builtin(global_invocation_id) id: vec3<u32>) {
 // End of a lab step: the frame's largest speed and the NaN guard (the lab step keeps its
 // own velocities).
 @compute @workgroup_size(64)
-fn lab_guard(@builtin(global_invocation_id) id: vec3<u32>) {
+fn lab_guard(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let i = id.x;
     if i >= P.n {
         return;

@@ -222,8 +222,18 @@ fn solve_barrier(shared_mem: bool) {
 // parts' first iteration, then its distance colours and its hinge colours in order, each
 // colour's constraints in parallel, the colouring's leftovers one by one.
 @compute @workgroup_size(256)
-fn solve(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) li: u32) {
-    let g = L.first + wid.x;
+fn solve(
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) li: u32,
+) {
+    // One workgroup a group of the level (`kernels::flat_groups` may split them over more
+    // dimensions and round up: the whole workgroup past the level's groups returns).
+    let nth = wid.x + (wid.y + wid.z * groups.y) * groups.x;
+    if nth >= L.count {
+        return;
+    }
+    let g = L.first + nth;
     // The group's record: read-only storage at a workgroup-uniform index, so every value
     // below is uniform across the workgroup (the colour loops' barriers need that).
     var hdr: array<u32, 16>;

@@ -11,7 +11,11 @@ fn carried(at: u32, p: vec3<f32>) -> vec3<f32> {
 // the pins land on their targets at rest (CPU twin: `ClothState::teleport`). Dispatched only
 // in steps where a cloth is carried or teleports.
 @compute @workgroup_size(64)
-fn teleport(@builtin(global_invocation_id) id: vec3<u32>) {
+fn teleport(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let i = id.x;
     if i >= P.n {
         return;
@@ -97,7 +101,11 @@ fn sc_cell_size(cl: Cloth) -> f32 {
 // vertex put into its cloth's hash (a bucket list: heads hold vertex + 1, 0 ends a list).
 // Nothing here writes a position, so every vertex reads its neighbours as the step found them.
 @compute @workgroup_size(64)
-fn step_begin(@builtin(global_invocation_id) id: vec3<u32>) {
+fn step_begin(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let i = id.x;
     if i >= P.n {
         return;
@@ -132,7 +140,11 @@ fn step_begin(@builtin(global_invocation_id) id: vec3<u32>) {
 
 // Start of a frame: the impulse slots start from zero.
 @compute @workgroup_size(64)
-fn impulse_clear(@builtin(global_invocation_id) id: vec3<u32>) {
+fn impulse_clear(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     if id.x < P.impulse_slots {
         atomicStore(&scratch[P.impulse_at + id.x], 0u);
     }

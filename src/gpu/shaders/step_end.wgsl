@@ -6,7 +6,11 @@
 // (`ClothState::is_finite`: the cloth's status flags it, the host resets the cloth as the CPU
 // does), and the self-collision hash emptied for the next step.
 @compute @workgroup_size(64)
-fn step_end(@builtin(global_invocation_id) id: vec3<u32>) {
+fn step_end(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let i = id.x;
     if i >= P.n {
         return;
@@ -48,7 +52,11 @@ fn step_end(@builtin(global_invocation_id) id: vec3<u32>) {
 // rebuilds the topology and uploads it again. The tearing cloths' edges: (a, b, rest bits,
 // constraint slot), global vertices.
 @compute @workgroup_size(64)
-fn tear_check(@builtin(global_invocation_id) id: vec3<u32>) {
+fn tear_check(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let e = id.x;
     if e >= P.edges {
         return;
@@ -83,7 +91,11 @@ fn tear_check(@builtin(global_invocation_id) id: vec3<u32>) {
 // After `tear_check`: an edge whose triangles all died holds nothing from the next step on
 // (the CPU's rebuilt topology keeps no edge without a triangle).
 @compute @workgroup_size(64)
-fn tear_release(@builtin(global_invocation_id) id: vec3<u32>) {
+fn tear_release(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let e = id.x;
     if e >= P.edges {
         return;
@@ -113,7 +125,11 @@ fn tear_release(@builtin(global_invocation_id) id: vec3<u32>) {
 // `L.count` of them): its earlier positions were copied into the substep-start region; it
 // takes them with this world's inverse masses (its pins).
 @compute @workgroup_size(64)
-fn carry(@builtin(global_invocation_id) id: vec3<u32>) {
+fn carry(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     if id.x >= L.count {
         return;
     }
@@ -138,7 +154,11 @@ fn settling(c: u32) -> f32 {
 
 // The first settling step keeps each vertex's speed at its start.
 @compute @workgroup_size(64)
-fn settle_begin(@builtin(global_invocation_id) id: vec3<u32>) {
+fn settle_begin(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let i = id.x;
     if i >= P.n {
         return;
@@ -152,7 +172,11 @@ fn settle_begin(@builtin(global_invocation_id) id: vec3<u32>) {
 // A settling step's end: invocation `k` limits vertex `k`'s speed (free vertices) and takes
 // the strain of settle edge `k` into its cloth's largest (`metrics::edge_strain`).
 @compute @workgroup_size(64)
-fn settle_end(@builtin(global_invocation_id) id: vec3<u32>) {
+fn settle_end(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let k = id.x;
     if k < P.n {
         let c = vertex_cloth(k);
@@ -182,7 +206,11 @@ fn settle_end(@builtin(global_invocation_id) id: vec3<u32>) {
 
 // After `settle_end`, one invocation per cloth: the steps left and the strain kept.
 @compute @workgroup_size(64)
-fn settle_update(@builtin(global_invocation_id) id: vec3<u32>) {
+fn settle_update(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let id = flat_id(gid, groups);
     let c = id.x;
     if c >= P.cloths || !cloth_active(c) {
         return;
