@@ -706,18 +706,14 @@ fn cloth_on_colliders_matches_the_cpu() {
     let Some(g) = gpu("cloth_on_colliders_matches_the_cpu") else {
         return;
     };
-    let params = SolverParams {
-        solver: Solver::Pbd {
-            stretch: 1.0,
-            shear: 0.5,
-            bending: 0.1,
-        },
-        substeps: 6,
-        iterations: 2,
-        ..Default::default()
-    };
-    let s = sim(40, params, |p| p * 1.5 + Vec3::new(0.0, 0.45, 0.0));
-    let out = compare(&g, &[Case::new(s)], 40, 1, collider_shapes, true);
+    let out = compare(
+        &g,
+        &[Case::new(pbd_over_colliders())],
+        40,
+        1,
+        collider_shapes,
+        true,
+    );
     check(&g, "colliders", &out, true);
     eprintln!(
         "colliders: worst relative impulse difference {}, largest impulse {} N·s",
@@ -2287,14 +2283,24 @@ fn symmetric_difference(a: &[[u32; 2]], b: &[[u32; 2]]) -> Vec<[u32; 2]> {
     out
 }
 
-/// The lab solver (seed 000's Jacobi averaging: velocity keep, 32 iterations of averaged edge
-/// projections) against the CPU's `lab_step`, two substeps per step, two moving pins. Bit for
-/// bit on llvmpipe.
-#[test]
-fn the_lab_solver_matches_the_cpu() {
-    let Some(g) = gpu("the_lab_solver_matches_the_cpu") else {
-        return;
+/// A 40² PBD cloth (six substeps of two iterations) over `collider_shapes`.
+fn pbd_over_colliders() -> Simulation {
+    let params = SolverParams {
+        solver: Solver::Pbd {
+            stretch: 1.0,
+            shear: 0.5,
+            bending: 0.1,
+        },
+        substeps: 6,
+        iterations: 2,
+        ..Default::default()
     };
+    sim(40, params, |p| p * 1.5 + Vec3::new(0.0, 0.45, 0.0))
+}
+
+/// A 21² cloth on the lab solver (two substeps, 32 iterations) whose two pinned corners
+/// slide along x.
+fn lab_sliding() -> Case {
     let params = SolverParams {
         solver: Solver::Lab {
             velocity_keep: 0.99,
@@ -2308,7 +2314,18 @@ fn the_lab_solver_matches_the_cpu() {
     let start = corners(&mut s, n);
     let mut case = Case::new(s);
     case.targets = sliding(start, Vec3::X * 0.005);
-    let out = compare(&g, &[case], 40, 1, |_| Vec::new(), true);
+    case
+}
+
+/// The lab solver (seed 000's Jacobi averaging: velocity keep, 32 iterations of averaged edge
+/// projections) against the CPU's `lab_step`, two substeps per step, two moving pins. Bit for
+/// bit on llvmpipe.
+#[test]
+fn the_lab_solver_matches_the_cpu() {
+    let Some(g) = gpu("the_lab_solver_matches_the_cpu") else {
+        return;
+    };
+    let out = compare(&g, &[lab_sliding()], 40, 1, |_| Vec::new(), true);
     check(&g, "lab", &out, true);
 }
 
@@ -2333,19 +2350,15 @@ fn kernels_dispatched_over_three_dimensions_match_the_cpu() {
         return;
     };
     assert_eq!(g.device.limits().max_compute_workgroups_per_dimension, 4);
-    let params = SolverParams {
-        solver: Solver::Pbd {
-            stretch: 1.0,
-            shear: 0.5,
-            bending: 0.1,
-        },
-        substeps: 6,
-        iterations: 2,
-        ..Default::default()
-    };
     // 1 600 vertices: 25 workgroups, dispatched as 4 × 4 × 2.
-    let s = sim(40, params, |p| p * 1.5 + Vec3::new(0.0, 0.45, 0.0));
-    let out = compare(&g, &[Case::new(s)], 20, 1, collider_shapes, true);
+    let out = compare(
+        &g,
+        &[Case::new(pbd_over_colliders())],
+        20,
+        1,
+        collider_shapes,
+        true,
+    );
     check(&g, "colliders, split dispatches", &out, true);
     assert!(out.impulse_max > 1e-3, "the colliders were hardly touched");
     assert!(
@@ -2361,21 +2374,59 @@ fn kernels_dispatched_over_three_dimensions_match_the_cpu() {
         0,
         0,
     );
-    let params = SolverParams {
-        solver: Solver::Lab {
-            velocity_keep: 0.99,
-        },
-        substeps: 2,
-        iterations: 32,
-        ..Default::default()
-    };
-    let n = 21;
-    let mut s = sim(n, params, |p| p + Vec3::Y);
-    let start = corners(&mut s, n);
-    let mut case = Case::new(s);
-    case.targets = sliding(start, Vec3::X * 0.005);
-    let out = compare(&g, &[case], 40, 1, |_| Vec::new(), true);
+    let out = compare(&g, &[lab_sliding()], 40, 1, |_| Vec::new(), true);
     check(&g, "lab, split dispatches", &out, true);
+}
+
+/// A device that binds at most 1 MiB: a frame whose mesh collider's SDF grid (72³ samples,
+/// 1.4 MiB) does not fit takes no step and says why, with no validation error (a raw wgpu
+/// device panics on one); the next frame, without that collider, steps.
+#[test]
+fn a_frame_whose_inputs_do_not_fit_the_device_takes_no_step() {
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: 1 << 20,
+        ..wgpu::Limits::default()
+    };
+    let Some(g) = gpu_with_limits(
+        "a_frame_whose_inputs_do_not_fit_the_device_takes_no_step",
+        limits,
+    ) else {
+        return;
+    };
+    let n = 12;
+    let mut s = sim(n, SolverParams::default(), |p| p + Vec3::Y);
+    let start = corners(&mut s, n);
+    let mut world = GpuWorld::new(&g.device, &g.queue, &g.kernels, &[&s]).expect("it fits");
+    let (positions, indices) = common::subdivided_cube(1, 0.4, Vec3::ZERO);
+    let grid = Arc::new(SdfGrid::from_mesh(&positions, &indices, 72).unwrap());
+    assert!(
+        grid.values().len() * 4 > 1 << 20,
+        "the grid passes the limit"
+    );
+    let big = vec![Collider {
+        shape: Shape::Mesh(grid),
+        start: Pose::default(),
+        end: Pose::default(),
+        thickness: 0.01,
+        friction: 0.0,
+    }];
+    let targets = vec![vec![start]];
+    let y = |world: &GpuWorld| -> f32 {
+        let (p, _) = world.read_state(&g.device, &g.queue, 0);
+        p.iter().map(|p| p.y).sum::<f32>() / p.len() as f32
+    };
+    let before = y(&world);
+    let frame = GpuFrame::uniform(DT, 1, &big, &targets);
+    common::run_gpu_frame(&mut world, &g.device, &g.queue, &g.kernels, &frame);
+    assert_eq!(world.steps(), 0, "a frame that does not fit takes no step");
+    let why = world.inputs_too_large().expect("it says why");
+    assert!(why.contains("SDF grids"), "{why}");
+    assert_eq!(y(&world), before, "the cloth held still");
+    let frame = GpuFrame::uniform(DT, 1, &[], &targets);
+    common::run_gpu_frame(&mut world, &g.device, &g.queue, &g.kernels, &frame);
+    assert_eq!(world.steps(), 1);
+    assert!(world.inputs_too_large().is_none());
+    assert!(y(&world) < before, "the cloth fell a step");
 }
 
 /// The torn triangles a GPU cloth hides (`hide.wgsl`) against its CPU twin

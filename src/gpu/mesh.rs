@@ -551,8 +551,8 @@ impl MeshWriter {
 }
 
 /// One compute pass: `resources` bound in order from binding 0 to the kernel's layout, then
-/// `groups` workgroups of its pipeline (split by [`flat_groups`](super::kernels::flat_groups) within `max_groups` a
-/// dimension).
+/// `groups` workgroups of its pipeline (split by
+/// [`flat_groups`](super::kernels::flat_groups) within `max_groups` a dimension).
 fn dispatch<const N: usize>(
     device: &wgpu::Device,
     encoder: &mut wgpu::CommandEncoder,

@@ -527,6 +527,9 @@ pub(crate) fn prepare_gpu_worlds(
             }
         }
         w.world.prepare(device, &queue, &pipelines.kernels, &frame);
+        if let Some(why) = w.world.inputs_too_large() {
+            warn_once!("bevy_cloth: GPU cloths hold still: {why}");
+        }
         if w.world.impulses_dropped() {
             warn_once!(
                 "bevy_cloth: {} GPU cloth vertices against {} colliders need more impulse \

@@ -359,6 +359,13 @@ pub struct GpuFrame<'a> {
 }
 
 impl<'a> GpuFrame<'a> {
+    /// Whether some cloth has motion targets this frame.
+    fn any_motion(&self) -> bool {
+        self.cloths
+            .iter()
+            .any(|f| f.motion.iter().any(|m| !m.end.is_empty()))
+    }
+
     /// `steps` steps of `dt` among the same `colliders`, every cloth taking every step with
     /// `pin_targets[c]` (per step) and no teleport or air.
     #[must_use]
@@ -442,11 +449,11 @@ pub(crate) fn torn_edge_tables(layout: &WorldLayout) -> Vec<Option<Arc<[[u32; 2]
         .collect()
 }
 
-/// Whether a world of `layout` fits the device: each of its buffers (name, bytes) bound
-/// whole, its regions addressed by 32-bit indices.
+/// Whether a world of `layout` fits the device: its largest dispatch within the workgroups
+/// three dimensions reach, each of its buffers (name, bytes) made and bound whole.
 ///
 /// # Errors
-/// The first buffer too large, in words, with the world's size.
+/// The first limit passed, in words, with the world's size.
 fn check_sizes(
     limits: &DeviceSizeLimits,
     layout: &WorldLayout,
@@ -476,6 +483,32 @@ fn check_sizes(
             limit >> 20
         ))),
     }
+}
+
+/// The capacity a buffer of `needed` elements of `size` bytes grows to: the next power of
+/// two, or `needed` itself where that would not bind.
+fn grown(needed: u64, size: u64, limits: &DeviceSizeLimits) -> u64 {
+    let doubled = needed.next_power_of_two();
+    if limits.binds(doubled * size) {
+        doubled
+    } else {
+        needed
+    }
+}
+
+/// The mesh colliders' grids of `steps`, each once, in the order they first appear.
+fn frame_grids<'a, 's: 'a>(
+    steps: impl Iterator<Item = &'a StepColliders<'s>>,
+) -> Vec<Arc<SdfGrid>> {
+    let mut grids: Vec<Arc<SdfGrid>> = Vec::new();
+    for c in steps.flat_map(|s| s.colliders) {
+        if let Shape::Mesh(g) = &c.shape
+            && !grids.iter().any(|x| Arc::ptr_eq(x, g))
+        {
+            grids.push(g.clone());
+        }
+    }
+    grids
 }
 
 fn storage_init(device: &wgpu::Device, label: &str, bytes: &[u8]) -> wgpu::Buffer {
@@ -585,6 +618,8 @@ pub struct GpuWorld {
     impulse_words: u32,
     /// The last frame's impulses did not fit the device.
     impulses_dropped: bool,
+    /// Why the last frame took no step: its inputs did not fit the device.
+    inputs_too_large: Option<String>,
     /// Carries recorded for this frame: (first vertex, vertices).
     carries: Vec<(u32, u32)>,
     /// Steps that still record the settle kernels (a cloth of the world settles a settings
@@ -746,6 +781,7 @@ impl GpuWorld {
             collider_slots: 0,
             impulse_words: 0,
             impulses_dropped: false,
+            inputs_too_large: None,
             carries: Vec::new(),
             settle_left: layout.settle_steps,
             settle_started: false,
@@ -962,12 +998,22 @@ impl GpuWorld {
             .cloths
             .iter()
             .any(|f| (f.first_step as usize) < frame.steps.len());
-        let frame_steps: &[StepColliders<'_>] = if taken { &frame.steps } else { &[] };
+        let lab = self.layout.lab;
+        // A frame whose inputs the device cannot bind takes no step either: its cloths hold
+        // still, and `inputs_too_large` says why.
+        self.inputs_too_large = None;
+        if taken && let Err(why) = self.check_inputs(&kernels.limits, frame) {
+            self.inputs_too_large = Some(why);
+        }
+        let frame_steps: &[StepColliders<'_>] = if taken && self.inputs_too_large.is_none() {
+            &frame.steps
+        } else {
+            &[]
+        };
         let steps = frame_steps.len() as u32;
         let substeps = self.layout.substeps;
         let dt = frame.dt;
         let h = dt / substeps as f32;
-        let lab = self.layout.lab;
         let mut rebind = false;
         // Colliders (the lab solver ignores them, as on the CPU).
         let no_colliders = StepColliders::default();
@@ -986,7 +1032,11 @@ impl GpuWorld {
             .map(|s| (s.colliders.len() as u64) * u64::from(substeps))
             .sum();
         if total_poses > self.collider_capacity {
-            self.collider_capacity = total_poses.next_power_of_two();
+            self.collider_capacity = grown(
+                total_poses,
+                size_of::<GpuCollider>() as u64,
+                &kernels.limits,
+            );
             self.colliders = empty(
                 device,
                 "cloth_colliders",
@@ -1002,7 +1052,7 @@ impl GpuWorld {
         let limits = &kernels.limits;
         let words = u64::from(self.scratch_regions.impulse) + wanted_words;
         self.impulses_dropped = wanted_words > 0
-            && (!limits.binds(words.next_power_of_two() * 4)
+            && (!limits.binds(words * 4)
                 || !limits.dispatches(wanted_words.div_ceil(u64::from(WORKGROUP))));
         let (slots, impulse_words) = if self.impulses_dropped {
             (0, 0)
@@ -1011,13 +1061,14 @@ impl GpuWorld {
         };
         if words > self.scratch_capacity && !self.impulses_dropped {
             // Keep the hash and lists: copy the old scratch into the bigger one.
-            let bigger = empty(device, "cloth_scratch", words.next_power_of_two() * 4, RW);
+            let capacity = grown(words, 4, limits);
+            let bigger = empty(device, "cloth_scratch", capacity * 4, RW);
             let mut encoder =
                 device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
             encoder.copy_buffer_to_buffer(&self.scratch, 0, &bigger, 0, self.scratch.size());
             queue.submit([encoder.finish()]);
             self.scratch = bigger;
-            self.scratch_capacity = words.next_power_of_two();
+            self.scratch_capacity = capacity;
             rebind = true;
         }
         // Tables.
@@ -1051,17 +1102,11 @@ impl GpuWorld {
         // backstop radius in `w`, end with the max distance, backstop normal and distance), when
         // some cloth has them this frame (not on the lab solver, which ignores them as on the
         // CPU).
-        let any_motion = !lab
-            && frame
-                .cloths
-                .iter()
-                .any(|f| f.motion.iter().any(|m| !m.end.is_empty()));
+        let any_motion = !lab && frame.any_motion();
         let motion_n = if any_motion { self.layout.n } else { 0 };
-        let motion_at_vec4s = u64::from(steps) * u64::from(pins + CLOTH_STEP_VEC4S * cloths as u32);
-        let frame_vec4s =
-            motion_at_vec4s + u64::from(steps) * u64::from(MOTION_VEC4S) * u64::from(motion_n);
+        let (motion_at_vec4s, frame_vec4s) = self.frame_vec4s(steps, any_motion);
         if frame_vec4s.max(1) > self.frame_capacity {
-            self.frame_capacity = frame_vec4s.next_power_of_two();
+            self.frame_capacity = grown(frame_vec4s, 16, &kernels.limits);
             self.frame = empty(device, "cloth_frame", self.frame_capacity * 16, RO);
             rebind = true;
         }
@@ -1325,14 +1370,7 @@ impl GpuWorld {
         queue: &wgpu::Queue,
         steps: &[&StepColliders<'_>],
     ) -> bool {
-        let mut grids: Vec<Arc<SdfGrid>> = Vec::new();
-        for c in steps.iter().flat_map(|s| s.colliders) {
-            if let Shape::Mesh(g) = &c.shape
-                && !grids.iter().any(|x| Arc::ptr_eq(x, g))
-            {
-                grids.push(g.clone());
-            }
-        }
+        let grids = frame_grids(steps.iter().copied());
         let same = grids.len() == self.sdf_grids.len()
             && grids
                 .iter()
@@ -1352,6 +1390,64 @@ impl GpuWorld {
         }
         self.sdf_grids = grids;
         true
+    }
+
+    /// Vec4s of the frame buffer for `steps` steps: where the motion targets start (after
+    /// each step's pin targets and cloth records), and in all.
+    fn frame_vec4s(&self, steps: u32, any_motion: bool) -> (u64, u64) {
+        let cloths = self.layout.cloths.len() as u64;
+        let per_step = u64::from(self.layout.pins) + u64::from(CLOTH_STEP_VEC4S) * cloths;
+        let motion_at = u64::from(steps) * per_step;
+        let motion_n = if any_motion { self.layout.n } else { 0 };
+        let motion = u64::from(steps) * u64::from(MOTION_VEC4S) * u64::from(motion_n);
+        (motion_at, motion_at + motion)
+    }
+
+    /// Whether the device binds what `frame`'s steps bring: the colliders' poses, their
+    /// meshes' SDF grids, the pins' targets and the motion targets.
+    ///
+    /// # Errors
+    /// The first input too large, in words.
+    fn check_inputs(&self, limits: &DeviceSizeLimits, frame: &GpuFrame<'_>) -> Result<(), String> {
+        let lab = self.layout.lab;
+        let steps = frame.steps.len() as u32;
+        let colliders = if lab {
+            0
+        } else {
+            frame.steps.iter().map(|s| s.colliders.len() as u64).sum()
+        };
+        let poses = colliders * u64::from(self.layout.substeps);
+        let grids: u64 = if lab {
+            0
+        } else {
+            frame_grids(frame.steps.iter())
+                .iter()
+                .map(|g| g.values().len() as u64 * 4)
+                .sum()
+        };
+        let (_, vec4s) = self.frame_vec4s(steps, !lab && frame.any_motion());
+        let inputs = [
+            ("collider poses", poses * size_of::<GpuCollider>() as u64),
+            ("mesh colliders' SDF grids", grids),
+            ("pin and motion targets", vec4s * 16),
+        ];
+        match inputs.iter().find(|(_, bytes)| !limits.binds(*bytes)) {
+            None => Ok(()),
+            Some((what, bytes)) => Err(format!(
+                "a frame of {steps} steps for {} GPU cloth vertices needs {} MB of {what}, \
+                 more than the adapter binds ({} MB)",
+                self.layout.n,
+                bytes.div_ceil(1 << 20),
+                limits.storage_binding.min(limits.buffer) >> 20
+            )),
+        }
+    }
+
+    /// Why the last prepared frame took no step though its cloths were to: its inputs did
+    /// not fit the device's buffers (`None` when they did).
+    #[must_use]
+    pub fn inputs_too_large(&self) -> Option<&str> {
+        self.inputs_too_large.as_deref()
     }
 
     /// Where a collider's grid sits in the SDF buffer: samples along x, y, z and the first.
