@@ -259,8 +259,8 @@ impl MeshWriter {
     /// ([`Self::record_hide_torn`]) before the host's tear.
     ///
     /// # Errors
-    /// The mesh needs a table larger than the device can bind, or more vertices than a
-    /// 32-bit index reaches.
+    /// The mesh needs a table larger than the device can bind, or more workgroups than a
+    /// dispatch reaches.
     pub fn new(
         device: &wgpu::Device,
         weld: &Weld,
@@ -329,9 +329,8 @@ impl MeshWriter {
             });
         let limits = DeviceSizeLimits::of(device);
         let bytes = topo.len() as u64 * 4;
-        let floats = u64::from(layout.stride / 4) * m as u64;
         let groups = (m as u64).max(drawn.len() as u64 / 3).div_ceil(64);
-        if !limits.binds(bytes) || floats > u64::from(u32::MAX) || !limits.dispatches(groups) {
+        if !limits.binds(bytes) || !limits.dispatches(groups) {
             return Err(GpuUnsupported(format!(
                 "its mesh of {m} vertices and {} triangles is too large to be written on the \
                  GPU (a {} MB table; the adapter binds {} MB and dispatches {} workgroups a \

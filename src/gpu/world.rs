@@ -999,11 +999,20 @@ impl GpuWorld {
             .iter()
             .any(|f| (f.first_step as usize) < frame.steps.len());
         let lab = self.layout.lab;
+        // Motion targets and mesh colliders' grids (each once), which the lab solver ignores
+        // as the CPU's does.
+        let any_motion = !lab && frame.any_motion();
+        let mut grids = if taken && !lab {
+            frame_grids(frame.steps.iter())
+        } else {
+            Vec::new()
+        };
         // A frame whose inputs the device cannot bind takes no step either: its cloths hold
         // still, and `inputs_too_large` says why.
         self.inputs_too_large = None;
-        if taken && let Err(why) = self.check_inputs(&kernels.limits, frame) {
+        if taken && let Err(why) = self.check_inputs(&kernels.limits, frame, &grids, any_motion) {
             self.inputs_too_large = Some(why);
+            grids.clear();
         }
         let frame_steps: &[StepColliders<'_>] = if taken && self.inputs_too_large.is_none() {
             &frame.steps
@@ -1021,7 +1030,7 @@ impl GpuWorld {
             .iter()
             .map(|s| if lab { &no_colliders } else { s })
             .collect();
-        rebind |= self.upload_grids(device, queue, &step_colliders);
+        rebind |= self.upload_grids(device, queue, grids);
         let slots = step_colliders
             .iter()
             .flat_map(|s| (0..s.colliders.len()).map(|k| s.slot(k) + 1))
@@ -1102,7 +1111,6 @@ impl GpuWorld {
         // backstop radius in `w`, end with the max distance, backstop normal and distance), when
         // some cloth has them this frame (not on the lab solver, which ignores them as on the
         // CPU).
-        let any_motion = !lab && frame.any_motion();
         let motion_n = if any_motion { self.layout.n } else { 0 };
         let (motion_at_vec4s, frame_vec4s) = self.frame_vec4s(steps, any_motion);
         if frame_vec4s.max(1) > self.frame_capacity {
@@ -1362,15 +1370,14 @@ impl GpuWorld {
         self.impulse_words = impulse_words;
     }
 
-    /// Makes the SDF buffer hold every grid the frame's colliders use (unless it already
+    /// Makes the SDF buffer hold `grids`, those the frame's colliders use (unless it already
     /// does). Returns whether the buffer was replaced.
     fn upload_grids(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        steps: &[&StepColliders<'_>],
+        grids: Vec<Arc<SdfGrid>>,
     ) -> bool {
-        let grids = frame_grids(steps.iter().copied());
         let same = grids.len() == self.sdf_grids.len()
             && grids
                 .iter()
@@ -1404,28 +1411,26 @@ impl GpuWorld {
     }
 
     /// Whether the device binds what `frame`'s steps bring: the colliders' poses, their
-    /// meshes' SDF grids, the pins' targets and the motion targets.
+    /// meshes' SDF `grids`, the pins' targets and (with `any_motion`) the motion targets.
     ///
     /// # Errors
     /// The first input too large, in words.
-    fn check_inputs(&self, limits: &DeviceSizeLimits, frame: &GpuFrame<'_>) -> Result<(), String> {
-        let lab = self.layout.lab;
+    fn check_inputs(
+        &self,
+        limits: &DeviceSizeLimits,
+        frame: &GpuFrame<'_>,
+        grids: &[Arc<SdfGrid>],
+        any_motion: bool,
+    ) -> Result<(), String> {
         let steps = frame.steps.len() as u32;
-        let colliders = if lab {
+        let colliders = if self.layout.lab {
             0
         } else {
             frame.steps.iter().map(|s| s.colliders.len() as u64).sum()
         };
         let poses = colliders * u64::from(self.layout.substeps);
-        let grids: u64 = if lab {
-            0
-        } else {
-            frame_grids(frame.steps.iter())
-                .iter()
-                .map(|g| g.values().len() as u64 * 4)
-                .sum()
-        };
-        let (_, vec4s) = self.frame_vec4s(steps, !lab && frame.any_motion());
+        let grids: u64 = grids.iter().map(|g| g.values().len() as u64 * 4).sum();
+        let (_, vec4s) = self.frame_vec4s(steps, any_motion);
         let inputs = [
             ("collider poses", poses * size_of::<GpuCollider>() as u64),
             ("mesh colliders' SDF grids", grids),
