@@ -57,10 +57,41 @@ fn sc_near_corner_reach(i: u32, k0: u32, k1: u32, k2: u32) -> f32 {
     return SC_NEAR_CORNER_THICKNESS * sqrt(near2);
 }
 
+// `self_collision::rest_triangle_reach`: SC_NEAR_CORNER_THICKNESS times the rest distance
+// from vertex `i` to the triangle of corners `k0`, `k1`, `k2` (to its nearest point).
+fn sc_rest_triangle_reach(i: u32, k0: u32, k1: u32, k2: u32) -> f32 {
+    let r = state[P.rest_at + i].xyz;
+    let d = sc_closest(r, state[P.rest_at + k0].xyz, state[P.rest_at + k1].xyz, state[P.rest_at + k2].xyz) - r;
+    return SC_NEAR_CORNER_THICKNESS * sqrt(dot(d, d));
+}
+
+// `MeshLists::joined_to_all`: whether an edge joins vertex `i` to each of the corners `k0`,
+// `k1`, `k2`, none of which is `i` (over the triangles through `i`; a closed cloth has none
+// torn).
+fn sc_joined_to_all(i: u32, k0: u32, k1: u32, k2: u32) -> bool {
+    var f0 = false;
+    var f1 = false;
+    var f2 = false;
+    for (var k = topo[P.tri_offsets_at + i]; k < topo[P.tri_offsets_at + i + 1u]; k++) {
+        let t = P.tri_at + 3u * topo[k];
+        let a = topo[t];
+        let b = topo[t + 1u];
+        let c = topo[t + 2u];
+        f0 = f0 || a == k0 || b == k0 || c == k0;
+        f1 = f1 || a == k1 || b == k1 || c == k1;
+        f2 = f2 || a == k2 || b == k2 || c == k2;
+    }
+    return f0 && f1 && f2 && i != k0 && i != k1 && i != k2;
+}
+
 // `self_collision::capped_thickness`: the thickness vertex `i` of a closed cloth keeps from
 // the triangle of corners `k0`, `k1`, `k2`: `thickness`, at most
-// `SC_NEAR_CORNER_THICKNESS` times its rest distance from the nearest corner.
+// `SC_NEAR_CORNER_THICKNESS` times its rest distance from the nearest corner, or from the
+// triangle itself where an edge joins `i` to each corner.
 fn sc_capped_thickness(thickness: f32, i: u32, k0: u32, k1: u32, k2: u32) -> f32 {
+    if sc_joined_to_all(i, k0, k1, k2) {
+        return min(thickness, sc_rest_triangle_reach(i, k0, k1, k2));
+    }
     return min(thickness, sc_near_corner_reach(i, k0, k1, k2));
 }
 

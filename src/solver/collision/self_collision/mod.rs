@@ -256,6 +256,10 @@ struct MeshLists {
     /// Offsets per vertex into `first_tris`, then triangle indices.
     first_start: Vec<u32>,
     first_tris: Vec<u32>,
+    /// Offsets per vertex into `vertex_tris`, then every triangle through it, in triangle
+    /// order (the GPU's `tri_offsets`): which vertices an edge joins it to.
+    vertex_start: Vec<u32>,
+    vertex_tris: Vec<u32>,
     longest: f32,
 }
 
@@ -288,6 +292,50 @@ impl MeshLists {
             self.first_tris[*at as usize] = ti as u32;
             *at += 1;
         }
+        // Every triangle through each vertex, in triangle order.
+        self.vertex_start.clear();
+        self.vertex_start.resize(n + 1, 0);
+        for t in triangles.iter().filter(|t| valid(t)) {
+            for &k in t {
+                self.vertex_start[k as usize + 1] += 1;
+            }
+        }
+        for k in 0..n {
+            self.vertex_start[k + 1] += self.vertex_start[k];
+        }
+        self.vertex_tris.resize(self.vertex_start[n] as usize, 0);
+        let mut fill = self.vertex_start.clone();
+        for (ti, t) in triangles.iter().enumerate().filter(|(_, t)| valid(t)) {
+            for &k in t {
+                let at = &mut fill[k as usize];
+                self.vertex_tris[*at as usize] = ti as u32;
+                *at += 1;
+            }
+        }
+    }
+
+    /// Whether an edge joins vertex `i` to each corner of `tri`, none of which is `i`: then
+    /// `i` and the triangle are as rigid as a tetrahedron of edges, and `i` stays as far from
+    /// the triangle's plane as it rests ([`capped_thickness`]). The GPU's `sc_joined_to_all`.
+    fn joined_to_all(&self, i: usize, tri: [u32; 3]) -> bool {
+        let (Some(&start), Some(&end)) = (self.vertex_start.get(i), self.vertex_start.get(i + 1))
+        else {
+            return false;
+        };
+        let mut found = [false; 3];
+        for &t in self
+            .vertex_tris
+            .get(start as usize..end as usize)
+            .unwrap_or(&[])
+        {
+            let Some(own) = self.triangles.get(t as usize) else {
+                continue;
+            };
+            for (f, k) in found.iter_mut().zip(tri) {
+                *f |= own.contains(&k);
+            }
+        }
+        found == [true; 3] && !tri.contains(&(i as u32))
     }
 }
 

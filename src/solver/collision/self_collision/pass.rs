@@ -2,6 +2,7 @@
 //! the reactions of the triangles it presses on (Jacobi, in fixed point for the reactions).
 
 use super::*;
+use crate::solver::collision::sdf::closest_point_on_triangle;
 
 /// Per vertex, the reactions a pass's vertex–triangle contacts give the triangles' corners,
 /// summed in fixed point ([`REACTION_UNITS`] a metre) so that the sum does not depend on the
@@ -294,13 +295,43 @@ fn near_corner_reach(rest: &[Vec3], i: usize, tri: [u32; 3]) -> Option<f32> {
     Some(NEAR_CORNER_THICKNESS * near2.sqrt())
 }
 
+/// [`NEAR_CORNER_THICKNESS`] times the rest distance from vertex `i` to triangle `tri` (to
+/// its nearest point, `rest`: the rest positions); `None` without them. At most
+/// [`near_corner_reach`]: the nearest point may lie on an edge or inside the triangle.
+#[inline]
+fn rest_triangle_reach(rest: &[Vec3], i: usize, tri: [u32; 3]) -> Option<f32> {
+    let &rest_i = rest.get(i)?;
+    let corners = [
+        *rest.get(tri[0] as usize)?,
+        *rest.get(tri[1] as usize)?,
+        *rest.get(tri[2] as usize)?,
+    ];
+    let d = closest_point_on_triangle(rest_i, &corners) - rest_i;
+    Some(NEAR_CORNER_THICKNESS * d.dot(d).sqrt())
+}
+
 /// The thickness vertex `i` of a closed cloth (`rest`: its rest positions) keeps from
 /// triangle `tri`: `thickness`, at most [`NEAR_CORNER_THICKNESS`] times its rest distance
-/// from the triangle's nearest corner; `thickness` without `rest`. The GPU's
-/// `sc_capped_thickness`.
+/// from the triangle's nearest corner, or from the triangle itself ([`rest_triangle_reach`])
+/// where an edge joins `i` to each of its corners (`joined`); `thickness` without `rest`.
+/// The GPU's `sc_capped_thickness`.
+///
+/// No vertex gets farther from a plane through a corner than from that corner. Where edges
+/// join the vertex to all three corners, the four are as rigid as a tetrahedron and the
+/// vertex stays about as far from the triangle as it rests: a cone's tip (joined to every
+/// vertex of its base) rests 0.5 m over the base's triangles of a 0.5 m Bevy `Cone`, and held
+/// 0.9 of its distance from their nearest corner (0.52 m) off them, it was pushed up every
+/// substep and pulled back by its edges: with self-collision the cone flew about the floor at
+/// 11–28 m/s (docs/experiments.md). From the triangle everywhere, creases of the closed
+/// cube and torus of `tests/self_collision.rs` ended crossed or kept moving more often.
 #[inline]
-fn capped_thickness(thickness: f32, rest: &[Vec3], i: usize, tri: [u32; 3]) -> f32 {
-    near_corner_reach(rest, i, tri).map_or(thickness, |reach| thickness.min(reach))
+fn capped_thickness(thickness: f32, rest: &[Vec3], i: usize, tri: [u32; 3], joined: bool) -> f32 {
+    let reach = if joined {
+        rest_triangle_reach(rest, i, tri)
+    } else {
+        near_corner_reach(rest, i, tri)
+    };
+    reach.map_or(thickness, |reach| thickness.min(reach))
 }
 
 /// One self-collision pass (Jacobi): every vertex sums its corrections from its touching
@@ -345,6 +376,7 @@ pub(crate) fn self_collide(
         .planes(triangles, read, &mut scratch.pass_planes, par);
     scratch.reactions.reset(n);
     let listed = &scratch.listed;
+    let mesh = &scratch.mesh;
     let planes = &scratch.pass_planes;
     let active = &scratch.active;
     let reactions = &scratch.reactions;
@@ -409,7 +441,13 @@ pub(crate) fn self_collide(
                 };
                 let code = slot & 3;
                 let thickness = match near_corner {
-                    NearCorner::Capped => capped_thickness(triangle_params.thickness, rest, i, tri),
+                    NearCorner::Capped => capped_thickness(
+                        triangle_params.thickness,
+                        rest,
+                        i,
+                        tri,
+                        mesh.joined_to_all(i, tri),
+                    ),
                     NearCorner::Thickness | NearCorner::Depenetration => triangle_params.thickness,
                 };
                 let meet = || match near_corner {
