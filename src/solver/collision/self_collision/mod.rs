@@ -316,7 +316,7 @@ impl MeshLists {
 
     /// Whether an edge joins vertex `i` to each corner of `tri`, none of which is `i`: then
     /// `i` and the triangle are as rigid as a tetrahedron of edges, and `i` stays as far from
-    /// the triangle's plane as it rests ([`capped_thickness`]). The GPU's `sc_joined_to_all`.
+    /// the triangle's plane as it rests (`pass::capped_thickness`). The GPU's `sc_joined_to_all`.
     fn joined_to_all(&self, i: usize, tri: [u32; 3]) -> bool {
         let (Some(&start), Some(&end)) = (self.vertex_start.get(i), self.vertex_start.get(i + 1))
         else {
