@@ -9,7 +9,8 @@ use super::ClothError;
 use super::ClothTorn;
 use crate::foundation::EntityName;
 use crate::solver::{
-    Carry, MeshBinding, Simulation, Weld, WindField, max_stretch, ray_hit, teleport_offset,
+    Carry, MeshBinding, Simulation, Weld, WindField, max_stretch, max_stretch_beyond, ray_hit,
+    teleport_offset,
 };
 
 /// The running simulation of a cloth entity, inserted by the plugin on its first step.
@@ -189,11 +190,18 @@ impl ClothSim {
         }
         let span = core::mem::take(&mut self.since_look);
         let topology = self.sim.topology();
-        let stretch = max_stretch(
-            &self.sim.state().positions,
-            topology.edges(),
-            topology.short_rest_edge(),
-        );
+        let positions = &self.sim.state().positions;
+        // A skinned cloth is measured against its skin: an animation (or a skin's weights
+        // blending between bones) may stretch its edges itself, which no setting fixes.
+        let stretch = match self.sim.motion_targets() {
+            Some(skin) => max_stretch_beyond(
+                positions,
+                skin.end,
+                topology.edges(),
+                topology.short_rest_edge(),
+            ),
+            None => max_stretch(positions, topology.edges(), topology.short_rest_edge()),
+        };
         self.stretched_for = if stretch > OVERSTRETCH {
             self.stretched_for + span
         } else {
@@ -227,7 +235,9 @@ impl ClothSim {
     }
 
     /// Whether the cloth has been overstretched: its visible edges (a modelling tool's tiny
-    /// detail edges left out) pulled past twice their rest length ([`OVERSTRETCH`]) for
+    /// detail edges left out) pulled past twice their rest length ([`OVERSTRETCH`]; a
+    /// skinned cloth's, [`ClothSkinning`](super::ClothSkinning), past twice the longer of
+    /// that and their length on the skin) for
     /// [`OVERSTRETCH_SECONDS`] of game time, which a fine cloth hanging from a few pins does
     /// at the default 10 substeps (a 64² grid from two corners: its corners stretch 3–5 fold).
     /// It was logged once as a warning naming the remedies (`ClothTethers`, more substeps, more

@@ -60,6 +60,34 @@ pub fn max_stretch(positions: &[Vec4], edges: &[Edge], min_rest: f32) -> f32 {
         .fold(0.0, f32::max)
 }
 
+/// [`max_stretch`] against the longer of each edge's rest length and its length in
+/// `reference` (a skin's targets, which an animation may stretch): how far the cloth is
+/// pulled beyond what it is made to follow. A `reference` of another length than
+/// `positions` is not one: plain [`max_stretch`].
+#[must_use]
+pub fn max_stretch_beyond(
+    positions: &[Vec4],
+    reference: &[Vec4],
+    edges: &[Edge],
+    min_rest: f32,
+) -> f32 {
+    if reference.len() != positions.len() {
+        return max_stretch(positions, edges, min_rest);
+    }
+    let length = |p: &[Vec4], e: &Edge| p[e.v[0] as usize].xyz().distance(p[e.v[1] as usize].xyz());
+    edges
+        .iter()
+        .filter(|e| e.rest > f32::EPSILON && e.rest >= min_rest)
+        .filter_map(|e| {
+            let len = length(positions, e);
+            let skin = length(reference, e);
+            // Not `max`: a skin length that is not finite leaves the rest length.
+            let long = if skin > e.rest { skin } else { e.rest };
+            len.is_finite().then_some(len / long - 1.0)
+        })
+        .fold(0.0, f32::max)
+}
+
 /// Mean and largest distance between two sets of positions of the same length.
 #[must_use]
 pub fn position_distance(a: &[Vec4], b: &[Vec4]) -> (f32, f32) {
@@ -86,6 +114,27 @@ mod tests {
             rest,
             kind: EdgeKind::Stretch,
         }
+    }
+
+    /// Against a skin that stretches an edge, only what the cloth is pulled beyond the skin
+    /// counts; a skin shorter than the rest (or not finite) leaves the rest length.
+    #[test]
+    fn max_stretch_beyond_a_skin_counts_what_the_skin_does_not_stretch() {
+        let p = |x: f32| Vec3::new(x, 0.0, 0.0).extend(0.0);
+        let edges = [edge(0, 1, 1.0), edge(1, 2, 1.0)];
+        // Now 3 and 1.5 long.
+        let positions = [p(0.0), p(3.0), p(4.5)];
+        // The skin: the first edge 3 long (as the cloth), the second 0.5.
+        let skin = [p(0.0), p(3.0), p(3.5)];
+        assert!((max_stretch(&positions, &edges, 0.0) - 2.0).abs() < 1e-6);
+        assert!((max_stretch_beyond(&positions, &skin, &edges, 0.0) - 0.5).abs() < 1e-6);
+        // The skin stretched as far as the cloth: nothing beyond it.
+        let skin = [p(0.0), p(3.0), p(4.5)];
+        assert_eq!(max_stretch_beyond(&positions, &skin, &edges, 0.0), 0.0);
+        // A skin that is not one, or not finite, is the rest.
+        let nan = [p(0.0), p(f32::NAN), p(4.5)];
+        assert!((max_stretch_beyond(&positions, &nan, &edges, 0.0) - 2.0).abs() < 1e-6);
+        assert!((max_stretch_beyond(&positions, &skin[..2], &edges, 0.0) - 2.0).abs() < 1e-6);
     }
 
     #[test]

@@ -81,7 +81,7 @@ pub use mesh::{
     MeshAttributes, MeshBinding, MeshShading, Topology, TopologyError, TopologyOptions, Weld,
     bend_angle, dihedral_angle, dihedral_weight, hinge_coefficients, hinge_curvature,
 };
-pub use metrics::{StrainStats, edge_strain, max_stretch, position_distance};
+pub use metrics::{StrainStats, edge_strain, max_stretch, max_stretch_beyond, position_distance};
 pub use parallel::{Parallel, Serial, Workers};
 pub use scene::HangingCloth;
 pub use step::{
