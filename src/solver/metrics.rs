@@ -48,16 +48,7 @@ pub fn edge_strain(positions: &[Vec4], edges: &[Edge]) -> StrainStats {
 /// `min_rest` leaves them out.
 #[must_use]
 pub fn max_stretch(positions: &[Vec4], edges: &[Edge], min_rest: f32) -> f32 {
-    edges
-        .iter()
-        .filter(|e| e.rest > f32::EPSILON && e.rest >= min_rest)
-        .filter_map(|e| {
-            let len = positions[e.v[0] as usize]
-                .xyz()
-                .distance(positions[e.v[1] as usize].xyz());
-            len.is_finite().then_some(len / e.rest - 1.0)
-        })
-        .fold(0.0, f32::max)
+    stretch_over(positions, edges, min_rest, |e| e.rest)
 }
 
 /// [`max_stretch`] against the longer of each edge's rest length and its length in
@@ -74,16 +65,34 @@ pub fn max_stretch_beyond(
     if reference.len() != positions.len() {
         return max_stretch(positions, edges, min_rest);
     }
-    let length = |p: &[Vec4], e: &Edge| p[e.v[0] as usize].xyz().distance(p[e.v[1] as usize].xyz());
+    stretch_over(positions, edges, min_rest, |e| {
+        let skin = length(reference, e);
+        // Not `max`: a skin length that is not finite leaves the rest length.
+        if skin > e.rest { skin } else { e.rest }
+    })
+}
+
+/// The length of `e` in `positions`.
+fn length(positions: &[Vec4], e: &Edge) -> f32 {
+    positions[e.v[0] as usize]
+        .xyz()
+        .distance(positions[e.v[1] as usize].xyz())
+}
+
+/// The largest `length / against(edge) − 1` over the edges resting at least `min_rest` (and
+/// longer than `f32::EPSILON`) whose length is finite; 0 when none is stretched.
+fn stretch_over(
+    positions: &[Vec4],
+    edges: &[Edge],
+    min_rest: f32,
+    against: impl Fn(&Edge) -> f32,
+) -> f32 {
     edges
         .iter()
         .filter(|e| e.rest > f32::EPSILON && e.rest >= min_rest)
         .filter_map(|e| {
             let len = length(positions, e);
-            let skin = length(reference, e);
-            // Not `max`: a skin length that is not finite leaves the rest length.
-            let long = if skin > e.rest { skin } else { e.rest };
-            len.is_finite().then_some(len / long - 1.0)
+            len.is_finite().then(|| len / against(e) - 1.0)
         })
         .fold(0.0, f32::max)
 }
