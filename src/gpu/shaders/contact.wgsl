@@ -84,8 +84,8 @@ fn sc_joined_to_all(i: u32, k0: u32, k1: u32, k2: u32) -> bool {
     return f0 && f1 && f2 && i != k0 && i != k1 && i != k2;
 }
 
-// `self_collision::capped_thickness`: the thickness vertex `i` of a closed cloth keeps from
-// the triangle of corners `k0`, `k1`, `k2`: `thickness`, at most
+// `thickness.min(self_collision::triangle_cap(..))`: the thickness vertex `i` of a closed
+// cloth keeps from the triangle of corners `k0`, `k1`, `k2`: `thickness`, at most
 // `SC_NEAR_CORNER_THICKNESS` times its rest distance from the nearest corner, or from the
 // triangle itself where an edge joins `i` to each corner.
 fn sc_capped_thickness(thickness: f32, i: u32, k0: u32, k1: u32, k2: u32) -> f32 {

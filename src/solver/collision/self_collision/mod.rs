@@ -158,6 +158,12 @@ pub struct SelfCollisionScratch {
     listed: Listed,
     /// The listed triangles' [`Plane`]s at the current pass's start, in triangle order.
     pass_planes: Vec<Plane>,
+    /// A closed cloth's: per vertex, for each of its listed triangles (in its slots' places),
+    /// the most it keeps off the triangle ([`pass::triangle_cap`]), which depends on the mesh
+    /// alone: made by a step's first pass, read by every pass after it.
+    caps: Vec<f32>,
+    /// Whether `caps` holds the current lists' (the query clears it).
+    caps_ready: bool,
 }
 
 /// A set of triangles as bits, with the rank of each member.
@@ -316,7 +322,7 @@ impl MeshLists {
 
     /// Whether an edge joins vertex `i` to each corner of `tri`, none of which is `i`: then
     /// `i` and the triangle are as rigid as a tetrahedron of edges, and `i` stays as far from
-    /// the triangle's plane as it rests (`pass::capped_thickness`). The GPU's `sc_joined_to_all`.
+    /// the triangle's plane as it rests (`pass::triangle_cap`). The GPU's `sc_joined_to_all`.
     fn joined_to_all(&self, i: usize, tri: [u32; 3]) -> bool {
         let (Some(&start), Some(&end)) = (self.vertex_start.get(i), self.vertex_start.get(i + 1))
         else {

@@ -251,7 +251,7 @@ pub(crate) enum NearCorner {
     Thickness,
     /// A closed cloth ([`Topology::is_closed`](crate::solver::Topology::is_closed)): the
     /// thickness capped at [`NEAR_CORNER_THICKNESS`] times the rest distance from the
-    /// triangle's nearest corner ([`capped_thickness`]).
+    /// triangle's nearest corner ([`triangle_cap`]).
     Capped,
     /// An open cloth of even edges: the whole thickness against what the pair closed within
     /// the substep, but an overlap older than the substep undone only up to
@@ -310,11 +310,11 @@ fn rest_triangle_reach(rest: &[Vec3], i: usize, tri: [u32; 3]) -> Option<f32> {
     Some(NEAR_CORNER_THICKNESS * d.dot(d).sqrt())
 }
 
-/// The thickness vertex `i` of a closed cloth (`rest`: its rest positions) keeps from
-/// triangle `tri`: `thickness`, at most [`NEAR_CORNER_THICKNESS`] times its rest distance
-/// from the triangle's nearest corner, or from the triangle itself ([`rest_triangle_reach`])
-/// where an edge joins `i` to each of its corners (`joined`); `thickness` without `rest`.
-/// The GPU's `sc_capped_thickness`.
+/// The most vertex `i` of a closed cloth (`rest`: its rest positions) keeps off triangle
+/// `tri` (its thickness there is the smaller of this and its own): [`NEAR_CORNER_THICKNESS`]
+/// times its rest distance from the triangle's nearest corner, or from the triangle itself
+/// ([`rest_triangle_reach`]) where an edge joins `i` to each of its corners (`joined`);
+/// infinite without `rest`. The GPU's `sc_capped_thickness`, which takes the smaller.
 ///
 /// No vertex gets farther from a plane through a corner than from that corner. Where edges
 /// join the vertex to all three corners, the four are as rigid as a tetrahedron and the
@@ -324,14 +324,55 @@ fn rest_triangle_reach(rest: &[Vec3], i: usize, tri: [u32; 3]) -> Option<f32> {
 /// substep and pulled back by its edges: with self-collision the cone flew about the floor at
 /// 11–28 m/s (docs/experiments.md). From the triangle everywhere, creases of the closed
 /// cube and torus of `tests/self_collision.rs` ended crossed or kept moving more often.
+///
+/// It depends on the mesh alone, so a step makes it once per listed triangle
+/// ([`fill_caps`]): made in every pass, it and the joined test were a third of a crumpled
+/// closed cube's self-collision (docs/performance.md).
 #[inline]
-fn capped_thickness(thickness: f32, rest: &[Vec3], i: usize, tri: [u32; 3], joined: bool) -> f32 {
+pub(super) fn triangle_cap(rest: &[Vec3], i: usize, tri: [u32; 3], joined: bool) -> f32 {
     let reach = if joined {
         rest_triangle_reach(rest, i, tri)
     } else {
         near_corner_reach(rest, i, tri)
     };
-    reach.map_or(thickness, |reach| thickness.min(reach))
+    reach.unwrap_or(f32::INFINITY)
+}
+
+/// Every listed triangle's [`triangle_cap`] into `scratch.caps` (slot for slot), unless the
+/// current lists' are there already; runs of vertices in parallel.
+fn fill_caps(
+    scratch: &mut SelfCollisionScratch,
+    rest: &[Vec3],
+    triangles: &[[u32; 3]],
+    par: &impl Parallel,
+) {
+    if scratch.caps_ready {
+        return;
+    }
+    let n = scratch.triangle_count.len();
+    scratch.caps.resize(n * MAX_SELF_TRIANGLES, f32::INFINITY);
+    let (tc, tl, mesh) = (&scratch.triangle_count, &scratch.triangles, &scratch.mesh);
+    let chunk = chunk_for(n, par.threads());
+    let mut runs: Vec<(usize, &mut [f32])> = scratch
+        .caps
+        .chunks_mut(chunk * MAX_SELF_TRIANGLES)
+        .enumerate()
+        .map(|(k, caps)| (k * chunk, caps))
+        .collect();
+    par.for_each_mut(&mut runs, |(first, caps)| {
+        for (k, caps) in caps.chunks_mut(MAX_SELF_TRIANGLES).enumerate() {
+            let i = *first + k;
+            let count = tc[i] as usize;
+            let slots = &tl[i * MAX_SELF_TRIANGLES..i * MAX_SELF_TRIANGLES + count];
+            for (cap, &slot) in caps.iter_mut().zip(slots) {
+                let t = ((slot & !BESIDE) >> 2) as usize;
+                *cap = triangles.get(t).map_or(f32::INFINITY, |&tri| {
+                    triangle_cap(rest, i, tri, mesh.joined_to_all(i, tri))
+                });
+            }
+        }
+    });
+    scratch.caps_ready = true;
 }
 
 /// One self-collision pass (Jacobi): every vertex sums its corrections from its touching
@@ -369,6 +410,9 @@ pub(crate) fn self_collide(
     if scratch.neighbour_count.len() != n || scratch.triangle_count.len() != n {
         return;
     }
+    if near_corner == NearCorner::Capped {
+        fill_caps(scratch, rest, triangles, par);
+    }
     let read: &[Vec4] = pos;
     let before: &[Vec4] = prev;
     scratch
@@ -376,7 +420,7 @@ pub(crate) fn self_collide(
         .planes(triangles, read, &mut scratch.pass_planes, par);
     scratch.reactions.reset(n);
     let listed = &scratch.listed;
-    let mesh = &scratch.mesh;
+    let caps = &scratch.caps;
     let planes = &scratch.pass_planes;
     let active = &scratch.active;
     let reactions = &scratch.reactions;
@@ -432,7 +476,8 @@ pub(crate) fn self_collide(
                 }
             }
             let count = tc[i] as usize;
-            for &slot in &tl[i * MAX_SELF_TRIANGLES..i * MAX_SELF_TRIANGLES + count] {
+            let slots = i * MAX_SELF_TRIANGLES..i * MAX_SELF_TRIANGLES + count;
+            for (&slot, s) in tl[slots.clone()].iter().zip(slots) {
                 let t = ((slot & !BESIDE) >> 2) as usize;
                 let (Some(&tri), Some(plane)) =
                     (triangles.get(t), listed.rank(t).and_then(|k| planes.get(k)))
@@ -441,13 +486,9 @@ pub(crate) fn self_collide(
                 };
                 let code = slot & 3;
                 let thickness = match near_corner {
-                    NearCorner::Capped => capped_thickness(
-                        triangle_params.thickness,
-                        rest,
-                        i,
-                        tri,
-                        mesh.joined_to_all(i, tri),
-                    ),
+                    NearCorner::Capped => triangle_params
+                        .thickness
+                        .min(caps.get(s).copied().unwrap_or(f32::INFINITY)),
                     NearCorner::Thickness | NearCorner::Depenetration => triangle_params.thickness,
                 };
                 let meet = || match near_corner {

@@ -693,6 +693,7 @@ impl SelfCollisionScratch {
         par: &impl Parallel,
     ) {
         let n = pos.len();
+        self.caps_ready = false;
         self.mesh.update(rest, triangles, par);
         // The grid's cells from the thickest vertex's radius (scales only on uneven meshes).
         let thickest = thickness * scales.iter().copied().fold(1.0, f32::max);
@@ -852,5 +853,6 @@ pub(crate) fn find_self_collision_candidates(
         scratch.triangle_count.resize(pos.len(), 0);
         scratch.active.clear();
         scratch.listed.set(Vec::new());
+        scratch.caps_ready = false;
     }
 }
