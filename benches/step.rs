@@ -1,16 +1,22 @@
 //! Criterion benchmarks of one 1/60 s solver step on the trade-off scene (1 m², 1 kg, two
 //! corner pins), serial and on a task pool with one thread per core; the solvers and tethers
-//! at 64²; 64 cloths of 16² against one of 128² (`step_many`); a step of a sleeping cloth.
+//! at 64²; 64 cloths of 16² against one of 128² (`step_many`); a step of a sleeping cloth;
+//! and self-collision's densest case, a closed cube crumpled on the floor.
 //!
 //! `cargo bench --bench step`
 
 use std::hint::black_box;
 
+use bevy::math::{Quat, Vec3};
 use bevy_cloth::solver::{
-    BendingSolve, DEFAULT_BENDING_COMPLIANCE, Environment, Features, HangingCloth, ManyItem,
-    Serial, Simulation, Sleep, Solver, SolverParams, TetherParams, Workers, step_many,
+    BendingSolve, Collider, DEFAULT_BENDING_COMPLIANCE, Environment, Features, HangingCloth,
+    ManyItem, Pose, SelfCollision, Serial, Shape, Simulation, Sleep, Solver, SolverParams,
+    TetherParams, Topology, TopologyOptions, Workers, step_many,
 };
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+
+#[path = "../tests/common/mod.rs"]
+mod common;
 
 fn scene(n: u32, solver: Solver, substeps: u32, bending_solve: BendingSolve) -> Simulation {
     let mut scene = HangingCloth::new(n);
@@ -144,6 +150,52 @@ fn bench(c: &mut Criterion) {
     assert!(sim.is_sleeping(), "the 64² cloth did not come to rest");
     g.bench_function("asleep", |b| {
         b.iter(|| sim.step(black_box(1.0 / 60.0), &par))
+    });
+    g.finish();
+    // Self-collision's densest case: a closed cube of 24 × 24 quads a face (0.8 m, 3 458
+    // vertices, its default thickness) dropped tilted onto the floor, two seconds on: it lies
+    // flattened in two layers a thickness apart, every vertex with a list (about 37 triangles
+    // and 20 vertices).
+    let mut g = c.benchmark_group("self_collision");
+    g.sample_size(10);
+    let (mut positions, indices) = common::subdivided_cube(24, 0.8, Vec3::ZERO);
+    let tilt = Quat::from_rotation_z(0.3) * Quat::from_rotation_x(0.2);
+    for p in &mut positions {
+        *p = tilt * *p + Vec3::Y * 1.5;
+    }
+    let topology =
+        Topology::from_triangles(&positions, None, &indices, TopologyOptions::default()).unwrap();
+    let thickness = topology.default_self_collision_thickness();
+    let n = topology.vertex_count();
+    let params = SolverParams {
+        sleep: Sleep::NEVER,
+        ..Default::default()
+    };
+    let mut sim = Simulation::new(topology, &vec![0.5 / n as f32; n], params).unwrap();
+    sim.set_features(Features {
+        self_collision: Some(SelfCollision {
+            thickness,
+            friction: 0.3,
+        }),
+        ..Features::default()
+    })
+    .unwrap();
+    let floor = [Collider {
+        shape: Shape::Plane,
+        start: Pose::at(Vec3::ZERO),
+        end: Pose::at(Vec3::ZERO),
+        thickness: 0.005,
+        friction: 0.6,
+    }];
+    let env = Environment {
+        colliders: &floor,
+        ..Environment::default()
+    };
+    for _ in 0..120 {
+        sim.step_in(1.0 / 60.0, &env, &par);
+    }
+    g.bench_function("crumpled_cube_24", |b| {
+        b.iter(|| sim.step_in(black_box(1.0 / 60.0), &env, &par))
     });
     g.finish();
 }
