@@ -9,9 +9,9 @@ use std::hint::black_box;
 
 use bevy::math::{Quat, Vec3};
 use bevy_cloth::solver::{
-    BendingSolve, Collider, DEFAULT_BENDING_COMPLIANCE, Environment, Features, HangingCloth,
-    ManyItem, Pose, SelfCollision, Serial, Shape, Simulation, Sleep, Solver, SolverParams,
-    TetherParams, Topology, TopologyOptions, Workers, step_many,
+    BendingSolve, DEFAULT_BENDING_COMPLIANCE, Environment, Features, HangingCloth, ManyItem,
+    Serial, Simulation, Sleep, Solver, SolverParams, TetherParams, Topology, TopologyOptions,
+    Workers, step_many,
 };
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 
@@ -172,21 +172,8 @@ fn bench(c: &mut Criterion) {
         ..Default::default()
     };
     let mut sim = Simulation::new(topology, &vec![0.5 / n as f32; n], params).unwrap();
-    sim.set_features(Features {
-        self_collision: Some(SelfCollision {
-            thickness,
-            friction: 0.3,
-        }),
-        ..Features::default()
-    })
-    .unwrap();
-    let floor = [Collider {
-        shape: Shape::Plane,
-        start: Pose::at(Vec3::ZERO),
-        end: Pose::at(Vec3::ZERO),
-        thickness: 0.005,
-        friction: 0.6,
-    }];
+    common::self_colliding(&mut sim, thickness);
+    let floor = [common::floor()];
     let env = Environment {
         colliders: &floor,
         ..Environment::default()

@@ -985,19 +985,6 @@ fn self_collision_of_an_uneven_cloth_matches_the_cpu_twin() {
     folded_cloth_self_collides(&g, Some(1.0), true, "uneven self-collision", 4, 30);
 }
 
-/// Switches self-collision on for `s`, `thickness` thick with friction 0.3 (nothing else).
-fn self_colliding(s: &mut Simulation, thickness: f32) {
-    s.set_features(Features {
-        self_collision: Some(SelfCollision {
-            thickness,
-            friction: 0.3,
-        }),
-        tethers: None,
-        tear_threshold: None,
-    })
-    .unwrap();
-}
-
 /// Frames the folded cloths are compared over.
 const FOLDED_FRAMES: usize = 45;
 
@@ -1040,7 +1027,7 @@ fn folded_cloth(spacings: Option<f32>, uneven: bool) -> (Simulation, Vec<Collide
     let thickness = spacings.map_or(s.topology().thickest_self_collision(), |k| {
         k * 1.2 / (n - 1) as f32
     });
-    self_colliding(&mut s, thickness);
+    common::self_colliding(&mut s, thickness);
     let shapes = vec![
         Collider::fixed(
             Shape::Sphere { radius: 0.12 },
@@ -1147,7 +1134,7 @@ fn tilted_closed_cube() -> Simulation {
     assert!(bevy_cloth::solver::NEAR_CORNER_THICKNESS * t.short_rest_edge() < thickness);
     let masses = vec![0.5 / placed.len() as f32; placed.len()];
     let mut s = Simulation::new(t, &masses, SolverParams::default()).unwrap();
-    self_colliding(&mut s, thickness);
+    common::self_colliding(&mut s, thickness);
     s
 }
 
@@ -1228,7 +1215,7 @@ fn self_collision_of_a_cone_caps_its_tip_from_its_base_as_on_the_cpu() {
     );
     let masses = vec![0.2 / placed.len() as f32; placed.len()];
     let mut s = Simulation::new(t, &masses, SolverParams::default()).unwrap();
-    self_colliding(&mut s, thickness);
+    common::self_colliding(&mut s, thickness);
     on_the_ground_as_on_the_cpu(&g, s, "cone");
 }
 

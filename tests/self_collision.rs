@@ -27,18 +27,6 @@ fn free_cloth(grid: Grid, friction: f32) -> Simulation {
     scene.build().expect("a valid cloth")
 }
 
-/// Switches self-collision on for `sim`, `thickness` thick with friction 0.3.
-fn self_colliding(sim: &mut Simulation, thickness: f32) {
-    sim.set_features(Features {
-        self_collision: Some(SelfCollision {
-            thickness,
-            friction: 0.3,
-        }),
-        ..Features::default()
-    })
-    .unwrap();
-}
-
 /// Steps `sim` among `colliders` for `steps` steps; returns the crossings at the end and the
 /// most seen after any step.
 fn run(
@@ -62,16 +50,6 @@ fn run(
         "positions stay finite"
     );
     (sim.self_crossings(), most)
-}
-
-fn floor() -> Collider {
-    Collider {
-        shape: Shape::Plane,
-        start: Pose::at(Vec3::ZERO),
-        end: Pose::at(Vec3::ZERO),
-        thickness: 0.005,
-        friction: 0.6,
-    }
 }
 
 /// A 1 m square stood on its edge and spun about the vertical: it twists as it collapses and
@@ -150,7 +128,7 @@ fn ends_apart(label: &str, sim: &mut Simulation, colliders: &[Collider], steps: 
 
 #[test]
 fn a_crumpled_cloth_never_passes_through_itself() {
-    ends_apart("crumpled", &mut crumpled(), &[floor()], 240);
+    ends_apart("crumpled", &mut crumpled(), &[common::floor()], 240);
 }
 
 /// A crumpled pile comes to rest and sleeps within seconds, as it does without
@@ -162,7 +140,7 @@ fn a_crumpled_cloth_never_passes_through_itself() {
 fn a_crumpled_pile_comes_to_rest_and_sleeps() {
     let mut sim = free_cloth(Grid::new(30, 30, 1.0, 1.0), 0.6);
     stand_and_spin(&mut sim);
-    let floor = [floor()];
+    let floor = [common::floor()];
     let par = Workers::new(1);
     let energy = sim.params().sleep.energy;
     let (mut last_energy, mut slept) = (f32::NAN, None);
@@ -207,7 +185,7 @@ fn a_crumpled_pile_comes_to_rest_and_sleeps() {
 #[test]
 fn a_cloth_folded_three_times_over_a_bar_keeps_its_layers_apart() {
     let (mut sim, bar) = folded_over_a_bar();
-    ends_apart("folded", &mut sim, &[bar, floor()], 300);
+    ends_apart("folded", &mut sim, &[bar, common::floor()], 300);
 }
 
 /// A 1 × 2 m strip folded over a half circle, its lower part on the floor and its upper part
@@ -251,7 +229,7 @@ fn a_layer_thrown_onto_the_cloth_lands_on_it() {
     ends_apart(
         "thrown at 10 m/s",
         &mut thrown_onto_itself(0.3, 10.0),
-        &[floor()],
+        &[common::floor()],
         120,
     );
 }
@@ -276,13 +254,18 @@ fn the_thickest_layers_a_cloth_takes_hold_too() {
     };
     let mut sim = crumpled();
     let t = thickest(&mut sim);
-    ends_apart(&format!("crumpled, {t} m thick"), &mut sim, &[floor()], 240);
+    ends_apart(
+        &format!("crumpled, {t} m thick"),
+        &mut sim,
+        &[common::floor()],
+        240,
+    );
     let (mut sim, bar) = folded_over_a_bar();
     let t = thickest(&mut sim);
     ends_apart(
         &format!("folded, {t} m thick"),
         &mut sim,
-        &[bar, floor()],
+        &[bar, common::floor()],
         300,
     );
 }
@@ -316,9 +299,14 @@ fn an_uneven_cloth_crumpled_keeps_its_layers_apart() {
         ..SolverParams::default()
     };
     let mut sim = Simulation::new(topology, &masses, params).unwrap();
-    self_colliding(&mut sim, thickness);
+    common::self_colliding(&mut sim, thickness);
     stand_and_spin(&mut sim);
-    ends_apart(&format!("uneven ({spread:.2})"), &mut sim, &[floor()], 240);
+    ends_apart(
+        &format!("uneven ({spread:.2})"),
+        &mut sim,
+        &[common::floor()],
+        240,
+    );
 }
 
 /// A skirt (the `make_character` example's: a tube of 12 rings of 32 vertices, a
@@ -360,7 +348,7 @@ fn a_skirt_hung_by_its_waist_keeps_its_shape_at_the_default_thickness() {
         target: rest[v as usize],
     });
     sim.state_mut().set_pins(waist).unwrap();
-    self_colliding(&mut sim, thickness);
+    common::self_colliding(&mut sim, thickness);
     let mut stretched = 0.0f32;
     let mut most = 0;
     for _ in 0..300 {
@@ -382,10 +370,10 @@ fn a_skirt_hung_by_its_waist_keeps_its_shape_at_the_default_thickness() {
 fn without_self_collision_the_same_scenes_cross() {
     let mut sim = crumpled();
     sim.set_features(Features::default()).unwrap();
-    let (_, most_crumpled) = run(&mut sim, &[floor()], 240, &Serial);
+    let (_, most_crumpled) = run(&mut sim, &[common::floor()], 240, &Serial);
     let (mut sim, bar) = folded_over_a_bar();
     sim.set_features(Features::default()).unwrap();
-    let (_, most_folded) = run(&mut sim, &[bar, floor()], 300, &Serial);
+    let (_, most_folded) = run(&mut sim, &[bar, common::floor()], 300, &Serial);
     println!("off: crumpled at most {most_crumpled}, folded at most {most_folded}");
     assert!(most_crumpled > 0 && most_folded > 0);
 }
@@ -403,10 +391,10 @@ fn self_collision_is_the_same_on_any_thread_count() {
             .collect::<Vec<_>>()
     };
     let one = run_on(&|sim| {
-        run(sim, &[floor()], 60, &Serial);
+        run(sim, &[common::floor()], 60, &Serial);
     });
     let four = run_on(&|sim| {
-        run(sim, &[floor()], 60, &Workers::new(3));
+        run(sim, &[common::floor()], 60, &Workers::new(3));
     });
     assert!(one == four, "positions differ between 1 and 4 threads");
 }
@@ -448,7 +436,7 @@ fn a_bevy_cone_with_self_collision_comes_to_rest_on_the_floor() {
             ..Features::default()
         })
         .unwrap();
-        let floor = [floor()];
+        let floor = [common::floor()];
         let (mut centre_speed, mut late) = (0.0f32, 0.0f32);
         for k in 0..600 {
             let env = Environment {
@@ -545,9 +533,9 @@ fn closed_shapes_with_self_collision_come_to_rest() {
                 };
                 let mut sim = Simulation::new(topology.clone(), &vec![0.5 / n as f32; n], params)
                     .expect("a valid cloth");
-                self_colliding(&mut sim, thickness);
+                common::self_colliding(&mut sim, thickness);
                 assert!(sim.batches().symmetric_sweeps(), "{name} sweeps both ways");
-                let floor = [floor()];
+                let floor = [common::floor()];
                 let mut late = 0.0f32;
                 for k in 0..600 {
                     let env = Environment {

@@ -843,3 +843,27 @@ pub fn welded(mesh: &Mesh, offset: Vec3) -> (Vec<Vec3>, Vec<u32>) {
         .collect();
     (welded, indices)
 }
+
+/// Switches self-collision on for `sim`, `thickness` thick with friction 0.3 (nothing else).
+pub fn self_colliding(sim: &mut bevy_cloth::solver::Simulation, thickness: f32) {
+    sim.set_features(bevy_cloth::solver::Features {
+        self_collision: Some(bevy_cloth::solver::SelfCollision {
+            thickness,
+            friction: 0.3,
+        }),
+        ..bevy_cloth::solver::Features::default()
+    })
+    .unwrap();
+}
+
+/// The ground: a plane through the origin facing up, 5 mm thick, friction 0.6.
+pub fn floor() -> bevy_cloth::solver::Collider {
+    use bevy_cloth::solver::Pose;
+    bevy_cloth::solver::Collider {
+        shape: bevy_cloth::solver::Shape::Plane,
+        start: Pose::at(Vec3::ZERO),
+        end: Pose::at(Vec3::ZERO),
+        thickness: 0.005,
+        friction: 0.6,
+    }
+}
