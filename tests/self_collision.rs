@@ -399,6 +399,33 @@ fn self_collision_is_the_same_on_any_thread_count() {
     assert!(one == four, "positions differ between 1 and 4 threads");
 }
 
+/// Steps `sim` on the floor for ten seconds at 60 steps a second on `threads` threads; after
+/// step `k` calls `each(k, mean, fastest)` with the cloth's mean velocity and the speed of
+/// its fastest vertex relative to that mean.
+fn ten_seconds_on_the_floor(
+    sim: &mut Simulation,
+    threads: usize,
+    mut each: impl FnMut(usize, Vec3, f32),
+) {
+    let floor = [common::floor()];
+    let par = Workers::new(threads);
+    for k in 0..600 {
+        let env = Environment {
+            colliders: &floor,
+            wind: None,
+            time: k as f64 / 60.0,
+        };
+        sim.step_in(1.0 / 60.0, &env, &par);
+        let v = &sim.state().velocities;
+        let mean = v.iter().map(|v| v.xyz()).sum::<Vec3>() / v.len() as f32;
+        let fastest = v
+            .iter()
+            .map(|v| (v.xyz() - mean).length())
+            .fold(0.0, f32::max);
+        each(k, mean, fastest);
+    }
+}
+
 /// Bevy's `Cone` mesh (a fan of long triangles from the tip to a ring, the base a fan of
 /// chords from one ring vertex) at 32 and 64 segments, tilted and dropped on the floor with
 /// self-collision at its default thickness (the mean rest edge, 0.34–0.35 m on this 0.5 m
@@ -436,28 +463,15 @@ fn a_bevy_cone_with_self_collision_comes_to_rest_on_the_floor() {
             ..Features::default()
         })
         .unwrap();
-        let floor = [common::floor()];
         let (mut centre_speed, mut late) = (0.0f32, 0.0f32);
-        for k in 0..600 {
-            let env = Environment {
-                colliders: &floor,
-                wind: None,
-                time: k as f64 / 60.0,
-            };
-            sim.step_in(1.0 / 60.0, &env, &Workers::new(2));
-            let v = &sim.state().velocities;
-            let mean = v.iter().map(|v| v.xyz()).sum::<Vec3>() / n as f32;
+        ten_seconds_on_the_floor(&mut sim, 2, |k, mean, fastest| {
             if k >= 60 {
                 centre_speed = centre_speed.max(mean.length());
             }
             if k >= 360 {
-                let fastest = v
-                    .iter()
-                    .map(|v| (v.xyz() - mean).length())
-                    .fold(0.0, f32::max);
                 late = late.max(fastest);
             }
-        }
+        });
         let top = sim
             .state()
             .positions
@@ -535,27 +549,13 @@ fn closed_shapes_with_self_collision_come_to_rest() {
                     .expect("a valid cloth");
                 common::self_colliding(&mut sim, thickness);
                 assert!(sim.batches().symmetric_sweeps(), "{name} sweeps both ways");
-                let floor = [common::floor()];
+                // The fastest vertex relative to the mean, each step from the seventh second.
                 let mut late = 0.0f32;
-                for k in 0..600 {
-                    let env = Environment {
-                        colliders: &floor,
-                        wind: None,
-                        time: k as f64 / 60.0,
-                    };
-                    sim.step_in(1.0 / 60.0, &env, &Workers::new(1));
-                    // The fastest vertex relative to the mean, each step from the seventh
-                    // second.
+                ten_seconds_on_the_floor(&mut sim, 1, |k, _, fastest| {
                     if k >= 360 {
-                        let v = &sim.state().velocities;
-                        let mean = v.iter().map(|v| v.xyz()).sum::<Vec3>() / n as f32;
-                        let fastest = v
-                            .iter()
-                            .map(|v| (v.xyz() - mean).length())
-                            .fold(0.0, f32::max);
                         late = late.max(fastest);
                     }
-                }
+                });
                 let crossings = sim.self_crossings();
                 println!(
                     "{name} from {height} m, air {air}: {late} m/s at most after 6 s, \
