@@ -172,9 +172,12 @@ pub struct ClothSelfCollision {
     /// [`MAX_SELF_COLLISION_EDGES`](crate::solver::MAX_SELF_COLLISION_EDGES) mean rest edge
     /// is used (more is brought down to that, with a warning): layers thicker than an edge
     /// pass through each other where the cloth crumples. For a thicker layer, a coarser mesh.
-    /// On a low-poly model (tens to hundreds of vertices) the mean edge is a large part of it
-    /// and holds its layers farther apart than its shape allows, which can pump it to tens of
-    /// metres a second: set about 1–2 % of the model's size (README, *Limits*).
+    /// On an open mesh the default is also at most half the narrowest gap across its rest
+    /// shape ([`REST_GAP_THICKNESS`](crate::solver::REST_GAP_THICKNESS): a sleeve's width, the
+    /// side beyond a right-angled crease), so that its layers are not held farther apart than
+    /// its shape allows. On a low-poly model (tens to hundreds of vertices) the mean edge is
+    /// still a large part of it, and some keep moving at a few metres a second: set about
+    /// 1–2 % of the model's size (README, *Limits*).
     pub thickness: Option<f32>,
     /// Friction between touching parts of the cloth (Coulomb, 0 by default). The
     /// `self_collision` example's strip settles within three seconds at 0 and moved for about

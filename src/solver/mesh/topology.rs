@@ -11,7 +11,7 @@ use glam::{Vec2, Vec3};
 use super::hinge::{bend_angle, dihedral_weight, hinge_coefficients};
 use crate::solver::limits::{
     DEFAULT_SHORT_EDGE_THICKNESS, EVEN_EDGE_SPREAD, MAX_COORDINATE, MAX_TRIANGLES, MAX_VERTICES,
-    SHORT_EDGE_THICKNESS,
+    REST_GAP_IGNORED, REST_GAP_THICKNESS, SHORT_EDGE_THICKNESS,
 };
 
 /// What a distance edge resists.
@@ -245,6 +245,28 @@ pub struct Topology {
     /// Every edge lies between exactly two triangles.
     closed: bool,
     options: TopologyOptions,
+    /// [`RestGaps`] of the rest shape, made when first asked for.
+    rest_gaps: LazyGaps,
+}
+
+/// The narrowest gaps across a rest shape ([`Topology::narrowest_rest_gap`]): as they are,
+/// and each over its vertex's triangle scale (what the default thickness is capped by).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct RestGaps {
+    narrowest: f32,
+    scaled: f32,
+}
+
+/// [`RestGaps`], made once when first asked for: they depend on the rest shape alone, which
+/// the other fields already say, so two topologies compare equal whether or not either has
+/// made them.
+#[derive(Clone, Debug, Default)]
+struct LazyGaps(std::sync::OnceLock<RestGaps>);
+
+impl PartialEq for LazyGaps {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 impl Topology {
@@ -468,6 +490,7 @@ impl Topology {
             skipped_triangles: 0,
             closed,
             options,
+            rest_gaps: LazyGaps::default(),
         }
     }
 
@@ -509,6 +532,12 @@ impl Topology {
             self.options,
         );
         t.skipped_triangles = self.skipped_triangles;
+        // Removing triangles only widens the gaps across the rest shape, so the ones made
+        // before the tear still bound the thickness (a cloth tearing every frame would
+        // otherwise make them again every frame).
+        if let Some(&gaps) = self.rest_gaps.0.get() {
+            let _ = t.rest_gaps.0.set(gaps);
+        }
         t
     }
 
@@ -597,14 +626,61 @@ impl Topology {
     /// [`DEFAULT_SHORT_EDGE_THICKNESS`]
     /// short edges. A mesh of uneven edges keeps its mean edge: each vertex scales it
     /// ([`Self::self_collision_scales`]). 0 without edges.
+    ///
+    /// An open mesh's is also at most [`REST_GAP_THICKNESS`] of the narrowest gap across its
+    /// rest shape ([`Self::narrowest_rest_gap`]; on uneven meshes each vertex's gap over its
+    /// triangle scale), so that at rest it touches none of its own layers: a sleeve or a
+    /// low-poly model's part whose walls or creases rest closer than its edges are long gets
+    /// a thinner layer; a flat sheet keeps the edge rule. A closed mesh keeps it too: its
+    /// contacts are capped pair by pair from the rest shape instead
+    /// ([`NEAR_CORNER_THICKNESS`](crate::solver::NEAR_CORNER_THICKNESS)).
     #[must_use]
     pub fn default_self_collision_thickness(&self) -> f32 {
+        let edges = self.edge_thickness();
+        if self.closed {
+            return edges;
+        }
+        edges.min(REST_GAP_THICKNESS * self.rest_gaps(edges).scaled)
+    }
+
+    /// The default thickness from the edges alone (before the rest-gap cap).
+    fn edge_thickness(&self) -> f32 {
         if self.edge_spread > EVEN_EDGE_SPREAD {
             self.mean_edge
         } else {
             self.mean_edge
                 .min(DEFAULT_SHORT_EDGE_THICKNESS * self.short_edge)
         }
+    }
+
+    /// The narrowest gap across the rest shape that bounds the default self-collision
+    /// thickness: the smallest rest distance from a vertex to the plane of a triangle it rests
+    /// over (its projection inside the triangle or on its edges, the vertex not one of its
+    /// corners: the far wall of a sleeve, the side beyond a crease folded to a right angle or
+    /// tighter), among those that could bound it (under twice the edges' default thickness,
+    /// times the largest [triangle scale](Self::self_collision_triangle_scales) on uneven
+    /// meshes); infinite where there is none (a flat or gently curved sheet). Gaps under
+    /// [`REST_GAP_IGNORED`] of that thickness are left out (a vertex on the triangle: a
+    /// T-junction or a face modelled twice). Made the first time it is asked for, from a
+    /// spatial hash of the vertices (about 40 tests a triangle on an even mesh).
+    #[must_use]
+    pub fn narrowest_rest_gap(&self) -> f32 {
+        self.rest_gaps(self.edge_thickness()).narrowest
+    }
+
+    /// [`RestGaps`] for a default thickness from the edges of `edges`.
+    fn rest_gaps(&self, edges: f32) -> RestGaps {
+        *self.rest_gaps.0.get_or_init(|| {
+            let scales = &self.self_collision_triangle_scales;
+            let most_scale = scales.iter().copied().fold(1.0f32, f32::max);
+            rest_gaps(
+                &self.rest_positions,
+                &self.triangles,
+                scales,
+                REST_GAP_IGNORED * edges,
+                edges * most_scale / REST_GAP_THICKNESS,
+            )
+        })
     }
 
     /// The thickest self-collision this cloth takes:
@@ -750,6 +826,132 @@ const MAX_THICKNESS_SCALE: f32 = 4.0;
 
 /// [`Topology::self_collision_scales`] and
 /// [`Topology::self_collision_triangle_scales`] of an uneven mesh.
+/// The narrowest gaps across a rest shape (see [`Topology::narrowest_rest_gap`]): over every
+/// vertex resting over a triangle it is not a corner of, more than `ignore` and less than
+/// `limit` off its plane, the least distance, and the least over the vertex's `scales` (none:
+/// 1). Vertices are hashed into cells `limit` wide and each triangle tests those in the cells
+/// around it; a triangle spanning more than [`GAP_CELLS`] cells (much longer than the gaps
+/// that matter) is left out. Infinite when no pair counts.
+fn rest_gaps(
+    positions: &[Vec3],
+    triangles: &[[u32; 3]],
+    scales: &[f32],
+    ignore: f32,
+    limit: f32,
+) -> RestGaps {
+    let mut gaps = RestGaps {
+        narrowest: f32::INFINITY,
+        scaled: f32::INFINITY,
+    };
+    if !(limit.is_finite() && limit > 0.0) {
+        return gaps;
+    }
+    let cell = |p: Vec3| {
+        let c = (p / limit).floor();
+        (c.x as i32, c.y as i32, c.z as i32)
+    };
+    let mut cells: std::collections::HashMap<
+        (i32, i32, i32),
+        Vec<u32>,
+        core::hash::BuildHasherDefault<CellHasher>,
+    > = std::collections::HashMap::default();
+    for (i, &p) in positions.iter().enumerate() {
+        cells.entry(cell(p)).or_default().push(i as u32);
+    }
+    for tri in triangles {
+        let [a, b, c] = tri.map(|k| positions[k as usize]);
+        let (e1, e2) = (b - a, c - a);
+        let normal = e1.cross(e2);
+        let len = normal.length();
+        let (d00, d01, d11) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+        let denom = d00 * d11 - d01 * d01;
+        // A sliver thinner than a ten-thousandth of its length is a line: its plane and
+        // weights are rounding (one in Bevy's `faces.glb` gave a 3 mm gap that is not there).
+        let longest2 = d00.max(d11).max((c - b).length_squared());
+        if !(len > GAP_SLIVER * longest2 && len.is_finite() && denom > 0.0 && denom.is_finite()) {
+            continue;
+        }
+        let n = normal / len;
+        // A vertex over the triangle less than `limit` off its plane lies within the
+        // triangle's box widened by `limit` times the normal along each axis (and the slack
+        // along its edges): a flat sheet's triangles look only above and below themselves.
+        let (lo_t, hi_t) = (a.min(b).min(c), a.max(b).max(c));
+        let widen = n.abs() * limit + Vec3::splat((hi_t - lo_t).length() * 4.0 * GAP_EDGE_SLACK);
+        let (lo, hi) = (cell(lo_t - widen), cell(hi_t + widen));
+        let span = |l: i32, h: i32| (i64::from(h) - i64::from(l) + 1).max(0);
+        if span(lo.0, hi.0) * span(lo.1, hi.1) * span(lo.2, hi.2) > GAP_CELLS {
+            continue;
+        }
+        for x in lo.0..=hi.0 {
+            for y in lo.1..=hi.1 {
+                for z in lo.2..=hi.2 {
+                    for &i in cells.get(&(x, y, z)).map_or(&[][..], Vec::as_slice) {
+                        if tri.contains(&i) {
+                            continue;
+                        }
+                        let ap = positions[i as usize] - a;
+                        let gap = ap.dot(n).abs();
+                        if gap >= limit || gap <= ignore {
+                            continue;
+                        }
+                        let (d20, d21) = (ap.dot(e1), ap.dot(e2));
+                        let v = (d11 * d20 - d01 * d21) / denom;
+                        let w = (d00 * d21 - d01 * d20) / denom;
+                        if v >= -GAP_EDGE_SLACK
+                            && w >= -GAP_EDGE_SLACK
+                            && v + w <= 1.0 + GAP_EDGE_SLACK
+                        {
+                            let scale = scales.get(i as usize).copied().unwrap_or(1.0);
+                            gaps.narrowest = gaps.narrowest.min(gap);
+                            gaps.scaled = gaps.scaled.min(gap / scale);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    gaps
+}
+
+/// How far beyond a triangle's edges (in its barycentric weights) a vertex still counts as
+/// resting over it in [`rest_gaps`]: a tube's rings line up, so a vertex projects onto the
+/// edge or corner across from it, and one a little way from a right-angled crease onto the
+/// edge of the side beyond it (held a thickness off that side, it would push against the
+/// crease); rounding puts either just outside.
+const GAP_EDGE_SLACK: f32 = 0.01;
+
+/// Twice a triangle's area over its longest edge squared under which [`rest_gaps`] leaves it
+/// out (a sliver: its normal and barycentric weights are rounding).
+const GAP_SLIVER: f32 = 1e-4;
+
+/// A hasher for [`rest_gaps`]'s cells (std's default, built against collision attacks, was
+/// most of its time; cell keys are not chosen by anyone).
+#[derive(Default)]
+struct CellHasher(u64);
+
+impl core::hash::Hasher for CellHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u32(u32::from(b));
+        }
+    }
+
+    fn write_u32(&mut self, i: u32) {
+        self.0 = (self.0.rotate_left(5) ^ u64::from(i)).wrapping_mul(0x517c_c1b7_2722_0a95);
+    }
+
+    fn write_i32(&mut self, i: i32) {
+        self.write_u32(i.cast_unsigned());
+    }
+}
+
+/// The most cells around one triangle [`rest_gaps`] looks in.
+const GAP_CELLS: i64 = 4096;
+
 fn edge_scales(positions: &[Vec3], triangles: &[[u32; 3]]) -> (Vec<f32>, Vec<f32>) {
     let n = positions.len();
     let mut sum = vec![0.0f64; n];
@@ -912,6 +1114,139 @@ mod tests {
         let t = of(&narrow.positions(), &narrow.indices());
         assert!(t.rest_edge_spread() > EVEN_EDGE_SPREAD);
         assert_eq!(t.default_self_collision_thickness(), t.mean_rest_edge());
+    }
+
+    /// An open tube of `sides` flat walls (`radius` to their corners) and `rings` rings
+    /// `spacing` apart along x: a sleeve.
+    fn sleeve(sides: usize, rings: usize, radius: f32, spacing: f32) -> Topology {
+        let positions: Vec<Vec3> = (0..rings * sides)
+            .map(|v| {
+                let (k, j) = (v / sides, v % sides);
+                let a = core::f32::consts::TAU * (j as f32 + 0.5) / sides as f32;
+                Vec3::new(k as f32 * spacing, radius * a.cos(), radius * a.sin())
+            })
+            .collect();
+        let indices: Vec<u32> = (0..rings - 1)
+            .flat_map(|k| (0..sides).map(move |j| (k, j)))
+            .flat_map(|(k, j)| {
+                let at = |k: usize, j: usize| (k * sides + j % sides) as u32;
+                let (a, b) = (at(k, j), at(k, j + 1));
+                let (c, d) = (at(k + 1, j + 1), at(k + 1, j));
+                [a, b, c, a, c, d]
+            })
+            .collect();
+        Topology::from_triangles(&positions, None, &indices, TopologyOptions::default()).unwrap()
+    }
+
+    /// The rest-gap cap: a square sleeve 0.2 m across with 0.2 m edges rests with each
+    /// corner over the wall across from it, 0.2 m off, so its default thickness is half of
+    /// that instead of its edges' 0.22 m; a flat sheet and a sleeve wider than its edges keep
+    /// the edge rule. Fails if the cap is left out, looks only strictly inside triangles (the
+    /// corner projects onto the opposite corner).
+    #[test]
+    fn the_default_thickness_is_at_most_half_the_narrowest_gap_across_the_rest_shape() {
+        let square = sleeve(4, 6, 0.2 / 2.0f32.sqrt(), 0.2);
+        assert!(square.rest_edge_spread() <= EVEN_EDGE_SPREAD);
+        let gap = square.narrowest_rest_gap();
+        assert!((gap - 0.2).abs() < 1e-5, "{gap}");
+        assert!(
+            square.edge_thickness() > 0.21,
+            "{}",
+            square.edge_thickness()
+        );
+        let got = square.default_self_collision_thickness();
+        assert!((got - REST_GAP_THICKNESS * 0.2).abs() < 1e-5, "{got}");
+        // Wide: 32 walls of 0.196 m around a 2 m tube, rings 0.2 m apart.
+        let wide = sleeve(32, 6, 1.0, 0.2);
+        assert_eq!(wide.narrowest_rest_gap(), f32::INFINITY);
+        assert_eq!(
+            wide.default_self_collision_thickness(),
+            wide.edge_thickness()
+        );
+        let grid = Grid::new(20, 20, 1.0, 1.0);
+        let flat = Topology::from_triangles(
+            &grid.positions(),
+            None,
+            &grid.indices(),
+            TopologyOptions::default(),
+        )
+        .unwrap();
+        assert_eq!(flat.narrowest_rest_gap(), f32::INFINITY);
+        assert_eq!(
+            flat.default_self_collision_thickness(),
+            flat.edge_thickness()
+        );
+        // A sheet bent along a crease: at a right angle the vertices a row from the crease
+        // rest over the other side's edge, a row (0.2 m) off it; bent by 60° they rest
+        // beside it.
+        let bent = |angle: f32| {
+            let grid = Grid::new(11, 11, 2.0, 2.0);
+            let dir = Vec3::new(angle.cos(), angle.sin(), 0.0);
+            let positions: Vec<Vec3> = grid
+                .positions()
+                .iter()
+                .map(|p| {
+                    if p.x > 0.0 {
+                        Vec3::new(0.0, 0.0, p.z) + dir * p.x
+                    } else {
+                        *p
+                    }
+                })
+                .collect();
+            Topology::from_triangles(
+                &positions,
+                None,
+                &grid.indices(),
+                TopologyOptions::default(),
+            )
+            .unwrap()
+        };
+        let right = bent(core::f32::consts::FRAC_PI_2);
+        let gap = right.narrowest_rest_gap();
+        assert!((gap - 0.2).abs() < 1e-5, "{gap}");
+        let open = bent(core::f32::consts::FRAC_PI_3);
+        assert_eq!(open.narrowest_rest_gap(), f32::INFINITY);
+        assert_eq!(
+            open.default_self_collision_thickness(),
+            open.edge_thickness()
+        );
+    }
+
+    /// A sheet modelled twice (a second copy 1 mm over the first, under a tenth of the
+    /// thickness) rests on itself, which is no gap; the same copy half an edge over it is one.
+    #[test]
+    fn a_face_modelled_twice_is_not_a_gap_but_a_layer_over_it_is() {
+        let grid = Grid::new(6, 6, 1.0, 1.0);
+        let (one, indices) = (grid.positions(), grid.indices());
+        let twice = |lift: f32| {
+            let positions: Vec<Vec3> = one
+                .iter()
+                .copied()
+                .chain(one.iter().map(|p| *p + Vec3::Y * lift))
+                .collect();
+            let n = one.len() as u32;
+            let indices: Vec<u32> = indices
+                .iter()
+                .chain(indices.iter())
+                .enumerate()
+                .map(|(k, &i)| if k < indices.len() { i } else { i + n })
+                .collect();
+            Topology::from_triangles(&positions, None, &indices, TopologyOptions::default())
+                .unwrap()
+        };
+        let sheet =
+            Topology::from_triangles(&one, None, &indices, TopologyOptions::default()).unwrap();
+        let edges = sheet.default_self_collision_thickness();
+        let doubled = twice(0.001);
+        assert_eq!(doubled.narrowest_rest_gap(), f32::INFINITY);
+        assert_eq!(doubled.default_self_collision_thickness(), edges);
+        let layered = twice(0.1);
+        assert!((layered.narrowest_rest_gap() - 0.1).abs() < 1e-6);
+        let got = layered.default_self_collision_thickness();
+        assert!(
+            (got - REST_GAP_THICKNESS * 0.1).abs() < 1e-6,
+            "{got} ({edges})"
+        );
     }
 
     /// A grid of long narrow cells (finer along z than along x, as a skirt's tube is finer
