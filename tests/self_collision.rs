@@ -574,3 +574,119 @@ fn closed_shapes_with_self_collision_come_to_rest() {
         }
     }
 }
+
+/// The left arm of Bevy's low-poly alien (`AlienCake/alien.glb`, from Kenney's CC0 assets):
+/// an open shell of 10 particles and 14 triangles whose walls and right-angled creases rest
+/// closer together than its edges are long, its positions in metres as the file has them.
+const ALIEN_ARM: [[f32; 3]; 36] = [
+    [0.0, -0.1888, 0.065],
+    [0.0, -0.15515, -0.065],
+    [0.0, -0.15515, -0.065],
+    [0.0, -0.3918, 0.012461],
+    [0.0, -0.3918, 0.012461],
+    [0.0, -0.35815, -0.11754],
+    [-0.060103, -0.3918, 0.012461],
+    [0.0, -0.3918, 0.012461],
+    [-0.060103, -0.35815, -0.11754],
+    [0.0, -0.35815, -0.11754],
+    [0.0, -0.3918, 0.012461],
+    [-0.060103, -0.3918, 0.012461],
+    [0.0, -0.1888, 0.065],
+    [0.0, -0.1888, 0.065],
+    [-0.13, -0.32413, 0.029974],
+    [-0.13, -0.32413, 0.029974],
+    [-0.13, -0.1888, 0.065],
+    [-0.13, -0.32413, 0.029974],
+    [-0.060103, -0.3918, 0.012461],
+    [-0.060103, -0.3918, 0.012461],
+    [-0.13, -0.29048, -0.10003],
+    [-0.13, -0.29048, -0.10003],
+    [-0.060103, -0.35815, -0.11754],
+    [-0.060103, -0.35815, -0.11754],
+    [0.0, -0.35815, -0.11754],
+    [0.0, -0.35815, -0.11754],
+    [-0.13, -0.29048, -0.10003],
+    [-0.13, -0.29048, -0.10003],
+    [-0.13, -0.29048, -0.10003],
+    [0.0, -0.15515, -0.065],
+    [0.0, -0.15515, -0.065],
+    [-0.13, -0.15515, -0.065],
+    [-0.13, -0.1888, 0.065],
+    [-0.13, -0.32413, 0.029974],
+    [-0.13, -0.15515, -0.065],
+    [-0.13, -0.29048, -0.10003],
+];
+
+/// [`ALIEN_ARM`]'s triangles.
+const ALIEN_ARM_TRIANGLES: [u32; 42] = [
+    4, 2, 0, 1, 3, 5, 8, 7, 6, 7, 8, 9, 13, 11, 10, 11, 13, 15, 14, 12, 16, 20, 18, 17, 19, 21, 22,
+    26, 24, 23, 25, 27, 29, 30, 28, 31, 34, 33, 32, 33, 34, 35,
+];
+
+/// A low-poly model's part with self-collision at its default thickness, scaled to 0.8 m and
+/// dropped on the floor at three tilts, lies still. Its default was its mean edge (0.51 m at
+/// that size), and at rest its walls lie closer than that: every contact pushed against its
+/// edges, and it flew about the floor at 34 m/s after seven seconds (measured); an open
+/// mesh's default is now at most half the narrowest gap across its rest shape
+/// (`REST_GAP_THICKNESS`).
+#[test]
+fn a_low_poly_models_part_with_self_collision_lies_still_on_the_floor() {
+    let weld = bevy_cloth::solver::Weld::new(&ALIEN_ARM.map(Vec3::from_array), None, 1e-5);
+    let welded: Vec<Vec3> = (0..weld.particle_count() as u32)
+        .map(|q| Vec3::from_array(ALIEN_ARM[weld.representative(q) as usize]))
+        .collect();
+    let indices: Vec<u32> = ALIEN_ARM_TRIANGLES
+        .iter()
+        .map(|&i| weld.particle(i))
+        .collect();
+    let (lo, hi) = welded
+        .iter()
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(a, b), p| {
+            (a.min(*p), b.max(*p))
+        });
+    let scale = 0.8 / (hi - lo).max_element();
+    for turn in [0.3f32, 0.5, 0.7] {
+        let tilt = Quat::from_rotation_z(turn) * Quat::from_rotation_x(0.2);
+        let positions: Vec<Vec3> = welded
+            .iter()
+            .map(|p| tilt * ((*p - (lo + hi) * 0.5) * scale) + Vec3::Y)
+            .collect();
+        let topology =
+            Topology::from_triangles(&positions, None, &indices, TopologyOptions::default())
+                .unwrap();
+        assert!(!topology.is_closed());
+        let gap = topology.narrowest_rest_gap();
+        let thickness = topology.default_self_collision_thickness();
+        // Uneven edges: each vertex's gap over its triangle scale bounds the thickness.
+        let mean_edge = topology.mean_rest_edge();
+        assert!(
+            gap < mean_edge && thickness < 0.5 * mean_edge,
+            "the arm rests over a gap of {gap} m, narrower than its mean edge ({mean_edge} m): \
+             thickness {thickness} m"
+        );
+        let n = topology.vertex_count();
+        let mut sim = Simulation::new(topology, &vec![0.3 / n as f32; n], SolverParams::default())
+            .expect("a valid cloth");
+        common::self_colliding(&mut sim, thickness);
+        let mut late = 0.0f32;
+        ten_seconds_on_the_floor(&mut sim, 2, |k, _, fastest| {
+            if k >= 420 {
+                late = late.max(fastest);
+            }
+        });
+        let top = sim
+            .state()
+            .positions
+            .iter()
+            .map(|p| p.y)
+            .fold(f32::NEG_INFINITY, f32::max);
+        println!(
+            "arm turned {turn}: thickness {thickness} m (gap {gap}), vertices at most {late} m/s after 7 s, top at {top} m"
+        );
+        assert!(
+            late < 0.5,
+            "arm turned {turn}: vertices move at {late} m/s after 7 s"
+        );
+        assert!(top < 1.0, "arm turned {turn}: its top is at {top} m");
+    }
+}
