@@ -426,6 +426,15 @@ fn ten_seconds_on_the_floor(
     }
 }
 
+/// The height of `sim`'s highest vertex.
+fn highest(sim: &Simulation) -> f32 {
+    sim.state()
+        .positions
+        .iter()
+        .map(|p| p.y)
+        .fold(f32::NEG_INFINITY, f32::max)
+}
+
 /// Bevy's `Cone` mesh (a fan of long triangles from the tip to a ring, the base a fan of
 /// chords from one ring vertex) at 32 and 64 segments, tilted and dropped on the floor with
 /// self-collision at its default thickness (the mean rest edge, 0.34–0.35 m on this 0.5 m
@@ -472,12 +481,7 @@ fn a_bevy_cone_with_self_collision_comes_to_rest_on_the_floor() {
                 late = late.max(fastest);
             }
         });
-        let top = sim
-            .state()
-            .positions
-            .iter()
-            .map(|p| p.y)
-            .fold(f32::NEG_INFINITY, f32::max);
+        let top = highest(&sim);
         println!(
             "cone of {resolution} segments: centre at most {centre_speed} m/s after 1 s, \
              vertices at most {late} m/s relative to it after 6 s, top at {top} m"
@@ -674,12 +678,7 @@ fn a_low_poly_models_part_with_self_collision_lies_still_on_the_floor() {
                 late = late.max(fastest);
             }
         });
-        let top = sim
-            .state()
-            .positions
-            .iter()
-            .map(|p| p.y)
-            .fold(f32::NEG_INFINITY, f32::max);
+        let top = highest(&sim);
         println!(
             "arm turned {turn}: thickness {thickness} m (gap {gap}), vertices at most {late} m/s after 7 s, top at {top} m"
         );
