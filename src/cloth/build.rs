@@ -12,9 +12,9 @@ use super::{
 };
 use crate::foundation::{EntityName, FixedPoses, finite_bounds, read_mesh};
 use crate::solver::{
-    EVEN_EDGE_SPREAD, Features, MAX_SELF_COLLISION_EDGES, MeshBinding, Pin, SelfCollision,
-    Simulation, SolverError, Stretch, TetherParams, Topology, TopologyError, TopologyOptions,
-    limits,
+    EVEN_EDGE_SPREAD, Features, MAX_SELF_COLLISION_EDGES, MeshBinding, Pin, REST_GAP_THICKNESS,
+    SelfCollision, Simulation, SolverError, Stretch, TetherParams, Topology, TopologyError,
+    TopologyOptions, limits,
 };
 
 /// A cloth built from its mesh, before its own mesh asset exists.
@@ -54,6 +54,7 @@ impl Built {
             attached: self.attached,
             settings_error: None,
             thickness_warned: None,
+            gap_warned: None,
             uneven_warned: false,
             cloth_error: None,
             pins_error: None,
@@ -353,6 +354,17 @@ pub(super) fn warn_self_collision(
         );
     }
     cs.thickness_warned = asked;
+    // A thickness set, as used: wider than the rest shape's gaps, the mesh fights itself.
+    let set = sc
+        .filter(|sc| sc.thickness.is_some())
+        .map(|sc| self_collision_thickness(&cs.sim, sc).0);
+    if let Some(set) = set
+        && cs.gap_warned != Some(set)
+        && let Some(why) = gap_warning(cs.sim.topology(), set)
+    {
+        warn!("cloth {who}: {why}");
+    }
+    cs.gap_warned = set;
     let topology = cs.sim.topology();
     let spread = topology.rest_edge_spread();
     if sc.is_some() && !cs.uneven_warned && spread > EVEN_EDGE_SPREAD {
@@ -364,6 +376,23 @@ pub(super) fn warn_self_collision(
              in a few places where the cloth crumples; a mesh remeshed to even edges holds"
         );
     }
+}
+
+/// What to tell the user about a self-collision `thickness` they set that is wider than the
+/// gaps across the cloth's rest shape ([`Topology::rest_clearance`]): the walls of a sleeve,
+/// the sides of a low-poly model's creases then push each other apart every step.
+fn gap_warning(topology: &Topology, thickness: f32) -> Option<String> {
+    let clear = topology.rest_clearance();
+    (thickness > clear).then(|| {
+        format!(
+            "its self-collision thickness {thickness} m is wider than the narrowest gap across \
+             its rest shape ({clear} m: walls or creases of the mesh that rest that close to \
+             another of its layers), so they push each other apart every step and it may never \
+             come to rest; at most {half} m (half the gap, as the default takes) holds, or leave \
+             the thickness unset",
+            half = REST_GAP_THICKNESS * clear
+        )
+    })
 }
 
 /// Fewer triangles than this and a cloth cannot fold: it bends only along its edges, so it
@@ -469,6 +498,53 @@ mod tests {
         );
         assert_eq!(loose_warning(&topology, &[pin(0), pin(9)]), None);
         assert_eq!(loose_warning(&topology, &[]), None);
+    }
+
+    /// A thickness set wider than the gap across a sheet creased at a right angle (the
+    /// vertices a row, 0.2 m, from the crease rest over the other side) is named with the
+    /// gap; a thinner one, the same on the flat sheet, and any on a closed tetrahedron (capped
+    /// pair by pair) are not.
+    #[test]
+    fn a_thickness_set_wider_than_the_rest_gap_is_named() {
+        let options = crate::solver::TopologyOptions::default();
+        let grid = crate::solver::Grid::new(11, 11, 2.0, 2.0);
+        let creased: Vec<Vec3> = grid
+            .positions()
+            .iter()
+            .map(|p| {
+                if p.x > 0.0 {
+                    Vec3::new(0.0, p.x, p.z)
+                } else {
+                    *p
+                }
+            })
+            .collect();
+        let creased = Topology::from_triangles(&creased, None, &grid.indices(), options).unwrap();
+        let flat =
+            Topology::from_triangles(&grid.positions(), None, &grid.indices(), options).unwrap();
+        let wide = 0.21;
+        assert!(creased.thickest_self_collision() >= wide);
+        let why = gap_warning(&creased, wide).expect("0.21 m is wider than the 0.2 m gap");
+        assert!(
+            why.starts_with("its self-collision thickness 0.21 m is wider"),
+            "{why}"
+        );
+        let clear = creased.rest_clearance();
+        assert!((clear - 0.2).abs() < 1e-5, "{clear}");
+        assert_eq!(gap_warning(&creased, 0.19), None);
+        assert_eq!(gap_warning(&flat, wide), None);
+        let tetrahedron = Topology::from_triangles(
+            &[Vec3::ZERO, Vec3::X, Vec3::Z, Vec3::Y],
+            None,
+            &[0, 2, 1, 0, 1, 3, 1, 2, 3, 0, 3, 2],
+            options,
+        )
+        .unwrap();
+        assert!(tetrahedron.is_closed());
+        assert_eq!(
+            gap_warning(&tetrahedron, tetrahedron.thickest_self_collision()),
+            None
+        );
     }
 
     #[test]

@@ -636,11 +636,8 @@ impl Topology {
     /// ([`NEAR_CORNER_THICKNESS`](crate::solver::NEAR_CORNER_THICKNESS)).
     #[must_use]
     pub fn default_self_collision_thickness(&self) -> f32 {
-        let edges = self.edge_thickness();
-        if self.closed {
-            return edges;
-        }
-        edges.min(REST_GAP_THICKNESS * self.rest_gaps(edges).scaled)
+        self.edge_thickness()
+            .min(REST_GAP_THICKNESS * self.rest_clearance())
     }
 
     /// The default thickness from the edges alone (before the rest-gap cap).
@@ -667,6 +664,23 @@ impl Topology {
     #[must_use]
     pub fn narrowest_rest_gap(&self) -> f32 {
         self.rest_gaps(self.edge_thickness()).narrowest
+    }
+
+    /// The widest self-collision thickness an open mesh's rest shape takes without any of
+    /// its vertices resting within its thickness of a layer it lies over: the narrowest gap
+    /// across the rest shape ([`Self::narrowest_rest_gap`]), on uneven meshes each vertex's
+    /// gap over its [triangle scale](Self::self_collision_triangle_scales). A thickness wider
+    /// than this has the walls or creases of the mesh push each other apart every step, so
+    /// that a low-poly model's part may never come to rest. Infinite for a closed mesh (its
+    /// contacts are capped pair by pair from the rest shape) and where no gap counts. The
+    /// default thickness ([`Self::default_self_collision_thickness`]) is at most
+    /// [`REST_GAP_THICKNESS`] of it.
+    #[must_use]
+    pub fn rest_clearance(&self) -> f32 {
+        if self.closed {
+            return f32::INFINITY;
+        }
+        self.rest_gaps(self.edge_thickness()).scaled
     }
 
     /// [`RestGaps`] for a default thickness from the edges of `edges`.
