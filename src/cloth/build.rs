@@ -505,7 +505,7 @@ mod tests {
     /// gap; a thinner one, the same on the flat sheet, and any on a closed tetrahedron (capped
     /// pair by pair) are not.
     #[test]
-    fn a_thickness_set_wider_than_the_rest_gap_is_named() {
+    fn a_thickness_set_wider_than_half_the_rest_gap_is_named() {
         let options = crate::solver::TopologyOptions::default();
         let grid = crate::solver::Grid::new(11, 11, 2.0, 2.0);
         let creased: Vec<Vec3> = grid

@@ -666,15 +666,14 @@ impl Topology {
         self.rest_gaps(self.edge_thickness()).narrowest
     }
 
-    /// The widest self-collision thickness an open mesh's rest shape takes without any of
-    /// its vertices resting within its thickness of a layer it lies over: the narrowest gap
-    /// across the rest shape ([`Self::narrowest_rest_gap`]), on uneven meshes each vertex's
-    /// gap over its [triangle scale](Self::self_collision_triangle_scales). A thickness wider
-    /// than this has the walls or creases of the mesh push each other apart every step, so
-    /// that a low-poly model's part may never come to rest. Infinite for a closed mesh (its
-    /// contacts are capped pair by pair from the rest shape) and where no gap counts. The
-    /// default thickness ([`Self::default_self_collision_thickness`]) is at most
-    /// [`REST_GAP_THICKNESS`] of it.
+    /// How far an open mesh's rest shape keeps its vertices from the layers they lie over:
+    /// the narrowest gap across it ([`Self::narrowest_rest_gap`]), on uneven meshes each
+    /// vertex's gap over its [triangle scale](Self::self_collision_triangle_scales). Infinite
+    /// for a closed mesh (its contacts are capped pair by pair from the rest shape) and where
+    /// no gap counts. The default thickness ([`Self::default_self_collision_thickness`]) is at
+    /// most [`REST_GAP_THICKNESS`] of it, and the plugin warns about a thickness set wider than
+    /// that: the walls or creases of the mesh then push each other apart every step, so that a
+    /// low-poly model's part may never come to rest.
     #[must_use]
     pub fn rest_clearance(&self) -> f32 {
         if self.closed {
