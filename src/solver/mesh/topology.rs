@@ -838,8 +838,6 @@ impl Topology {
 const MIN_THICKNESS_SCALE: f32 = 0.25;
 const MAX_THICKNESS_SCALE: f32 = 4.0;
 
-/// [`Topology::self_collision_scales`] and
-/// [`Topology::self_collision_triangle_scales`] of an uneven mesh.
 /// The narrowest gaps across a rest shape (see [`Topology::narrowest_rest_gap`]): over every
 /// vertex resting over a triangle it is not a corner of, more than `ignore` and less than
 /// `limit` off its plane, the least distance, and the least over the vertex's `scales` (none:
@@ -874,58 +872,94 @@ fn rest_gaps(
     }
     for tri in triangles {
         let [a, b, c] = tri.map(|k| positions[k as usize]);
-        let (e1, e2) = (b - a, c - a);
-        let normal = e1.cross(e2);
-        let len = normal.length();
-        let (d00, d01, d11) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
-        let denom = d00 * d11 - d01 * d01;
-        // A sliver thinner than a ten-thousandth of its length is a line: its plane and
-        // weights are rounding (one in Bevy's `faces.glb` gave a 3 mm gap that is not there).
-        let longest2 = d00.max(d11).max((c - b).length_squared());
-        if !(len > GAP_SLIVER * longest2 && len.is_finite() && denom > 0.0 && denom.is_finite()) {
+        let Some(plane) = RestPlane::of(a, b, c) else {
             continue;
-        }
-        let n = normal / len;
+        };
         // A vertex over the triangle less than `limit` off its plane lies within the
         // triangle's box widened by `limit` times the normal along each axis, and by the
         // slack along its edges (four times it along the box's diagonal: two weights can be
         // out by it at a corner): a flat sheet's triangles look only above and below.
         let (lo_t, hi_t) = (a.min(b).min(c), a.max(b).max(c));
-        let widen = n.abs() * limit + Vec3::splat((hi_t - lo_t).length() * 4.0 * GAP_EDGE_SLACK);
+        let widen =
+            plane.n.abs() * limit + Vec3::splat((hi_t - lo_t).length() * 4.0 * GAP_EDGE_SLACK);
         let (lo, hi) = (cell(lo_t - widen), cell(hi_t + widen));
         let span = |l: i32, h: i32| (i64::from(h) - i64::from(l) + 1).max(0);
         if span(lo.0, hi.0) * span(lo.1, hi.1) * span(lo.2, hi.2) > GAP_CELLS {
             continue;
         }
+        let mut look_in = |cell| {
+            for &i in cells.get(&cell).map_or(&[][..], Vec::as_slice) {
+                if !tri.contains(&i)
+                    && let Some(gap) = plane.gap_over(positions[i as usize], ignore, limit)
+                {
+                    let scale = scales.get(i as usize).copied().unwrap_or(1.0);
+                    gaps.narrowest = gaps.narrowest.min(gap);
+                    gaps.scaled = gaps.scaled.min(gap / scale);
+                }
+            }
+        };
         for x in lo.0..=hi.0 {
             for y in lo.1..=hi.1 {
-                for z in lo.2..=hi.2 {
-                    for &i in cells.get(&(x, y, z)).map_or(&[][..], Vec::as_slice) {
-                        if tri.contains(&i) {
-                            continue;
-                        }
-                        let ap = positions[i as usize] - a;
-                        let gap = ap.dot(n).abs();
-                        if gap >= limit || gap <= ignore {
-                            continue;
-                        }
-                        let (d20, d21) = (ap.dot(e1), ap.dot(e2));
-                        let v = (d11 * d20 - d01 * d21) / denom;
-                        let w = (d00 * d21 - d01 * d20) / denom;
-                        if v >= -GAP_EDGE_SLACK
-                            && w >= -GAP_EDGE_SLACK
-                            && v + w <= 1.0 + GAP_EDGE_SLACK
-                        {
-                            let scale = scales.get(i as usize).copied().unwrap_or(1.0);
-                            gaps.narrowest = gaps.narrowest.min(gap);
-                            gaps.scaled = gaps.scaled.min(gap / scale);
-                        }
-                    }
-                }
+                (lo.2..=hi.2).for_each(|z| look_in((x, y, z)));
             }
         }
     }
     gaps
+}
+
+/// A rest triangle's plane, for [`rest_gaps`].
+struct RestPlane {
+    a: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+    n: Vec3,
+    d00: f32,
+    d01: f32,
+    d11: f32,
+    denom: f32,
+}
+
+impl RestPlane {
+    /// The plane of `[a, b, c]`; `None` for a degenerate triangle or a sliver thinner than
+    /// [`GAP_SLIVER`] of its length, which is a line: its plane and weights are rounding (one
+    /// in Bevy's `faces.glb` gave a 3 mm gap that is not there).
+    fn of(a: Vec3, b: Vec3, c: Vec3) -> Option<Self> {
+        let (e1, e2) = (b - a, c - a);
+        let normal = e1.cross(e2);
+        let len = normal.length();
+        let (d00, d01, d11) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+        let denom = d00 * d11 - d01 * d01;
+        let longest2 = d00.max(d11).max((c - b).length_squared());
+        (len > GAP_SLIVER * longest2 && len.is_finite() && denom > 0.0 && denom.is_finite()).then(
+            || Self {
+                a,
+                e1,
+                e2,
+                n: normal / len,
+                d00,
+                d01,
+                d11,
+                denom,
+            },
+        )
+    }
+
+    /// How far `p` lies off the plane, where that is more than `ignore` and less than
+    /// `limit` and `p` lies over the triangle (its projection inside, or out by no more than
+    /// [`GAP_EDGE_SLACK`] in a barycentric weight). The distance first: most vertices near a
+    /// sheet's triangle lie in its plane.
+    fn gap_over(&self, p: Vec3, ignore: f32, limit: f32) -> Option<f32> {
+        let ap = p - self.a;
+        let gap = ap.dot(self.n).abs();
+        if !(gap > ignore && gap < limit) {
+            return None;
+        }
+        let (d20, d21) = (ap.dot(self.e1), ap.dot(self.e2));
+        let v = (self.d11 * d20 - self.d01 * d21) / self.denom;
+        let w = (self.d00 * d21 - self.d01 * d20) / self.denom;
+        (v >= -GAP_EDGE_SLACK && w >= -GAP_EDGE_SLACK && v + w <= 1.0 + GAP_EDGE_SLACK)
+            .then_some(gap)
+    }
 }
 
 /// How far beyond a triangle's edges (in its barycentric weights) a vertex still counts as
@@ -967,6 +1001,8 @@ impl core::hash::Hasher for CellHasher {
 /// The most cells around one triangle [`rest_gaps`] looks in.
 const GAP_CELLS: i64 = 4096;
 
+/// [`Topology::self_collision_scales`] and
+/// [`Topology::self_collision_triangle_scales`] of an uneven mesh.
 fn edge_scales(positions: &[Vec3], triangles: &[[u32; 3]]) -> (Vec<f32>, Vec<f32>) {
     let n = positions.len();
     let mut sum = vec![0.0f64; n];
