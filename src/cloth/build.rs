@@ -354,7 +354,7 @@ pub(super) fn warn_self_collision(
         );
     }
     cs.thickness_warned = asked;
-    // A thickness set, as used: wider than the rest shape's gaps, the mesh fights itself.
+    // A thickness set, as used: wider than half the rest shape's gaps, the mesh fights itself.
     let set = sc
         .filter(|sc| sc.thickness.is_some())
         .map(|sc| self_collision_thickness(&cs.sim, sc).0);
@@ -378,21 +378,39 @@ pub(super) fn warn_self_collision(
     }
 }
 
-/// What to tell the user about a self-collision `thickness` they set that is wider than the
-/// gaps across the cloth's rest shape ([`Topology::rest_clearance`]): the walls of a sleeve,
-/// the sides of a low-poly model's creases then push each other apart every step.
+/// What to tell the user about a self-collision `thickness` they set that is more than
+/// [`REST_GAP_THICKNESS`] of the narrowest gap across the cloth's rest shape
+/// ([`Topology::rest_clearance`]), the most the default takes: the walls of a sleeve, the
+/// sides of a low-poly model's creases then push each other apart every step. (Of Bevy's
+/// glTF model parts dropped with thicknesses set, none set at up to 0.56 of its gap moved
+/// after seven seconds, and 7 of the 10 set at 0.58–1.1 of it did.)
 fn gap_warning(topology: &Topology, thickness: f32) -> Option<String> {
     let clear = topology.rest_clearance();
-    (thickness > clear).then(|| {
+    let most = REST_GAP_THICKNESS * clear;
+    // Not for what the message's rounded figure lets through (3 digits: within 0.5 %).
+    (thickness > 1.01 * most).then(|| {
         format!(
-            "its self-collision thickness {thickness} m is wider than the narrowest gap across \
-             its rest shape ({clear} m: walls or creases of the mesh that rest that close to \
+            "its self-collision thickness {thickness} m is more than half the narrowest gap \
+             across its rest shape ({} m: walls or creases of the mesh that rest that close to \
              another of its layers), so they push each other apart every step and it may never \
-             come to rest; at most {half} m (half the gap, as the default takes) holds, or leave \
-             the thickness unset",
-            half = REST_GAP_THICKNESS * clear
+             come to rest; at most {} m (what the default takes) holds, or leave the thickness \
+             unset",
+            three_digits(clear),
+            three_digits(most)
         )
     })
+}
+
+/// `x` (positive, finite) to three significant digits: 0.2 for 0.199_999_99, 0.00123 for
+/// 0.001_234_5.
+fn three_digits(x: f32) -> String {
+    let decimals = (2.0 - x.log10().floor()).clamp(0.0, 12.0) as usize;
+    let text = format!("{x:.decimals$}");
+    if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_owned()
+    } else {
+        text
+    }
 }
 
 /// Fewer triangles than this and a cloth cannot fold: it bends only along its edges, so it
@@ -500,7 +518,7 @@ mod tests {
         assert_eq!(loose_warning(&topology, &[]), None);
     }
 
-    /// A thickness set wider than the gap across a sheet creased at a right angle (the
+    /// A thickness set wider than half the gap across a sheet creased at a right angle (the
     /// vertices a row, 0.2 m, from the crease rest over the other side) is named with the
     /// gap; a thinner one, the same on the flat sheet, and any on a closed tetrahedron (capped
     /// pair by pair) are not.
@@ -522,16 +540,21 @@ mod tests {
         let creased = Topology::from_triangles(&creased, None, &grid.indices(), options).unwrap();
         let flat =
             Topology::from_triangles(&grid.positions(), None, &grid.indices(), options).unwrap();
-        let wide = 0.21;
-        assert!(creased.thickest_self_collision() >= wide);
-        let why = gap_warning(&creased, wide).expect("0.21 m is wider than the 0.2 m gap");
+        let wide = 0.11;
+        let why = gap_warning(&creased, wide).expect("0.11 m is over half the 0.2 m gap");
         assert!(
-            why.starts_with("its self-collision thickness 0.21 m is wider"),
+            why.starts_with("its self-collision thickness 0.11 m is more than half"),
             "{why}"
         );
         let clear = creased.rest_clearance();
         assert!((clear - 0.2).abs() < 1e-5, "{clear}");
-        assert_eq!(gap_warning(&creased, 0.19), None);
+        assert!(
+            why.contains("(0.2 m: walls") && why.contains("at most 0.1 m"),
+            "{why}"
+        );
+        assert_eq!(gap_warning(&creased, 0.09), None);
+        // The figure it gives, as printed, passes.
+        assert_eq!(gap_warning(&creased, 0.1), None);
         assert_eq!(gap_warning(&flat, wide), None);
         let tetrahedron = Topology::from_triangles(
             &[Vec3::ZERO, Vec3::X, Vec3::Z, Vec3::Y],
