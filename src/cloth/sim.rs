@@ -67,8 +67,8 @@ pub struct ClothSim {
     /// [`MAX_SELF_COLLISION_EDGES`](crate::solver::MAX_SELF_COLLISION_EDGES) mean edges): a
     /// tear, which changes the mean edge, does not warn again.
     pub(super) thickness_warned: Option<f32>,
-    /// The self-collision thickness set (as used) when the warning that it is wider than the
-    /// gaps across the rest shape was last considered: warned once per thickness set.
+    /// The self-collision thickness set (as used) when the warning that it is wider than half
+    /// the gaps across the rest shape was last considered: warned once per thickness set.
     pub(super) gap_warned: Option<f32>,
     /// Whether the warning that the mesh's edges are uneven for self-collision was given
     /// (once per cloth built).
