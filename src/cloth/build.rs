@@ -538,8 +538,7 @@ mod tests {
             })
             .collect();
         let creased = Topology::from_triangles(&creased, None, &grid.indices(), options).unwrap();
-        let flat =
-            Topology::from_triangles(&grid.positions(), None, &grid.indices(), options).unwrap();
+        let flat = grid.topology(options).unwrap();
         let wide = 0.11;
         let why = gap_warning(&creased, wide).expect("0.11 m is over half the 0.2 m gap");
         assert!(

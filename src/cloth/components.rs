@@ -175,7 +175,9 @@ pub struct ClothSelfCollision {
     /// On an open mesh the default is also at most half the narrowest gap across its rest
     /// shape ([`REST_GAP_THICKNESS`](crate::solver::REST_GAP_THICKNESS): a sleeve's width, the
     /// side beyond a right-angled crease), so that its layers are not held farther apart than
-    /// its shape allows. On a low-poly model (tens to hundreds of vertices) the mean edge is
+    /// its shape allows; a thickness set wider than half that gap
+    /// ([`Topology::rest_clearance`](crate::solver::Topology::rest_clearance)) is used with a
+    /// warning. On a low-poly model (tens to hundreds of vertices) the mean edge is
     /// still a large part of it, and some keep moving at a few metres a second: set about
     /// 1–2 % of the model's size (README, *Limits*).
     pub thickness: Option<f32>,

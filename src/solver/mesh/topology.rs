@@ -663,7 +663,7 @@ impl Topology {
     /// 2-core machine, half what building its topology takes), and kept through tears.
     #[must_use]
     pub fn narrowest_rest_gap(&self) -> f32 {
-        self.rest_gaps(self.edge_thickness()).narrowest
+        self.rest_gaps().narrowest
     }
 
     /// How far an open mesh's rest shape keeps its vertices from the layers they lie over:
@@ -679,12 +679,13 @@ impl Topology {
         if self.closed {
             return f32::INFINITY;
         }
-        self.rest_gaps(self.edge_thickness()).scaled
+        self.rest_gaps().scaled
     }
 
-    /// [`RestGaps`] for a default thickness from the edges of `edges`.
-    fn rest_gaps(&self, edges: f32) -> RestGaps {
+    /// [`RestGaps`], made the first time they are asked for.
+    fn rest_gaps(&self) -> RestGaps {
         *self.rest_gaps.0.get_or_init(|| {
+            let edges = self.edge_thickness();
             let scales = &self.self_collision_triangle_scales;
             let most_scale = scales.iter().copied().fold(1.0f32, f32::max);
             rest_gaps(
@@ -1214,14 +1215,9 @@ mod tests {
             wide.default_self_collision_thickness(),
             wide.edge_thickness()
         );
-        let grid = Grid::new(20, 20, 1.0, 1.0);
-        let flat = Topology::from_triangles(
-            &grid.positions(),
-            None,
-            &grid.indices(),
-            TopologyOptions::default(),
-        )
-        .unwrap();
+        let flat = Grid::new(20, 20, 1.0, 1.0)
+            .topology(TopologyOptions::default())
+            .unwrap();
         assert_eq!(flat.narrowest_rest_gap(), f32::INFINITY);
         assert_eq!(
             flat.default_self_collision_thickness(),
