@@ -30,7 +30,8 @@
 //!
 //! `--scene-costs` instead measures what each scene feature costs on the 64² and 256² scenes
 //! (XPBD 10 × 1): nothing, a sphere collider under the cloth, wind, self-collision, tethers,
-//! tearing (threshold never reached), and everything at once; with a feature off, its code
+//! tethers and self-collision (a sheet that hangs at its length), tearing (threshold never
+//! reached), and everything at once; with a feature off, its code
 //! does not run, so `plain` is the cost of every scene without it. Tethers also report their
 //! effect on `max_strain`. `--variants plain,self_collision` runs only those rows;
 //! `--parts N` steps each cloth in N parts instead of `solver::default_part_count`'s
@@ -253,6 +254,12 @@ fn scene_costs(args: &Args, par: &Workers, threads: usize) {
         Variant {
             name: "tethers",
             tethers: true,
+            ..off
+        },
+        Variant {
+            name: "tethers_self_collision",
+            tethers: true,
+            self_collision: true,
             ..off
         },
         Variant {
