@@ -1309,7 +1309,8 @@ impl GpuWorld {
                     .copied()
                     .filter(|c| *c != Carry::IDENTITY && c.is_finite());
                 teleport_steps[k as usize] |= jump.is_some() || carry.is_some();
-                // Flags: 1 takes the step, + 2 teleports, + 4 is carried; 0 sits it out (no
+                // Flags: 1 takes the step, + 2 teleports, + 4 is carried, + 8 held by motion
+                // targets, + 16 its carry stretches (velocities no faster); 0 sits it out (no
                 // targets for this step).
                 let motion = f
                     .motion
@@ -1321,6 +1322,11 @@ impl GpuWorld {
                     1.0 + if jump.is_some() { 2.0 } else { 0.0 }
                         + if carry.is_some() { 4.0 } else { 0.0 }
                         + if motion.is_some() { 8.0 } else { 0.0 }
+                        + if carry.is_some_and(|c| c.stretch.is_some()) {
+                            16.0
+                        } else {
+                            0.0
+                        }
                 };
                 if let Some(m) = motion {
                     let base = (motion_at + k * MOTION_VEC4S * motion_n + c.vbase) as usize;

@@ -867,3 +867,47 @@ pub fn floor() -> bevy_cloth::solver::Collider {
         friction: 0.6,
     }
 }
+
+/// Two 32² one-metre cloths hanging from two corners, on `backend` (none: the default), read
+/// back: one spawned at scale 1, one spawned at scale 0 that grows to 1 over 30 frames (a
+/// pop-in); the fastest vertex of each, and each one's edge–triangle pairs crossing, half a
+/// second after the growth ended.
+pub fn popped_in(app: &mut App, backend: Option<ClothBackend>) -> [(f32, usize); 2] {
+    let grid = Grid::new(32, 32, 1.0, 1.0);
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    let cloths = [1.0, 0.0].map(|from| {
+        let x = 4.0 * app.world().entities().len() as f32;
+        let mut e = app.world_mut().spawn((
+            Mesh3d(mesh.clone()),
+            Transform::from_xyz(x, 2.0, 0.0).with_scale(Vec3::splat(from)),
+            Cloth::default(),
+            ClothPins::rest([grid.index(0, 0), grid.index(31, 0)]),
+            ClothReadback,
+        ));
+        if let Some(b) = backend {
+            e.insert(b);
+        }
+        e.id()
+    });
+    app.update();
+    for f in 1..=30 {
+        let s = f as f32 / 30.0;
+        app.world_mut()
+            .get_mut::<Transform>(cloths[1])
+            .unwrap()
+            .scale = Vec3::splat(s);
+        app.update();
+    }
+    run(app, 30);
+    cloths.map(|e| {
+        let sim = app.world().get::<ClothSim>(e).expect("built").simulation();
+        let state = sim.state();
+        let fastest = (0..state.len())
+            .map(|i| state.velocity(i).length())
+            .fold(0.0f32, f32::max);
+        (fastest, sim.self_crossings())
+    })
+}

@@ -43,8 +43,9 @@
 // slots.
 //
 // `frame` (vec4): per step every pin's target | per step and cloth a record (xyz: teleport
-// offset; w: 0 not stepped, else 1 + 2 teleporting + 4 carried + 8 held by motion targets;
-// three more vec4 for a carry) | [per step the motion targets, 3 per vertex of the world].
+// offset; w: 0 not stepped, else 1 + 2 teleporting + 4 carried + 8 held by motion targets
+// + 16 stretched; three more vec4 for a carry) | [per step the motion targets, 3 per vertex
+// of the world].
 
 struct World {
     h: f32,
@@ -263,7 +264,8 @@ fn vertex_pin(i: u32) -> u32 {
 }
 
 // `vec4`s of a cloth's record per step in `frame` (`world.rs`'s `CLOTH_STEP_VEC4S`): flags
-// (w: 1 takes the step, + 2 teleports, + 4 is carried; 0 sits it out) with the teleport
+// (w: 1 takes the step, + 2 teleports, + 4 is carried, + 8 held by motion targets, + 16 its
+// carry stretches; 0 sits it out) with the teleport
 // offset (xyz), then the carried motion's matrix columns with its offset in their w.
 const CLOTH_STEP_VEC4S: u32 = 4u;
 

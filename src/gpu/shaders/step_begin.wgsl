@@ -5,8 +5,20 @@ fn carried(at: u32, p: vec3<f32>) -> vec3<f32> {
     return frame[at + 1u].xyz * p.x + frame[at + 2u].xyz * p.y + frame[at + 3u].xyz * p.z;
 }
 
-// The start of a step for the cloths carried or teleporting in it. Carried (`ClothInertia`):
-// every vertex moves by the rigid motion `m·x + b` and its velocity turns with it (CPU twin:
+// `solver::step::inertia::no_faster`: a velocity `was` carried through a stretch to `turned`,
+// brought back to `was`'s speed where the stretch made it faster.
+fn no_faster(turned: vec3<f32>, was: vec3<f32>) -> vec3<f32> {
+    let now2 = dot(turned, turned);
+    let was2 = dot(was, was);
+    if now2 <= was2 {
+        return turned;
+    }
+    return turned * sqrt(was2 / now2);
+}
+
+// The start of a step for the cloths carried or teleporting in it. Carried (`ClothInertia`,
+// or a change of its entity's scale, flag 16): every vertex moves by the motion `m·x + b` and
+// its velocity turns with it, no faster where it was stretched (CPU twin:
 // `ClothState::carry`). Then the teleport rule: every vertex moves by the cloth's offset and
 // the pins land on their targets at rest (CPU twin: `ClothState::teleport`). Dispatched only
 // in steps where a cloth is carried or teleports.
@@ -31,7 +43,11 @@ fn teleport(
         let v = state[P.vel_at + i];
         state[i] = vec4<f32>(carried(at, x.xyz) + b, x.w);
         state[P.prev_at + i] = vec4<f32>(carried(at, q.xyz) + b, q.w);
-        state[P.vel_at + i] = vec4<f32>(carried(at, v.xyz), v.w);
+        var turned = carried(at, v.xyz);
+        if (flags & 16u) != 0u {
+            turned = no_faster(turned, v.xyz);
+        }
+        state[P.vel_at + i] = vec4<f32>(turned, v.w);
     }
     if (flags & 2u) == 0u {
         return;
