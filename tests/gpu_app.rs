@@ -2476,15 +2476,7 @@ fn a_gpu_cloth_grown_in_is_not_whipped_by_its_growth() {
         return;
     }
     let mut app = render_app();
-    let [(plain, _), (popped, crossings)] = common::popped_in(&mut app, Some(ClothBackend::Gpu));
-    println!(
-        "fastest: spawned at scale 1 {plain} m/s, popped in {popped} m/s; {crossings} crossing pairs"
-    );
-    assert!(
-        popped <= 2.0 * plain,
-        "popped in {popped} m/s against {plain}"
-    );
-    assert_eq!(crossings, 0, "popped in through itself");
+    common::check_popped_in(common::popped_in(&mut app, Some(ClothBackend::Gpu)));
 }
 
 /// Tethers added to a running GPU cloth settle it as on the CPU (`game`'s

@@ -282,26 +282,8 @@ pub fn clone_with_children(app: &mut App, root: Entity) -> (Entity, Entity) {
 /// spawned at scale 0 that grows to 1 over 30 frames (a pop-in), one at scale 1 that grows to
 /// 2 meanwhile; on `backend` (none: the default), read back. Returns them after 150 frames.
 pub fn scaled_cloths(app: &mut App, backend: Option<ClothBackend>) -> [Entity; 3] {
-    let grid = Grid::new(16, 16, 1.0, 1.0);
-    let mesh = app
-        .world_mut()
-        .resource_mut::<Assets<Mesh>>()
-        .add(grid_mesh(&grid));
     let tweens = [(1.0, 1.0), (0.0, 1.0), (1.0, 2.0)];
-    let cloths = tweens.map(|(from, _)| {
-        let x = 4.0 * app.world().entities().len() as f32;
-        let mut e = app.world_mut().spawn((
-            Mesh3d(mesh.clone()),
-            Transform::from_xyz(x, 2.0, 0.0).with_scale(Vec3::splat(from)),
-            Cloth::default(),
-            ClothPins::rest([grid.index(0, 0), grid.index(15, 0)]),
-            ClothReadback,
-        ));
-        if let Some(b) = backend {
-            e.insert(b);
-        }
-        e.id()
-    });
+    let cloths = hanging_at_scales(app, 16, tweens.map(|(from, _)| from), backend);
     app.update();
     for f in 1..=30 {
         let t = f as f32 / 30.0;
@@ -313,6 +295,48 @@ pub fn scaled_cloths(app: &mut App, backend: Option<ClothBackend>) -> [Entity; 3
     }
     run(app, 119);
     cloths
+}
+
+/// One-metre n² cloths hanging from two corners, 4 m apart, one at each of `scales`, on
+/// `backend` (none: the default), read back.
+fn hanging_at_scales<const N: usize>(
+    app: &mut App,
+    n: u32,
+    scales: [f32; N],
+    backend: Option<ClothBackend>,
+) -> [Entity; N] {
+    let grid = Grid::new(n, n, 1.0, 1.0);
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    scales.map(|scale| {
+        let x = 4.0 * app.world().entities().len() as f32;
+        let mut e = app.world_mut().spawn((
+            Mesh3d(mesh.clone()),
+            Transform::from_xyz(x, 2.0, 0.0).with_scale(Vec3::splat(scale)),
+            Cloth::default(),
+            ClothPins::rest([grid.index(0, 0), grid.index(n - 1, 0)]),
+            ClothReadback,
+        ));
+        if let Some(b) = backend {
+            e.insert(b);
+        }
+        e.id()
+    })
+}
+
+/// Checks [`popped_in`]: the popped-in cloth is no faster than twice the one spawned at
+/// scale 1 and has not gone through itself.
+pub fn check_popped_in([(plain, _), (popped, crossings)]: [(f32, usize); 2]) {
+    println!(
+        "fastest: spawned at scale 1 {plain} m/s, popped in {popped} m/s; {crossings} crossing pairs"
+    );
+    assert!(
+        popped <= 2.0 * plain,
+        "popped in {popped} m/s against {plain}"
+    );
+    assert_eq!(crossings, 0, "popped in through itself");
 }
 
 /// Checks [`scaled_cloths`]: each one's rest shape is the mesh at its entity's scale (mean
@@ -873,25 +897,7 @@ pub fn floor() -> bevy_cloth::solver::Collider {
 /// pop-in); the fastest vertex of each, and each one's edge–triangle pairs crossing, half a
 /// second after the growth ended.
 pub fn popped_in(app: &mut App, backend: Option<ClothBackend>) -> [(f32, usize); 2] {
-    let grid = Grid::new(32, 32, 1.0, 1.0);
-    let mesh = app
-        .world_mut()
-        .resource_mut::<Assets<Mesh>>()
-        .add(grid_mesh(&grid));
-    let cloths = [1.0, 0.0].map(|from| {
-        let x = 4.0 * app.world().entities().len() as f32;
-        let mut e = app.world_mut().spawn((
-            Mesh3d(mesh.clone()),
-            Transform::from_xyz(x, 2.0, 0.0).with_scale(Vec3::splat(from)),
-            Cloth::default(),
-            ClothPins::rest([grid.index(0, 0), grid.index(31, 0)]),
-            ClothReadback,
-        ));
-        if let Some(b) = backend {
-            e.insert(b);
-        }
-        e.id()
-    });
+    let cloths = hanging_at_scales(app, 32, [1.0, 0.0], backend);
     app.update();
     for f in 1..=30 {
         let s = f as f32 / 30.0;
