@@ -1402,9 +1402,8 @@ fn a_teleport_matches_the_cpu() {
 /// carry against `ClothState::carry`, every frame from the same
 /// state, within the rounding bound. Not bit for bit even on llvmpipe (its shader compiler
 /// evaluates the carry's matrix product differently; 5.1e-7 m, 0.24 % of the bound, before a
-/// stretched velocity kept its speed; 6.8e-6 m, 3.2 %, since: the square root and the
-/// division that bring it back, and which side of equal a velocity's speeds fall on where the
-/// stretch barely changes it), so that is not asserted.
+/// stretched velocity kept its speed; 1.2e-6 m, 0.56 %, since: the square root and the
+/// division of `clamp_speed` that bring it back), so that is not asserted.
 #[test]
 fn a_carried_cloth_matches_the_cpu() {
     let Some(g) = gpu("a_carried_cloth_matches_the_cpu") else {

@@ -5,17 +5,6 @@ fn carried(at: u32, p: vec3<f32>) -> vec3<f32> {
     return frame[at + 1u].xyz * p.x + frame[at + 2u].xyz * p.y + frame[at + 3u].xyz * p.z;
 }
 
-// `solver::step::inertia::no_faster`: a velocity `was` carried through a stretch to `turned`,
-// brought back to `was`'s speed where the stretch made it faster.
-fn no_faster(turned: vec3<f32>, was: vec3<f32>) -> vec3<f32> {
-    let now2 = dot(turned, turned);
-    let was2 = dot(was, was);
-    if now2 <= was2 {
-        return turned;
-    }
-    return turned * sqrt(was2 / now2);
-}
-
 // The start of a step for the cloths carried or teleporting in it. Carried (`ClothInertia`,
 // or a change of its entity's scale, flag 16): every vertex moves by the motion `m·x + b` and
 // its velocity turns with it, no faster where it was stretched (CPU twin:
@@ -45,7 +34,8 @@ fn teleport(
         state[P.prev_at + i] = vec4<f32>(carried(at, q.xyz) + b, q.w);
         var turned = carried(at, v.xyz);
         if (flags & 16u) != 0u {
-            turned = no_faster(turned, v.xyz);
+            // `solver::step::inertia::no_faster`: no faster than before the stretch.
+            turned = clamp_speed(vec4<f32>(turned, 0.0), length(v.xyz)).xyz;
         }
         state[P.vel_at + i] = vec4<f32>(turned, v.w);
     }

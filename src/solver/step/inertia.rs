@@ -14,6 +14,7 @@
 use glam::{Mat3, Quat, Vec3, Vec4};
 
 use super::state::ClothState;
+use super::substeps::clamp_speed;
 
 /// A motion applied to a whole cloth: `x ↦ rotation·(x − pivot) + pivot + translation`, then
 /// the [`Stretch`] if there is one.
@@ -210,25 +211,17 @@ impl ClothState {
     }
 }
 
-/// A velocity `was` carried through a stretch to `turned`, brought back to `was`'s speed where
-/// the stretch made it faster (the GPU's `teleport` kernel does the same). A cloth grown in
-/// from a small scale (a pop-in) would otherwise have its speeds multiplied by the growth: a
-/// 64² banner grown from scale 0.05 to 1 in half a second swung at 4.3 m/s half a second
-/// later, 14 % stretched and with 34 edge–triangle pairs through itself, against 1.1 m/s,
-/// 4 % and none with the speeds kept. A shrink still slows it down with its size.
-/// (A velocity so large that the stretch overflows it comes out at rest.)
+/// A velocity `was` carried through a stretch to `turned`, shortened to `was`'s speed where
+/// the stretch made it faster ([`clamp_speed`]; the GPU's `teleport` kernel does the same). A
+/// cloth grown in from a small scale (a pop-in) would otherwise have its speeds multiplied by
+/// the growth: a 64² banner grown from scale 0.05 to 1 in half a second swung at 4.3 m/s half
+/// a second later, 14 % stretched and with 34 edge–triangle pairs through itself, against
+/// 1.1 m/s, 4 % and none with the speeds kept. A shrink still slows it down with its size. (A
+/// velocity so large that the stretch overflows it comes out at rest.)
 #[inline]
 fn no_faster(turned: Vec3, was: Vec3) -> Vec3 {
-    let (now2, was2) = (turned.length_squared(), was.length_squared());
-    if now2 <= was2 && turned.is_finite() {
-        return turned;
-    }
-    let slowed = turned * (was2 / now2).sqrt();
-    if slowed.is_finite() {
-        slowed
-    } else {
-        Vec3::ZERO
-    }
+    let kept = clamp_speed(turned.extend(0.0), was.length()).truncate();
+    if kept.is_finite() { kept } else { Vec3::ZERO }
 }
 
 #[cfg(test)]

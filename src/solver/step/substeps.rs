@@ -199,7 +199,7 @@ struct Consts {
 
 /// `v` shortened to at most `max` (w stays 0).
 #[inline]
-fn clamp_speed(v: Vec4, max: f32) -> Vec4 {
+pub(super) fn clamp_speed(v: Vec4, max: f32) -> Vec4 {
     let s2 = v.length_squared();
     if s2 > max * max {
         v * (max / s2.sqrt())
