@@ -137,6 +137,12 @@ impl ClothSim {
         &self.sim
     }
 
+    /// Makes its simulation's tethers current (see `Simulation::prepare_tethers`) without
+    /// counting as an edit: the GPU backend uploads them.
+    pub(crate) fn prepare_tethers(&mut self) {
+        self.sim.prepare_tethers();
+    }
+
     /// Mutable access, e.g. to [`ClothState::reset`](crate::solver::ClothState::reset) the
     /// cloth. Changes are written to the mesh at the next write-back; a cloth on the GPU
     /// restarts from the state as edited here.

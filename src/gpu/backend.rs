@@ -555,7 +555,7 @@ pub(crate) fn choose_backends(
                     *generation += 1;
                     g.generation = *generation;
                     let pins_before: Vec<u32> = pinned_vertices(&g.upload.sim);
-                    g.upload = Arc::new(upload(&cloth, layout, !edited));
+                    g.upload = Arc::new(upload(&mut cloth, layout, !edited));
                     hand_over_settle(&mut cloth);
                     g.key = key;
                     g.edits = cloth.edit_count();
@@ -586,7 +586,7 @@ pub(crate) fn choose_backends(
                          from (add ClothReadback to read the GPU's state back)"
                     );
                 }
-                let first = Arc::new(upload(&cloth, layout, false));
+                let first = Arc::new(upload(&mut cloth, layout, false));
                 hand_over_settle(&mut cloth);
                 // Asleep on the CPU, it starts awake on the GPU (and sleeps there once at rest).
                 if cloth.is_sleeping() {
@@ -674,7 +674,10 @@ fn hand_over_settle(cloth: &mut Mut<ClothSim>) {
     }
 }
 
-fn upload(cloth: &ClothSim, layout: VertexLayout, carry: bool) -> GpuUpload {
+/// What the render world needs of `cloth` to build its part of the GPU world; its tethers made
+/// here (kept from upload to upload while its pins stay, scaled with its rest shape).
+fn upload(cloth: &mut Mut<ClothSim>, layout: VertexLayout, carry: bool) -> GpuUpload {
+    cloth.bypass_change_detection().prepare_tethers();
     let binding = cloth.binding();
     let shading = binding.shading();
     let tangents = shading.corner_uvs().map(|uvs| TangentSource {

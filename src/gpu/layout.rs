@@ -394,8 +394,15 @@ impl WorldLayout {
                 flags |= FLAG_SYMMETRIC;
             }
             if let Some(tp) = features.tethers.filter(|_| !key.lab) {
-                let pinned: Vec<u32> = pins.iter().map(|p| p.vertex).collect();
-                let t = Tethers::build(sim.topology(), &pinned, tp);
+                // The simulation's own where the backend made them before the upload.
+                let built;
+                let t = if let Some(t) = sim.current_tethers() {
+                    t
+                } else {
+                    let pinned: Vec<u32> = pins.iter().map(|p| p.vertex).collect();
+                    built = Tethers::build(sim.topology(), &pinned, tp);
+                    &built
+                };
                 if !t.is_empty() {
                     flags |= FLAG_TETHERS;
                     tethers.extend(

@@ -721,3 +721,71 @@ fn colliders_tethers_and_a_skin_add_no_parallel_region() {
         with.impulses()
     );
 }
+
+/// A cloth's rest shape scaled evenly (an entity grown in by its scale) keeps its tethers,
+/// scaled: within rounding the limits a search of the new shape finds, and the steps after
+/// keep them. Scaled unevenly, or given another mesh's rest shape, they are
+/// searched for again on the next step.
+#[test]
+fn tethers_follow_an_even_scale_of_the_rest_shape_and_are_searched_again_otherwise() {
+    let mut scene = HangingCloth::new(12);
+    scene.features.tethers = Some(TetherParams::default());
+    let mut sim = scene.build().unwrap();
+    let dt = 1.0 / 60.0;
+    sim.step(dt, &Serial);
+    let pins: Vec<u32> = sim.state().pins().iter().map(|p| p.vertex).collect();
+    let params = TetherParams::default();
+    let indices: Vec<u32> = sim
+        .topology()
+        .triangles()
+        .iter()
+        .flatten()
+        .copied()
+        .collect();
+    let rest = sim.topology().rest_positions().to_vec();
+    let options = sim.topology().options();
+    let shaped = |f: &dyn Fn(Vec3) -> Vec3| {
+        let moved: Vec<Vec3> = rest.iter().map(|p| f(*p)).collect();
+        Topology::from_triangles(&moved, None, &indices, options).unwrap()
+    };
+    let first = sim.current_tethers().unwrap().clone();
+    // Grown threefold about a point: kept, scaled.
+    let grown = shaped(&|p| (p - Vec3::Y) * 3.0 + Vec3::Y);
+    let searched = Tethers::build(&grown, &pins, params);
+    sim.set_rest_shape(grown).unwrap();
+    let kept = sim
+        .current_tethers()
+        .expect("kept through an even scale")
+        .clone();
+    assert_eq!(kept.len(), searched.len());
+    for ((v, p, a), (w, q, b), (_, _, was)) in kept
+        .entries()
+        .zip(searched.entries())
+        .zip(first.entries())
+        .map(|((x, y), z)| (x, y, z))
+    {
+        assert_eq!((v, p), (w, q));
+        assert!(
+            (a - b).abs() <= 64.0 * f32::EPSILON * (b + 4.0),
+            "{v}: {a} vs {b}"
+        );
+        assert!(
+            (a - 3.0 * was).abs() <= 64.0 * f32::EPSILON * a,
+            "{v}: {a} vs 3 × {was}"
+        );
+    }
+    sim.step(dt, &Serial);
+    assert_eq!(sim.current_tethers(), Some(&kept), "kept by the step");
+    // Widened along x only: searched for again, on the next step.
+    let wide = shaped(&|p| p * Vec3::new(1.5, 1.0, 1.0));
+    let searched = Tethers::build(&wide, &pins, params);
+    sim.set_rest_shape(wide).unwrap();
+    assert!(sim.current_tethers().is_none());
+    sim.step(dt, &Serial);
+    assert_eq!(sim.current_tethers(), Some(&searched));
+    // The same positions, other triangles (each turned over): another mesh, searched again.
+    let flipped: Vec<u32> = indices.chunks(3).flat_map(|t| [t[0], t[2], t[1]]).collect();
+    let other = Topology::from_triangles(&rest, None, &flipped, options).unwrap();
+    sim.set_rest_shape(other).unwrap();
+    assert!(sim.current_tethers().is_none());
+}

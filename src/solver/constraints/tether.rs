@@ -23,6 +23,12 @@ use wide::{CmpGt, f32x4};
 
 use crate::solver::mesh::Topology;
 
+/// How unevenly (relative to each length) the edges and tethered distances of a rest shape
+/// may have been scaled, beyond the rounding of its positions, for
+/// [`Tethers::rescaled`] to scale the limits instead of building them again: a tenth of
+/// the smallest change of an entity's scale the plugin follows with the rest shape.
+pub(crate) const RESCALE_TOLERANCE: f32 = 1e-5;
+
 /// Tether settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TetherParams {
@@ -59,6 +65,16 @@ pub struct Tethers {
     /// `rounds × n`: the anchor slot of each vertex's tether in each round.
     slot: Vec<u32>,
     /// `rounds × n`: the longest distance allowed (`+∞`: no tether).
+    max_len: Vec<f32>,
+    /// The rest positions the limits were measured on and the limits there: `max_len` is
+    /// them times the uniform scale the rest shape has taken since (see [`Self::rescaled`]).
+    measured: Measured,
+}
+
+/// What a search of the mesh measured (see [`Tethers::rescaled`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Measured {
+    rest: Vec<Vec3>,
     max_len: Vec<f32>,
 }
 
@@ -145,6 +161,7 @@ impl Tethers {
             rounds,
             slot: vec![0; rounds * n],
             max_len: vec![f32::INFINITY; rounds * n],
+            measured: Measured::default(),
         };
         for (v, list) in lists.iter().enumerate() {
             for (r, &(slot, max_len)) in list.iter().enumerate() {
@@ -152,7 +169,62 @@ impl Tethers {
                 t.max_len[r * n + v] = max_len;
             }
         }
+        t.measured = Measured {
+            rest: rest.to_vec(),
+            max_len: t.max_len.clone(),
+        };
         t
+    }
+
+    /// These tethers for `topology`, the mesh they were built on (the same vertices, edges
+    /// and triangles) with its rest shape scaled evenly, moved or turned, as an entity grown
+    /// in by its scale is (see [`Simulation::set_rest_shape`](crate::solver::Simulation::set_rest_shape)): every limit
+    /// times the scale, without searching the mesh again. The same limits as
+    /// [`Self::build`] on `topology` up to the rounding of the rest positions, the same pins
+    /// unless two were equally near.
+    ///
+    /// Measured against the rest shape the tethers were built on, not the last one, so a
+    /// scale animated over many frames does not gather rounding or a slight unevenness.
+    /// `None` (build them again) where `topology` has another vertex count or its rest shape
+    /// is not the measured one scaled evenly as far as the limits can tell: an edge, or a
+    /// tethered vertex's straight distance to its pin, scaled by another factor than the
+    /// edges' mean beyond the rounding of the positions and [`RESCALE_TOLERANCE`].
+    #[must_use]
+    pub(crate) fn rescaled(&self, topology: &Topology) -> Option<Self> {
+        let was = &self.measured.rest;
+        let now = topology.rest_positions();
+        if was.len() != self.n || now.len() != self.n {
+            return None;
+        }
+        let length = |p: &[Vec3], a: u32, b: u32| p[a as usize].distance(p[b as usize]);
+        let pairs = topology.edges().iter().map(|e| (e.v[0], e.v[1]));
+        let (sum_was, sum_now) = pairs.clone().fold((0.0f64, 0.0f64), |(w, n), (a, b)| {
+            (
+                w + f64::from(length(was, a, b)),
+                n + f64::from(length(now, a, b)),
+            )
+        });
+        let scale = (sum_now / sum_was) as f32;
+        if !(scale.is_finite() && scale > 0.0) {
+            return None;
+        }
+        // Beyond the tolerance, or the rounding of positions as far from the origin as the
+        // pair's ends (a few ulps of each end, before and after).
+        let even = |a: u32, b: u32| {
+            let far = |p: &[Vec3]| p[a as usize].abs().max(p[b as usize].abs()).max_element();
+            let rounding = 8.0 * f32::EPSILON * (far(now) + scale * far(was));
+            let expected = scale * length(was, a, b);
+            (length(now, a, b) - expected).abs() <= RESCALE_TOLERANCE * expected + rounding
+        };
+        let tethered = self.entries().map(|(v, pin, _)| (v, pin));
+        if !(pairs.clone().all(|(a, b)| even(a, b)) && tethered.clone().all(|(v, p)| even(v, p))) {
+            return None;
+        }
+        let mut t = self.clone();
+        for (l, m) in t.max_len.iter_mut().zip(&self.measured.max_len) {
+            *l = m * scale;
+        }
+        Some(t)
     }
 
     /// Number of tethers (a vertex may have several).
@@ -439,5 +511,109 @@ mod tests {
         tethers.project(&mut pos);
         assert!((pos[2].xyz().distance(pos[0].xyz()) - 2.0).abs() < 1e-5);
         assert_eq!(pos[1], before);
+    }
+
+    /// A curved 9 × 7 sheet (both kinds of limits: straight where it is flat enough, the path
+    /// where it is not) with three pins placed unevenly (no two equally near a vertex).
+    fn curved() -> (Vec<Vec3>, Vec<u32>, [u32; 3]) {
+        let g = Grid::new(9, 7, 2.0, 1.5);
+        let rest = g
+            .positions()
+            .iter()
+            .map(|p| Vec3::new(p.x, 0.4 * (2.0 * p.x).sin() + 0.3 * p.z * p.z, p.z))
+            .collect();
+        (
+            rest,
+            g.indices(),
+            [g.index(0, 0), g.index(8, 1), g.index(3, 6)],
+        )
+    }
+
+    fn topology(rest: &[Vec3], indices: &[u32]) -> Topology {
+        Topology::from_triangles(rest, None, indices, TopologyOptions::default()).unwrap()
+    }
+
+    /// Every tether of `a` is one of `b`'s (same vertex, same pin, in the same order) with a
+    /// limit within the rounding of positions as far as `far` from the origin: a limit is a
+    /// sum of up to a dozen lengths along the mesh, each a few ulps of `far` off.
+    fn assert_same_limits(a: &Tethers, b: &Tethers, far: f32) {
+        assert_eq!(a.len(), b.len());
+        for ((va, pa, la), (vb, pb, lb)) in a.entries().zip(b.entries()) {
+            assert_eq!((va, pa), (vb, pb));
+            let tolerance = 64.0 * f32::EPSILON * (lb + far);
+            assert!((la - lb).abs() <= tolerance, "vertex {va}: {la} vs {lb}");
+        }
+    }
+
+    #[test]
+    fn an_evenly_scaled_rest_shape_scales_the_limits_as_a_search_finds_them() {
+        let (rest, indices, pins) = curved();
+        let params = TetherParams {
+            slack: 0.05,
+            pins_per_vertex: 2,
+        };
+        let tethers = Tethers::build(&topology(&rest, &indices), &pins, params);
+        assert!(tethers.len() > 100, "{}", tethers.len());
+        // Grown 2.5 times, turned and moved, then shrunk to 0.3 of its first size far from
+        // the origin: each time as a search of the new shape finds, measured from the first.
+        let turn = glam::Quat::from_rotation_y(0.7) * glam::Quat::from_rotation_x(-0.3);
+        let mut last = tethers.clone();
+        for (scale, offset) in [(2.5, Vec3::new(3.0, 2.0, -1.0)), (0.3, Vec3::splat(200.0))] {
+            let moved: Vec<Vec3> = rest.iter().map(|p| turn * (*p * scale) + offset).collect();
+            let shape = topology(&moved, &indices);
+            let scaled = last.rescaled(&shape).expect("an even scale");
+            let searched = Tethers::build(&shape, &pins, params);
+            assert_same_limits(&scaled, &searched, offset.length() + 3.0 * scale);
+            // Not merely the limits it had: they changed by the scale.
+            let (_, _, first) = tethers.entries().next().unwrap();
+            let (_, _, now) = scaled.entries().next().unwrap();
+            assert!((now / first - scale).abs() < 1e-5, "{now} / {first}");
+            last = scaled;
+        }
+    }
+
+    #[test]
+    fn an_uneven_scale_or_another_shape_is_searched_again() {
+        let (rest, indices, pins) = curved();
+        let tethers = Tethers::build(&topology(&rest, &indices), &pins, TetherParams::default());
+        // Wider than deep, by a hundredth and by a thousandth (beyond the tolerance, 1e-5).
+        for widen in [1.01, 1.001] {
+            let wide: Vec<Vec3> = rest
+                .iter()
+                .map(|p| *p * Vec3::new(widen, 1.0, 1.0))
+                .collect();
+            assert!(
+                tethers.rescaled(&topology(&wide, &indices)).is_none(),
+                "{widen}"
+            );
+        }
+        // One vertex moved: its edges no longer scale with the others.
+        let mut bent = rest.clone();
+        bent[30].y += 0.05;
+        assert!(tethers.rescaled(&topology(&bent, &indices)).is_none());
+        // Another vertex count.
+        let g = Grid::new(4, 4, 1.0, 1.0);
+        let small = g.topology(TopologyOptions::default()).unwrap();
+        assert!(tethers.rescaled(&small).is_none());
+        // Collapsed to a point: no scale to take.
+        let point = vec![Vec3::ZERO; rest.len()];
+        let collapsed =
+            Topology::from_triangles(&point, None, &indices, TopologyOptions::default());
+        if let Ok(collapsed) = collapsed {
+            assert!(tethers.rescaled(&collapsed).is_none());
+        }
+        // A flat sheet scaled across its plane only is the same shape: kept as it was.
+        let g = Grid::new(6, 5, 1.0, 1.0);
+        let flat = g.topology(TopologyOptions::default()).unwrap();
+        let t = Tethers::build(&flat, &[0, 5], TetherParams::default());
+        let thick: Vec<Vec3> = g
+            .positions()
+            .iter()
+            .map(|p| *p * Vec3::new(1.0, 3.0, 1.0))
+            .collect();
+        let same = t
+            .rescaled(&topology(&thick, &g.indices()))
+            .expect("the same shape");
+        assert_eq!(same.max_len, t.max_len);
     }
 }

@@ -250,17 +250,7 @@ impl Simulation {
             }
             self.sleep.wake();
         }
-        // Tethers follow the pins: rebuild when the pinned vertices changed.
-        match self.features.tethers {
-            Some(params) => {
-                let pins: Vec<u32> = self.state.pins().iter().map(|p| p.vertex).collect();
-                if self.tethers.as_ref().is_none_or(|(p, _)| *p != pins) {
-                    let t = Tethers::build(&self.topology, &pins, params);
-                    self.tethers = Some((pins, t));
-                }
-            }
-            None => self.tethers = None,
-        }
+        self.prepare_tethers();
         if self.settling == MAX_SETTLE_STEPS {
             // The speeds the cloth had when the settings changed.
             self.settle_speed.clear();
@@ -369,6 +359,31 @@ impl Simulation {
         gone
     }
 
+    /// Makes the tethers current: built for the pinned vertices now where they were built for
+    /// others (or not yet), none without [`Features::tethers`]. Each step does it; the GPU
+    /// backend before it uploads the cloth, so that it takes them from here
+    /// ([`Self::current_tethers`]) instead of building its own.
+    pub(crate) fn prepare_tethers(&mut self) {
+        match self.features.tethers {
+            Some(params) => {
+                if self.current_tethers().is_none() {
+                    let pins: Vec<u32> = self.state.pins().iter().map(|p| p.vertex).collect();
+                    let t = Tethers::build(&self.topology, &pins, params);
+                    self.tethers = Some((pins, t));
+                }
+            }
+            None => self.tethers = None,
+        }
+    }
+
+    /// The tethers for the pinned vertices now, where [`Self::prepare_tethers`] made them
+    /// (`None`: not made, made for other pins, or no tethers).
+    pub(crate) fn current_tethers(&self) -> Option<&Tethers> {
+        let (pins, t) = self.tethers.as_ref()?;
+        let now = self.state.pins().iter().map(|p| p.vertex);
+        (self.features.tethers.is_some() && pins.iter().copied().eq(now)).then_some(t)
+    }
+
     /// Makes `topology` (the same vertices) the cloth's: its constraints rebuilt with the same
     /// part count, its implicit bending's factorisation and its tethers made again.
     fn take_topology(&mut self, topology: Topology) {
@@ -410,13 +425,29 @@ impl Simulation {
     /// Takes `topology` as the cloth's rest shape, keeping its state: the same vertices and
     /// triangles with other rest positions (its entity was scaled, see
     /// [`Stretch`](crate::solver::Stretch)). The constraints are rebuilt from it (same part
-    /// count), tethers on the next step.
+    /// count). The tethers are scaled where `topology` is the same mesh scaled evenly (an
+    /// entity grown in by its scale), otherwise made again on the next step.
     ///
     /// # Errors
     /// [`SolverError::State`] if `topology` has another vertex count (nothing changes).
     pub fn set_rest_shape(&mut self, topology: Topology) -> Result<(), SolverError> {
         self.same_vertices(&topology)?;
+        // The same mesh scaled evenly (an entity grown in by its scale): its tethers scaled
+        // with it instead of searched for again at every frame of the growth.
+        let was = &self.topology;
+        let same_mesh = was.triangles() == topology.triangles()
+            && was
+                .edges()
+                .iter()
+                .map(|e| e.v)
+                .eq(topology.edges().iter().map(|e| e.v));
+        let tethers = self
+            .tethers
+            .take()
+            .filter(|_| same_mesh)
+            .and_then(|(pins, t)| Some((pins, t.rescaled(&topology)?)));
         self.take_topology(topology);
+        self.tethers = tethers;
         self.sleep.wake();
         Ok(())
     }
