@@ -2479,6 +2479,39 @@ fn a_gpu_cloth_grown_in_is_not_whipped_by_its_growth() {
     common::check_popped_in(common::popped_in(&mut app, Some(ClothBackend::Gpu)));
 }
 
+/// On the GPU too, banners popped in, out and in again by their own scale and their parent's
+/// hang still after it (`game`'s `banners_popped_in_and_out_hang_still`, the same bound, read
+/// back): the stretch's centre reaches the `teleport` kernel with the carry.
+#[test]
+fn gpu_banners_popped_in_and_out_hang_still() {
+    if common::gpu_or_skip("gpu_banners_popped_in_and_out_hang_still").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    common::check_banners_popped_in_and_out(common::banners_popped_in_and_out(
+        &mut app,
+        Some(ClothBackend::Gpu),
+        1,
+    ));
+}
+
+/// The same at 12 frames a second (five fixed steps a frame, each with a new rest shape): the
+/// GPU solves a frame's steps with the last step's rest shape, so the frame's stretches all
+/// apply at its first step. Before, the earlier steps ran the cloth at one size with the rest
+/// shape of another.
+#[test]
+fn gpu_banners_popped_in_and_out_at_12_fps_hang_still() {
+    if common::gpu_or_skip("gpu_banners_popped_in_and_out_at_12_fps_hang_still").is_none() {
+        return;
+    }
+    let mut app = render_app();
+    common::check_banners_popped_in_and_out(common::banners_popped_in_and_out(
+        &mut app,
+        Some(ClothBackend::Gpu),
+        5,
+    ));
+}
+
 /// Tethers added to a running GPU cloth settle it as on the CPU (`game`'s
 /// `tethers_added_to_a_running_cloth_do_not_fling_it`, the same bound): the new upload
 /// carries the settle. Before, its fastest vertex reached 28.5 m/s (2.7 while it fell; 3.7

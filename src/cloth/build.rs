@@ -38,6 +38,7 @@ impl Built {
             sim: self.sim,
             mesh: meshes.add(self.mesh),
             binding: self.binding,
+            local_edge: typical_edge(&self.rest_local),
             rest_local: self.rest_local,
             u16_indices: self.u16_indices,
             steps: 0,
@@ -64,6 +65,7 @@ impl Built {
             inertia_error: None,
             anchor_error: None,
             shaped: self.shaped,
+            placed_at: None,
             reshapes: 0,
             reshape_error: None,
             made_from: self.made_from,
@@ -187,7 +189,7 @@ pub(super) fn build(
         &mut sim,
         &list,
         &rest_local,
-        own,
+        Some(own),
         poses,
         cloth.teleport_distance,
     )?;
@@ -217,15 +219,50 @@ fn rest_placed(cs: &ClothSim, at: &GlobalTransform) -> Vec<Vec3> {
         .collect()
 }
 
+/// The shortest a cloth's typical edge ([`typical_edge`]) may be placed at, in multiples of
+/// the f32 spacing at its distance from the origin (64 ulps: rest lengths within 2 %), and in
+/// metres wherever it is: smaller, it is [`hidden`].
+const SMALLEST_EDGE_ULPS: f32 = 64.0;
+const SMALLEST_EDGE: f32 = 1e-5;
+
+/// Whether `pose` places a cloth whose mesh has edges about `local_edge` long
+/// ([`typical_edge`]) too small to simulate: a zero (or not finite) scale along some axis, or
+/// one that makes its edges shorter than [`SMALLEST_EDGE`] or than [`SMALLEST_EDGE_ULPS`] f32
+/// steps at its distance from the origin (where positions no longer resolve its shape: a
+/// pop-in's tween near 0). Such a cloth waits to be built, or keeps the shape, size and pins it
+/// had (hidden), until its scale places it larger.
+pub(super) fn hidden(pose: &GlobalTransform, local_edge: f32) -> bool {
+    let affine = pose.affine();
+    let det = affine.matrix3.determinant();
+    if !(det.is_finite() && det.abs() > f32::MIN_POSITIVE) {
+        return true;
+    }
+    let edge = local_edge * det.abs().cbrt();
+    let far = Vec3::from(affine.translation).abs().max_element();
+    !(edge >= SMALLEST_EDGE && edge >= SMALLEST_EDGE_ULPS * f32::EPSILON * far)
+}
+
+/// A length typical of the edges of a mesh with vertices at `positions`: the diagonal of their
+/// bounds over the square root of their count (a square grid's diagonal edge, near enough).
+pub(super) fn typical_edge(positions: &[Vec3]) -> f32 {
+    finite_bounds(positions.iter().copied()).map_or(0.0, |(lo, hi)| {
+        (hi - lo).length() / (positions.len().max(1) as f32).sqrt()
+    })
+}
+
 /// Relative change of an entity's scale (along any of its axes) from the one its cloth's rest
 /// shape was placed at past which the rest shape follows it.
 const RESHAPE_TOLERANCE: f32 = 1e-4;
 
 /// When the entity's scale (`own`, its pose at this step) is no longer the one the rest shape
 /// was placed at: the rest shape placed at the new scale (the same vertices and triangles, a
-/// tear kept), and the stretch that takes the cloth's state along with it about the entity's
-/// origin (in its current orientation, so that its motion and turning stay the pins'
-/// business). A zero scale keeps the last shape (the cloth hidden, not squashed).
+/// tear kept), and the stretch that takes the cloth's state along with it (in the entity's
+/// current orientation, so that its turning stays the pins' business) about the point the
+/// change holds still, within the new rest shape's bounds ([`Stretch::holding`]: the
+/// entity's origin when it is scaled itself, a scaled parent's when that moved the origin;
+/// the entity's motion stays the pins' business). A scale too small to place the cloth at
+/// ([`hidden`]: zero, or a tween's first frames) keeps the last shape (the cloth hidden, not
+/// squashed).
 ///
 /// # Errors
 /// The rest shape at the new scale cannot be built (triangles collapsed); nothing changes.
@@ -234,13 +271,18 @@ pub(super) fn reshape(
     own: &GlobalTransform,
 ) -> Result<Option<Stretch>, ClothError> {
     let now = own.affine();
-    let det = now.matrix3.determinant();
-    if !(det.is_finite() && det.abs() > f32::MIN_POSITIVE) {
+    if hidden(own, cs.local_edge) {
         return Ok(None);
     }
     let shaped = GlobalTransform::from(cs.shaped);
     let (scale, rotation, origin) = own.to_scale_rotation_translation();
     let (scale_was, rotation_was, _) = shaped.to_scale_rotation_translation();
+    // Where the entity's origin was at the last step it had a shape at (a zero scale holds
+    // the cloth as it was): the stretch holds still the point the change of pose holds still.
+    let origin_was = cs
+        .placed_at
+        .replace(origin)
+        .unwrap_or(Vec3::from(cs.shaped.translation));
     let changed = (scale - scale_was)
         .abs()
         .cmpgt(RESHAPE_TOLERANCE * scale_was.abs())
@@ -261,14 +303,17 @@ pub(super) fn reshape(
     if !linear.is_finite() {
         return Ok(None);
     }
+    let stretch = Stretch::holding(
+        linear,
+        origin_was,
+        origin,
+        finite_bounds(rest.iter().copied()),
+    );
     cs.sim.set_rest_shape(topology)?;
     cs.shaped = now;
     cs.reshapes += 1;
     cs.dirty = true;
-    Ok(Some(Stretch {
-        center: origin,
-        linear,
-    }))
+    Ok(Some(stretch))
 }
 
 /// Applies a change of [`Cloth`] that keeps the welding (the same particles) to the running
@@ -488,6 +533,38 @@ pub(super) fn features(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A cloth is hidden at a zero scale along any axis and below the smallest edge its
+    /// position resolves, and placed at any scale above it, near the origin or far from it.
+    #[test]
+    fn a_cloth_too_small_to_place_is_hidden() {
+        // A 1.4 m banner of 36 rows: edges of about 4 cm.
+        let edge = 0.04;
+        let at = |x: f32, scale: Vec3| {
+            GlobalTransform::from(Transform::from_xyz(x, 2.6, 0.0).with_scale(scale))
+        };
+        assert!(!hidden(&at(0.0, Vec3::ONE), edge));
+        assert!(hidden(&at(0.0, Vec3::ZERO), edge));
+        assert!(hidden(&at(0.0, Vec3::new(1.0, 0.0, 1.0)), edge));
+        assert!(hidden(&at(0.0, Vec3::splat(f32::NAN)), edge));
+        // 2.6 m from the origin f32 steps are at most 3.1e-7 m: edges of 64 steps, 2e-5 m,
+        // need a scale of 5e-4.
+        assert!(hidden(&at(0.0, Vec3::splat(3e-4)), edge));
+        assert!(!hidden(&at(0.0, Vec3::splat(1e-3)), edge));
+        // 2 km out they are 2.4e-4 m: a scale of 0.38 at least.
+        assert!(!hidden(&at(2000.0, Vec3::splat(0.5)), edge));
+        assert!(hidden(&at(2000.0, Vec3::splat(0.3)), edge));
+        // At the origin, edges of a hundredth of a millimetre at least.
+        let origin = |s: f32| GlobalTransform::from(Transform::from_scale(Vec3::splat(s)));
+        assert!(hidden(&origin(1e-4), edge));
+        assert!(!hidden(&origin(1e-3), edge));
+        assert!(
+            (typical_edge(&[Vec3::ZERO, Vec3::X, Vec3::Z, Vec3::new(1.0, 0.0, 1.0)])
+                - 0.5f32.sqrt())
+            .abs()
+                < 1e-6
+        );
+    }
 
     /// Two sheets, one of them pinned: the other is named, with its vertex count; both pinned,
     /// or none (a cloth dropped on something), nothing is said.

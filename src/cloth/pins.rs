@@ -85,13 +85,18 @@ fn pin_target(
     particle: u32,
     anchor: PinAnchor,
     rest_local: &[Vec3],
-    own: &GlobalTransform,
+    own: Option<&GlobalTransform>,
     poses: &FixedPoses,
 ) -> Option<Vec3> {
     match anchor {
-        PinAnchor::Rest => rest_local
-            .get(particle as usize)
-            .map(|r| own.transform_point(*r)),
+        // Hidden by a scale too small to place the cloth at (`own` is `None`), the rest pins
+        // hold where they are, as its rest shape does: drawn to one point, they would crumple
+        // the cloth it grows back from.
+        PinAnchor::Rest => own.and_then(|own| {
+            rest_local
+                .get(particle as usize)
+                .map(|r| own.transform_point(*r))
+        }),
         PinAnchor::World(w) => Some(w),
         PinAnchor::Entity { entity, offset } => {
             poses.get(entity).map(|t| t.transform_point(offset))
@@ -108,7 +113,7 @@ pub(super) fn repin(
     sim: &mut Simulation,
     list: &[(u32, PinAnchor)],
     rest_local: &[Vec3],
-    own: &GlobalTransform,
+    own: Option<&GlobalTransform>,
     poses: &FixedPoses,
     teleport: f32,
 ) -> Result<Option<Vec3>, ClothError> {
@@ -147,7 +152,7 @@ pub(super) fn follow_anchors(
     sim: &mut Simulation,
     list: &[(u32, PinAnchor)],
     rest_local: &[Vec3],
-    own: &GlobalTransform,
+    own: Option<&GlobalTransform>,
     poses: &FixedPoses,
     teleport: f32,
 ) -> Option<Vec3> {

@@ -36,6 +36,9 @@ pub struct ClothSim {
     pub(super) binding: MeshBinding,
     /// Mesh-space rest position of every particle (for pins that follow the cloth entity).
     pub(super) rest_local: Vec<Vec3>,
+    /// How long its mesh's edges are, about ([`typical_edge`](super::build::typical_edge)):
+    /// below some scale the cloth is hidden.
+    pub(super) local_edge: f32,
     pub(super) u16_indices: bool,
     pub(super) steps: u64,
     /// Moved since the last write-back.
@@ -95,6 +98,9 @@ pub struct ClothSim {
     /// The entity's pose the rest shape is placed by: the cloth's size follows the entity's
     /// scale from it (see `build::reshape`).
     pub(super) shaped: Affine3A,
+    /// The entity's origin at the last step its scale was not zero: a change of scale
+    /// stretches the cloth about the point the change holds still (see `build::reshape`).
+    pub(super) placed_at: Option<Vec3>,
     /// How many times the rest shape followed the entity's scale (a backend stepping
     /// elsewhere takes the new shape when this changes).
     pub(super) reshapes: u64,

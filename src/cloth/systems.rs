@@ -7,7 +7,8 @@ use bevy::prelude::*;
 use bevy::tasks::ComputeTaskPool;
 
 use super::build::{
-    build, features, remake, reshape, warn_coarse, warn_loose, warn_self_collision,
+    build, features, hidden, remake, reshape, typical_edge, warn_coarse, warn_loose,
+    warn_self_collision,
 };
 use super::error::report;
 use super::inertia::carry_unfelt_motion;
@@ -142,10 +143,16 @@ pub(super) fn init_cloths(
         // Where the entity is at this step, even if it was spawned in this fixed step and
         // has no propagated GlobalTransform yet.
         let own = poses.get(entity).unwrap_or_default();
-        let det = own.affine().matrix3.determinant();
-        if !(det.is_finite() && det.abs() > f32::MIN_POSITIVE) {
+        let local_edge = mesh
+            .attribute(Mesh::ATTRIBUTE_POSITION)
+            .and_then(|a| a.as_float3())
+            .map_or(0.0, |p| {
+                typical_edge(&p.iter().map(|&p| Vec3::from(p)).collect::<Vec<_>>())
+            });
+        if hidden(&own, local_edge) {
             // A zero scale (an entity spawned hidden, to be shown later) flattens the mesh to
-            // nothing: wait until the entity has a shape to build the cloth at.
+            // nothing, a tiny one to less than positions resolve: wait until the entity places
+            // the cloth at a size it can be built at.
             wait(&mut still_waiting, entity, &|| {
                 format!(
                     "cloth {who}: its transform has a zero scale after {} s; it is built \
@@ -401,6 +408,8 @@ pub(super) fn sync_cloths(
         carry_unfelt_motion(&mut commands, who, cs, cloth, inertia, &poses);
         // The entity's scale changed: the rest shape and the state follow it.
         let reshaped = reshape(cs, &own);
+        // The pose the rest pins are placed by: none while the cloth is hidden.
+        let placed = (!hidden(&own, cs.local_edge)).then_some(&own);
         if let Ok(Some(stretch)) = &reshaped {
             cs.carry = Some(cs.carry.unwrap_or(Carry::IDENTITY).then_stretch(*stretch));
             // The pins' last targets too, so that the size change is no jump of theirs.
@@ -508,7 +517,7 @@ pub(super) fn sync_cloths(
                     &mut cs.sim,
                     &list,
                     &cs.rest_local,
-                    &own,
+                    placed,
                     &poses,
                     cloth.teleport_distance,
                 )
@@ -532,7 +541,7 @@ pub(super) fn sync_cloths(
                 &mut cs.sim,
                 &list,
                 &cs.rest_local,
-                &own,
+                placed,
                 &poses,
                 cloth.teleport_distance,
             )

@@ -91,6 +91,10 @@ pub(crate) struct GpuUpload {
     pub tangents: Option<TangentSource>,
     /// Start from the GPU state of the previous upload (a settings change), not from `sim`'s.
     pub carry: bool,
+    /// How many of the frame's queued steps, from its first, have their carries (the motion
+    /// and change of size carried into them) in `sim`'s state already: a cloth that starts
+    /// from that state skips them on the GPU instead of carrying it twice.
+    pub carried: usize,
     /// The cloth's own mesh (its copy, drawn through `Mesh3d`), the only one the GPU writes:
     /// a mesh the game puts in `Mesh3d` is the source of the next build, not a target.
     pub mesh: AssetId<Mesh>,
@@ -196,6 +200,11 @@ pub struct ClothOnGpu {
     /// (its pins changed between two fixed steps of a frame): the next queued step's targets
     /// replace theirs.
     stale_targets: usize,
+    /// The queued steps' carries fold into the first at the next step queued (a new rest
+    /// shape within the frame).
+    fold_carries: bool,
+    /// The [`ClothSim::reshape_count`] of the last upload.
+    reshapes: u64,
     /// The index of the first queued step among the frame's steps ([`GpuStepQueue`]).
     pub(crate) first_step: u32,
     /// Per queued step, how far the whole cloth jumps at its start (the teleport rule).
@@ -398,6 +407,7 @@ impl ClothOnGpu {
     fn forget_queued_steps(&mut self) {
         self.pending.clear();
         self.stale_targets = 0;
+        self.fold_carries = false;
         self.teleports.clear();
         self.carries.clear();
         self.motion.clear();
@@ -555,7 +565,12 @@ pub(crate) fn choose_backends(
                     *generation += 1;
                     g.generation = *generation;
                     let pins_before: Vec<u32> = pinned_vertices(&g.upload.sim);
-                    g.upload = Arc::new(upload(&mut cloth, layout, !edited));
+                    let reshaped = cloth.reshape_count() != g.reshapes;
+                    g.reshapes = cloth.reshape_count();
+                    // Its state has the carries of the steps queued so far and of this one
+                    // (queued next); an edit forgets the others.
+                    let carried = if edited { 1 } else { g.pending.len() + 1 };
+                    g.upload = Arc::new(upload(&mut cloth, layout, !edited, carried));
                     hand_over_settle(&mut cloth);
                     g.key = key;
                     g.edits = cloth.edit_count();
@@ -569,6 +584,13 @@ pub(crate) fn choose_backends(
                         // This frame's earlier steps were queued for a state that is gone: the
                         // new one starts now and sits them out.
                         g.forget_queued_steps();
+                    } else if reshaped {
+                        // A new rest shape (the entity's scale changed): the GPU solves all
+                        // this frame's steps with it, so they all run at its size. The earlier
+                        // steps take this step's pin targets, and the frame's carries (their
+                        // stretches) apply at its first step (see `queue_gpu_steps`).
+                        g.stale_targets = g.pending.len();
+                        g.fold_carries = true;
                     } else if pins_before != pinned_vertices(&g.upload.sim) {
                         // Other pins: the earlier steps' targets are for the old ones; they
                         // take this step's targets instead.
@@ -586,7 +608,7 @@ pub(crate) fn choose_backends(
                          from (add ClothReadback to read the GPU's state back)"
                     );
                 }
-                let first = Arc::new(upload(&mut cloth, layout, false));
+                let first = Arc::new(upload(&mut cloth, layout, false, 1));
                 hand_over_settle(&mut cloth);
                 // Asleep on the CPU, it starts awake on the GPU (and sleeps there once at rest).
                 if cloth.is_sleeping() {
@@ -601,6 +623,8 @@ pub(crate) fn choose_backends(
                         key: settings_key(&cloth, dt),
                         pending: Vec::new(),
                         stale_targets: 0,
+                        fold_carries: false,
+                        reshapes: cloth.reshape_count(),
                         first_step: 0,
                         teleports: Vec::new(),
                         carries: Vec::new(),
@@ -676,7 +700,12 @@ fn hand_over_settle(cloth: &mut Mut<ClothSim>) {
 
 /// What the render world needs of `cloth` to build its part of the GPU world; its tethers made
 /// here (kept from upload to upload while its pins stay, scaled with its rest shape).
-fn upload(cloth: &mut Mut<ClothSim>, layout: VertexLayout, carry: bool) -> GpuUpload {
+fn upload(
+    cloth: &mut Mut<ClothSim>,
+    layout: VertexLayout,
+    carry: bool,
+    carried: usize,
+) -> GpuUpload {
     cloth.bypass_change_detection().prepare_tethers();
     let binding = cloth.binding();
     let shading = binding.shading();
@@ -702,6 +731,7 @@ fn upload(cloth: &mut Mut<ClothSim>, layout: VertexLayout, carry: bool) -> GpuUp
         layout,
         tangents,
         carry,
+        carried,
         mesh: cloth.mesh().id(),
     }
 }
@@ -953,7 +983,20 @@ pub(crate) fn queue_gpu_steps(
         g.pending.push(targets);
         cloth.count_external_steps(1);
         g.teleports.push(teleport.unwrap_or(Vec3::ZERO));
-        g.carries.push(carry.unwrap_or(Carry::IDENTITY));
+        let mut carry = carry.unwrap_or(Carry::IDENTITY);
+        if core::mem::take(&mut g.fold_carries) && !g.carries.is_empty() {
+            // The frame's steps run with the rest shape uploaded now: every carry of the frame
+            // (this one's too) applies at its first step, so that the cloth is at that size
+            // from then on.
+            let folded = g.carries[1..]
+                .iter()
+                .chain([&carry])
+                .fold(g.carries[0], |all, c| all.then(*c));
+            g.carries.fill(Carry::IDENTITY);
+            g.carries[0] = folded;
+            carry = Carry::IDENTITY;
+        }
+        g.carries.push(carry);
         g.motion.push(
             cloth
                 .simulation()

@@ -190,6 +190,9 @@ struct Member {
     steps: u32,
     /// Read its positions and velocities back this frame.
     readback: bool,
+    /// Started this frame from its upload's state (not carried over from a GPU state): the
+    /// carries of its first [`GpuUpload::carried`] steps are in that state already.
+    fresh: bool,
 }
 
 /// A world and its cloths, in the world's order.
@@ -386,6 +389,7 @@ pub(crate) fn prepare_gpu_worlds(
                     0
                 },
                 readback: x.readback,
+                fresh: false,
             });
     }
     let mut old: Vec<WorldEntry> = core::mem::take(&mut worlds.worlds);
@@ -417,7 +421,7 @@ pub(crate) fn prepare_gpu_worlds(
         // Built again: as many worlds as the device needs, halving a group of cloths that
         // does not fit; a cloth that does not fit alone is refused.
         let mut groups = vec![members];
-        while let Some(members) = groups.pop() {
+        while let Some(mut members) = groups.pop() {
             let sims: Vec<&crate::solver::Simulation> =
                 members.iter().map(|m| &m.upload.sim).collect();
             let mut world = match GpuWorld::new(device, &queue, &pipelines.kernels, &sims) {
@@ -439,7 +443,7 @@ pub(crate) fn prepare_gpu_worlds(
             // settings made to go on from where the GPU cloth is.
             let mut encoder =
                 device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
-            for (i, m) in members.iter().enumerate() {
+            for (i, m) in members.iter_mut().enumerate() {
                 let from = old.iter().find_map(|w| {
                     w.members
                         .iter()
@@ -453,6 +457,8 @@ pub(crate) fn prepare_gpu_worlds(
                     // The same upload goes on with its settle; new settings start theirs.
                     let same = w.members[k].generation == m.generation;
                     world.record_carry(&mut encoder, &w.world, k, i, same);
+                } else {
+                    m.fresh = true;
                 }
             }
             queue.submit([encoder.finish()]);
@@ -479,6 +485,20 @@ pub(crate) fn prepare_gpu_worlds(
         })
         .collect();
     let dt = extracted.queue.steps.first().map_or(0.0, |s| s.dt);
+    // A cloth started from its upload's state skips the carries that state has had already.
+    let skipped: HashMap<Entity, Vec<Carry>> = worlds
+        .worlds
+        .iter()
+        .flat_map(|w| &w.members)
+        .filter(|m| m.fresh && m.upload.carried > 0)
+        .filter_map(|m| {
+            let x = extracted.cloths.iter().find(|x| x.entity == m.entity)?;
+            let mut carries = x.carries.clone();
+            let had = m.upload.carried.min(carries.len());
+            carries[..had].fill(Carry::IDENTITY);
+            Some((m.entity, carries))
+        })
+        .collect();
     for w in &mut worlds.worlds {
         let cloths: Vec<ClothFrame<'_>> = w
             .members
@@ -490,7 +510,7 @@ pub(crate) fn prepare_gpu_worlds(
                         first_step: x.first_step,
                         pin_targets: &x.pin_targets,
                         teleports: &x.teleports,
-                        carries: &x.carries,
+                        carries: skipped.get(&m.entity).unwrap_or(&x.carries),
                         air_velocities: &x.air,
                         motion: &x.motion,
                     },

@@ -892,6 +892,124 @@ pub fn floor() -> bevy_cloth::solver::Collider {
     }
 }
 
+/// Three 0.9 m × 1.4 m banners (24 × 36) with tethers hanging from their top edges at 2.6 m,
+/// on `backend` (none: the default), read back: one spawned at full size, and two that pop in
+/// (scale 0 to 1 over 30 fixed steps), out (to 0 over 15, held near and at 0 for 5) and in
+/// again: one by its own scale, one by its parent's, a mount on its top edge (a prefab's root
+/// popped, the banner its child: the growth moves the banner's own origin). The scale is set
+/// at each fixed step (`FixedUpdate`), each frame `steps` fixed steps long (a frame rate of
+/// 60 / `steps`). The fastest vertex of each, about 30 steps after the second growth ended.
+pub fn banners_popped_in_and_out(
+    app: &mut App,
+    backend: Option<ClothBackend>,
+    steps: usize,
+) -> [f32; 3] {
+    app.insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
+        Duration::from_secs_f64(steps as f64 / 60.0),
+    ));
+    let grid = Grid::new(24, 36, 0.9, 1.4);
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(grid_mesh(&grid));
+    // Turned 90° about x, the grid stands in xy, its last row at the top, 0.7 m above its
+    // centre.
+    let turn = Quat::from_rotation_x(core::f32::consts::FRAC_PI_2);
+    let below_top = Transform::from_xyz(0.0, -0.7, 0.0).with_rotation(turn);
+    let top: Vec<u32> = (0..24).map(|i| grid.index(i, 35)).collect();
+    // (x, scale of the mount, scale of the banner): the one scaled is 0 at first.
+    let banners = [(0.0, 1.0, 1.0), (2.0, 1.0, 0.0), (4.0, 0.0, 1.0)].map(|(x, m, b)| {
+        let mount = app
+            .world_mut()
+            .spawn(Transform::from_xyz(x, 2.6, 0.0).with_scale(Vec3::splat(m)))
+            .id();
+        let mut e = app.world_mut().spawn((
+            Mesh3d(mesh.clone()),
+            below_top.with_scale(Vec3::splat(b)),
+            ChildOf(mount),
+            Cloth::default(),
+            ClothPins::rest(top.iter().copied()),
+            ClothTethers::default(),
+            ClothReadback,
+        ));
+        if let Some(b) = backend {
+            e.insert(b);
+        }
+        e.id()
+    });
+    let scaled = [
+        banners[1],
+        app.world().get::<ChildOf>(banners[2]).unwrap().parent(),
+    ];
+    app.update();
+    let grow = (1..=30).map(|f| f as f32 / 30.0);
+    let shrink = (1..=15).map(|f| 1.0 - f as f32 / 15.0);
+    // Held near 0 (a tween's end, a millionth: too small to place the cloth at) and at 0.
+    let hidden = [1e-6, 1e-6, 0.0, 0.0, 1e-6];
+    let schedule: Vec<f32> = grow
+        .clone()
+        .chain(shrink)
+        .chain(hidden)
+        .chain(grow)
+        .collect();
+    // Set at each fixed step, as a tween on the fixed clock does.
+    app.insert_resource(PopSchedule {
+        entities: scaled,
+        scales: schedule.into_iter().rev().collect(),
+    })
+    .add_systems(FixedUpdate, pop_step);
+    while !app.world().resource::<PopSchedule>().scales.is_empty() {
+        app.update();
+    }
+    run(app, 30 / steps);
+    banners.map(|e| {
+        let state = app
+            .world()
+            .get::<ClothSim>(e)
+            .expect("built")
+            .simulation()
+            .state();
+        (0..state.len())
+            .map(|i| state.velocity(i).length())
+            .fold(0.0f32, f32::max)
+    })
+}
+
+/// What [`banners_popped_in_and_out`] scales, and the scales left (the next last).
+#[derive(Resource)]
+struct PopSchedule {
+    entities: [Entity; 2],
+    scales: Vec<f32>,
+}
+
+/// Sets the next scale of a [`PopSchedule`].
+fn pop_step(mut schedule: ResMut<PopSchedule>, mut transforms: Query<&mut Transform>) {
+    let Some(s) = schedule.scales.pop() else {
+        return;
+    };
+    for e in schedule.entities {
+        if let Ok(mut t) = transforms.get_mut(e) {
+            t.scale = Vec3::splat(s);
+        }
+    }
+}
+
+/// Checks [`banners_popped_in_and_out`]: all three hang still (no vertex faster than 5 cm/s;
+/// a banner at rest moves by far less).
+pub fn check_banners_popped_in_and_out(fastest: [f32; 3]) {
+    let names = [
+        "spawned at full size",
+        "popped by its own scale",
+        "popped by its parent's",
+    ];
+    for (v, name) in fastest.into_iter().zip(names) {
+        println!("fastest: {name} {v} m/s");
+    }
+    for (v, name) in fastest.into_iter().zip(names) {
+        assert!(v < 0.05, "{name}: {v} m/s");
+    }
+}
+
 /// Two 32² one-metre cloths hanging from two corners, on `backend` (none: the default), read
 /// back: one spawned at scale 1, one spawned at scale 0 that grows to 1 over 30 frames (a
 /// pop-in); the fastest vertex of each, and each one's edge–triangle pairs crossing, half a

@@ -41,6 +41,36 @@ pub struct Stretch {
     pub linear: Mat3,
 }
 
+impl Stretch {
+    /// The stretch by `linear` about the point a change of an entity's pose holds still, its
+    /// origin having moved from `was` to `now` meanwhile: where `x ↦ c + linear·(x − c)` takes
+    /// `was` to `now`. A parent scaled about its own origin holds that still, not the child's
+    /// origin (which the scale moves): a banner hanging from a scaled mount grows from the
+    /// mount, as its pins do, instead of being shifted against them at every step of the
+    /// growth. Where the point lies outside `bounds` (the cloth's extent; `None`: its origin
+    /// now) it is brought to the nearest point of them: an entity that moves while its scale
+    /// changes (a walk, whose motion a small change of scale would explain only about a point
+    /// far away) still moves its cloth through the pins, as it does at a constant scale,
+    /// instead of carrying it along. A direction `linear` does not scale keeps the origin's
+    /// coordinate.
+    #[must_use]
+    pub fn holding(linear: Mat3, was: Vec3, now: Vec3, bounds: Option<(Vec3, Vec3)>) -> Self {
+        // c = now + δ with (I − L)·δ = L·(now − was), in regularised least squares: a
+        // direction L does not change (I − L ≈ 0 there) gives δ nothing along it.
+        let a = Mat3::IDENTITY - linear;
+        let normal = a.transpose() * a;
+        let size = (normal.x_axis.x + normal.y_axis.y + normal.z_axis.z) / 3.0;
+        let regular = normal + Mat3::from_diagonal(Vec3::splat(1e-6 * size + f32::MIN_POSITIVE));
+        let delta = regular.inverse() * (a.transpose() * (linear * (now - was)));
+        let held = now + delta;
+        let center = match bounds {
+            Some((lo, hi)) if held.is_finite() && lo.cmple(hi).all() => held.clamp(lo, hi),
+            _ => now,
+        };
+        Self { center, linear }
+    }
+}
+
 impl Carry {
     /// No motion.
     pub const IDENTITY: Self = Self {
@@ -56,6 +86,37 @@ impl Carry {
         Self {
             stretch: Some(stretch),
             ..self
+        }
+    }
+
+    /// This carry, then `next`, as one: the same map (to rounding) as applying the two in
+    /// turn. Rigid when both are; otherwise the whole map is its stretch (about the origin,
+    /// after a translation), so a velocity is turned by it and kept no faster, as one stretch
+    /// does. The GPU backend folds the carries of a frame's steps into its first this way
+    /// when the frame changed the cloth's rest shape (see `queue_gpu_steps`).
+    #[must_use]
+    pub fn then(self, next: Self) -> Self {
+        let (m1, b1) = self.affine();
+        let (m2, b2) = next.affine();
+        let (m, b) = (m2 * m1, m2 * b1 + b2);
+        if self.stretch.is_none() && next.stretch.is_none() {
+            Self {
+                rotation: next.rotation * self.rotation,
+                pivot: Vec3::ZERO,
+                translation: b,
+                stretch: None,
+            }
+        } else {
+            // x ↦ m·(x + m⁻¹·b).
+            Self {
+                rotation: Quat::IDENTITY,
+                pivot: Vec3::ZERO,
+                translation: m.inverse() * b,
+                stretch: Some(Stretch {
+                    center: Vec3::ZERO,
+                    linear: m,
+                }),
+            }
         }
     }
 
@@ -400,5 +461,52 @@ mod tests {
             ..stretch
         }));
         assert_eq!(s.positions, before);
+    }
+
+    #[test]
+    fn a_stretch_holds_still_the_point_its_change_of_pose_holds_still_within_the_cloth() {
+        let close = |a: Vec3, b: Vec3| a.distance(b) < 1e-5 * (1.0 + b.length());
+        let box_around = |c: Vec3, half: f32| Some((c - Vec3::splat(half), c + Vec3::splat(half)));
+        // Scaled about its own origin: the origin.
+        let o = Vec3::new(3.0, 2.0, -1.0);
+        let grow = Mat3::from_diagonal(Vec3::splat(1.5));
+        assert!(close(
+            Stretch::holding(grow, o, o, box_around(o, 1.0)).center,
+            o
+        ));
+        // A child hanging 0.7 m below a mount scaled from 0.4 to 0.6: the mount, which the
+        // growth moved the child's origin away from.
+        let mount = Vec3::new(-2.0, 2.6, 0.5);
+        let below = Vec3::new(0.0, -0.7, 0.0);
+        let (was, now) = (mount + 0.4 * below, mount + 0.6 * below);
+        let held = Stretch::holding(grow, was, now, box_around(now, 0.6));
+        assert!(close(held.center, mount), "{}", held.center);
+        // The child's old origin goes where the new pose puts it.
+        assert!(close(held.center + held.linear * (was - held.center), now));
+        // The same growth scaled unevenly, along x only: the origin's offset along y is not
+        // scaled, so the point held is the origin's, whatever its x.
+        let wide = Mat3::from_diagonal(Vec3::new(1.5, 1.0, 1.0));
+        let held = Stretch::holding(wide, now, now, box_around(now, 0.6));
+        assert!(close(held.center, now), "{}", held.center);
+        // Walking 2 cm while growing by 1 %: the point that explains it lies 2 m behind, out
+        // of the cloth; the nearest point of its bounds is taken, so the stretch carries the
+        // cloth by no more than the growth moves a point of it, and the walk is left to the pins.
+        let walk = Vec3::new(0.02, 0.0, 0.0);
+        let slight = Mat3::from_diagonal(Vec3::splat(1.01));
+        let held = Stretch::holding(slight, o, o + walk, box_around(o + walk, 0.5));
+        assert!(
+            (held.center.x - (o.x + walk.x - 0.5)).abs() < 1e-5,
+            "{}",
+            held.center
+        );
+        let moved = held.center + held.linear * (o - held.center) - o;
+        assert!(moved.length() < 0.011, "{moved}");
+        // No bounds, or input that is not finite: the origin now.
+        assert!(close(Stretch::holding(grow, was, now, None).center, now));
+        let nan = Vec3::splat(f32::NAN);
+        assert_eq!(
+            Stretch::holding(grow, nan, now, box_around(now, 1.0)).center,
+            now
+        );
     }
 }
