@@ -237,9 +237,11 @@ pub(super) fn hidden(pose: &GlobalTransform, local_edge: f32) -> bool {
     if !(det.is_finite() && det.abs() > f32::MIN_POSITIVE) {
         return true;
     }
+    // A mesh with no extent (no positions yet, all at one point) is left to the build to
+    // report.
     let edge = local_edge * det.abs().cbrt();
     let far = Vec3::from(affine.translation).abs().max_element();
-    !(edge >= SMALLEST_EDGE && edge >= SMALLEST_EDGE_ULPS * f32::EPSILON * far)
+    local_edge > 0.0 && !(edge >= SMALLEST_EDGE && edge >= SMALLEST_EDGE_ULPS * f32::EPSILON * far)
 }
 
 /// A length typical of the edges of a mesh with vertices at `positions`: the diagonal of their
@@ -558,6 +560,9 @@ mod tests {
         let origin = |s: f32| GlobalTransform::from(Transform::from_scale(Vec3::splat(s)));
         assert!(hidden(&origin(1e-4), edge));
         assert!(!hidden(&origin(1e-3), edge));
+        // A mesh with no extent is not hidden by its size (its build says what is wrong).
+        assert!(!hidden(&origin(1e-4), 0.0));
+        assert!(hidden(&origin(0.0), 0.0));
         assert!(
             (typical_edge(&[Vec3::ZERO, Vec3::X, Vec3::Z, Vec3::new(1.0, 0.0, 1.0)])
                 - 0.5f32.sqrt())

@@ -155,8 +155,8 @@ pub(super) fn init_cloths(
             // the cloth at a size it can be built at.
             wait(&mut still_waiting, entity, &|| {
                 format!(
-                    "cloth {who}: its transform has a zero scale after {} s; it is built \
-                     once the scale is not zero",
+                    "cloth {who}: its transform has a zero scale (or one too small to place \
+                     it at) after {} s; it is built once the scale places it larger",
                     MESH_WAIT_WARNING.as_secs()
                 )
             });
