@@ -2484,15 +2484,7 @@ fn a_gpu_cloth_grown_in_is_not_whipped_by_its_growth() {
 /// back): the stretch's centre reaches the `teleport` kernel with the carry.
 #[test]
 fn gpu_banners_popped_in_and_out_hang_still() {
-    if common::gpu_or_skip("gpu_banners_popped_in_and_out_hang_still").is_none() {
-        return;
-    }
-    let mut app = render_app();
-    common::check_banners_popped_in_and_out(common::banners_popped_in_and_out(
-        &mut app,
-        Some(ClothBackend::Gpu),
-        1,
-    ));
+    gpu_banners_popped_in_and_out("gpu_banners_popped_in_and_out_hang_still", 1);
 }
 
 /// The same at 12 frames a second (five fixed steps a frame, each with a new rest shape): the
@@ -2501,14 +2493,19 @@ fn gpu_banners_popped_in_and_out_hang_still() {
 /// shape of another.
 #[test]
 fn gpu_banners_popped_in_and_out_at_12_fps_hang_still() {
-    if common::gpu_or_skip("gpu_banners_popped_in_and_out_at_12_fps_hang_still").is_none() {
+    gpu_banners_popped_in_and_out("gpu_banners_popped_in_and_out_at_12_fps_hang_still", 5);
+}
+
+/// [`common::banners_popped_in_and_out`] on the GPU, `steps` fixed steps a frame, checked.
+fn gpu_banners_popped_in_and_out(test: &str, steps: usize) {
+    if common::gpu_or_skip(test).is_none() {
         return;
     }
     let mut app = render_app();
     common::check_banners_popped_in_and_out(common::banners_popped_in_and_out(
         &mut app,
         Some(ClothBackend::Gpu),
-        5,
+        steps,
     ));
 }
 
