@@ -38,7 +38,7 @@ impl Built {
             sim: self.sim,
             mesh: meshes.add(self.mesh),
             binding: self.binding,
-            local_edge: typical_edge(&self.rest_local),
+            local_edge: typical_edge(self.rest_local.iter().copied()),
             rest_local: self.rest_local,
             u16_indices: self.u16_indices,
             steps: 0,
@@ -246,10 +246,9 @@ pub(super) fn hidden(pose: &GlobalTransform, local_edge: f32) -> bool {
 
 /// A length typical of the edges of a mesh with vertices at `positions`: the diagonal of their
 /// bounds over the square root of their count (a square grid's diagonal edge, near enough).
-pub(super) fn typical_edge(positions: &[Vec3]) -> f32 {
-    finite_bounds(positions.iter().copied()).map_or(0.0, |(lo, hi)| {
-        (hi - lo).length() / (positions.len().max(1) as f32).sqrt()
-    })
+pub(super) fn typical_edge(positions: impl ExactSizeIterator<Item = Vec3>) -> f32 {
+    let count = positions.len().max(1) as f32;
+    finite_bounds(positions).map_or(0.0, |(lo, hi)| (hi - lo).length() / count.sqrt())
 }
 
 /// Relative change of an entity's scale (along any of its axes) from the one its cloth's rest
@@ -264,7 +263,7 @@ const RESHAPE_TOLERANCE: f32 = 1e-4;
 /// entity's origin when it is scaled itself, a scaled parent's when that moved the origin;
 /// the entity's motion stays the pins' business). A scale too small to place the cloth at
 /// ([`hidden`]: zero, or a tween's first frames) keeps the last shape (the cloth hidden, not
-/// squashed).
+/// squashed): the caller passes `own` only when it places the cloth.
 ///
 /// # Errors
 /// The rest shape at the new scale cannot be built (triangles collapsed); nothing changes.
@@ -273,9 +272,6 @@ pub(super) fn reshape(
     own: &GlobalTransform,
 ) -> Result<Option<Stretch>, ClothError> {
     let now = own.affine();
-    if hidden(own, cs.local_edge) {
-        return Ok(None);
-    }
     let shaped = GlobalTransform::from(cs.shaped);
     let (scale, rotation, origin) = own.to_scale_rotation_translation();
     let (scale_was, rotation_was, _) = shaped.to_scale_rotation_translation();
@@ -564,7 +560,7 @@ mod tests {
         assert!(!hidden(&origin(1e-4), 0.0));
         assert!(hidden(&origin(0.0), 0.0));
         assert!(
-            (typical_edge(&[Vec3::ZERO, Vec3::X, Vec3::Z, Vec3::new(1.0, 0.0, 1.0)])
+            (typical_edge([Vec3::ZERO, Vec3::X, Vec3::Z, Vec3::new(1.0, 0.0, 1.0)].into_iter())
                 - 0.5f32.sqrt())
             .abs()
                 < 1e-6

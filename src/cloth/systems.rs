@@ -146,9 +146,7 @@ pub(super) fn init_cloths(
         let local_edge = mesh
             .attribute(Mesh::ATTRIBUTE_POSITION)
             .and_then(|a| a.as_float3())
-            .map_or(0.0, |p| {
-                typical_edge(&p.iter().map(|&p| Vec3::from(p)).collect::<Vec<_>>())
-            });
+            .map_or(0.0, |p| typical_edge(p.iter().map(|&p| Vec3::from(p))));
         if hidden(&own, local_edge) {
             // A zero scale (an entity spawned hidden, to be shown later) flattens the mesh to
             // nothing, a tiny one to less than positions resolve: wait until the entity places
@@ -406,10 +404,10 @@ pub(super) fn sync_cloths(
         }
         let own = poses.get(entity).unwrap_or_default();
         carry_unfelt_motion(&mut commands, who, cs, cloth, inertia, &poses);
-        // The entity's scale changed: the rest shape and the state follow it.
-        let reshaped = reshape(cs, &own);
-        // The pose the rest pins are placed by: none while the cloth is hidden.
+        // The pose the rest shape and rest pins are placed by: none while the cloth is hidden.
         let placed = (!hidden(&own, cs.local_edge)).then_some(&own);
+        // The entity's scale changed: the rest shape and the state follow it.
+        let reshaped = placed.map_or(Ok(None), |own| reshape(cs, own));
         if let Ok(Some(stretch)) = &reshaped {
             cs.carry = Some(cs.carry.unwrap_or(Carry::IDENTITY).then_stretch(*stretch));
             // The pins' last targets too, so that the size change is no jump of theirs.

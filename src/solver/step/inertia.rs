@@ -463,6 +463,50 @@ mod tests {
         assert_eq!(s.positions, before);
     }
 
+    /// Two carries folded into one move every point as the two in turn do: rigid ones into a
+    /// rigid one, with a stretch into one whose stretch turns velocities (and keeps them no
+    /// faster).
+    #[test]
+    fn carries_folded_into_one_move_points_as_the_two_in_turn() {
+        let turn = Carry {
+            rotation: Quat::from_rotation_y(0.4),
+            pivot: Vec3::new(1.0, 0.0, -2.0),
+            translation: Vec3::new(0.0, 0.3, 0.1),
+            stretch: None,
+        };
+        let walk = Carry {
+            rotation: Quat::from_rotation_x(-0.2),
+            pivot: Vec3::new(0.0, 2.0, 0.0),
+            translation: Vec3::new(0.5, 0.0, 0.0),
+            stretch: None,
+        };
+        let grow = Carry::IDENTITY.then_stretch(Stretch {
+            center: Vec3::new(0.0, 2.6, 0.0),
+            linear: Mat3::from_diagonal(Vec3::new(1.5, 1.5, 1.2)),
+        });
+        let points = [
+            Vec3::ZERO,
+            Vec3::new(1.0, 2.0, 3.0),
+            Vec3::new(-4.0, 0.5, 2.0),
+        ];
+        for (a, b) in [(turn, walk), (turn, grow), (grow, walk), (grow, grow)] {
+            let both = a.then(b);
+            assert_eq!(
+                both.stretch.is_some(),
+                a.stretch.is_some() || b.stretch.is_some()
+            );
+            for p in points {
+                let expected = b.apply(a.apply(p));
+                assert!(
+                    both.apply(p).distance(expected) < 1e-5 * (1.0 + expected.length()),
+                    "{p}: {} against {expected}",
+                    both.apply(p)
+                );
+            }
+        }
+        assert_eq!(Carry::IDENTITY.then(Carry::IDENTITY), Carry::IDENTITY);
+    }
+
     #[test]
     fn a_stretch_holds_still_the_point_its_change_of_pose_holds_still_within_the_cloth() {
         let close = |a: Vec3, b: Vec3| a.distance(b) < 1e-5 * (1.0 + b.length());
