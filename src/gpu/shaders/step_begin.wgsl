@@ -34,8 +34,10 @@ fn teleport(
         state[P.prev_at + i] = vec4<f32>(carried(at, q.xyz) + b, q.w);
         var turned = carried(at, v.xyz);
         if (flags & 16u) != 0u {
-            // `solver::step::inertia::no_faster`: no faster than before the stretch.
-            turned = clamp_speed(vec4<f32>(turned, 0.0), length(v.xyz)).xyz;
+            // `solver::step::inertia::no_faster`: no faster than before the stretch, and at
+            // rest where the stretch overflowed it.
+            let kept = clamp_speed(vec4<f32>(turned, 0.0), length(v.xyz)).xyz;
+            turned = select(vec3<f32>(0.0), kept, finite3(kept));
         }
         state[P.vel_at + i] = vec4<f32>(turned, v.w);
     }
