@@ -288,11 +288,12 @@ pub(super) fn reshape(
     if !changed {
         return Ok(None);
     }
-    let rest = rest_placed(cs, own);
-    let options = cs.sim.topology().options();
+    // The rest shape at the new pose, the topology's edges and hinges kept.
+    let rest = cs.rest_at(own);
     let topology = cs
-        .binding
-        .topology(&rest, options)
+        .sim
+        .topology()
+        .reshaped(&rest)
         .map_err(SolverError::from)?;
     // The old shape's linear map turned into the entity's orientation now, and the map from
     // it to the new one.

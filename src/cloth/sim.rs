@@ -165,17 +165,22 @@ impl ClothSim {
         self.sim.stop_settling();
     }
 
+    /// Each particle's rest position placed by `pose` (the rest shape the entity's transform
+    /// gives the cloth).
+    pub(super) fn rest_at(&self, pose: &GlobalTransform) -> Vec<Vec3> {
+        self.rest_local
+            .iter()
+            .map(|&p| pose.transform_point(p))
+            .collect()
+    }
+
     /// After a NaN or infinite state (found by the step, or by a backend stepping the cloth
     /// elsewhere): the rest pose, placed where the entity is now (`placement`, when known),
     /// counted and logged as a warning.
     pub fn recover(&mut self, who: EntityName<'_>, placement: Option<GlobalTransform>) {
         self.sim.reset_to_rest();
         if let Some(t) = placement {
-            let placed: Vec<Vec3> = self
-                .rest_local
-                .iter()
-                .map(|p| t.transform_point(*p))
-                .collect();
+            let placed = self.rest_at(&t);
             self.sim.reset_to(&placed);
         }
         self.recoveries += 1;

@@ -779,6 +779,36 @@ impl ConstraintBatches {
         batches
     }
 
+    /// Takes the rest lengths, angles and weights of `topology`, whose edges and bending pairs
+    /// are the ones these batches were built from (its rest shape measured again:
+    /// [`Topology::reshaped`]), and loads the material of `solver`: what [`Self::new`] builds
+    /// from it (with the part count and sweeps these have), without partitioning and colouring
+    /// again.
+    pub(crate) fn remeasure(&mut self, topology: &Topology, solver: Solver) {
+        let (edges, bends) = (topology.edges(), topology.bends());
+        for part in self.all_parts_mut() {
+            let d = &mut part.distance;
+            for (rest, &e) in d.rest.iter_mut().zip(&d.edge) {
+                *rest = edges[e as usize].rest;
+            }
+            d.lambda.fill(0.0);
+            let b = &mut part.bending;
+            for (k, &h) in b.bend.iter().enumerate() {
+                let bend = &bends[h as usize];
+                if b.iso {
+                    for (column, &a) in b.a.iter_mut().zip(&bend.coeffs) {
+                        column[k] = a;
+                    }
+                } else {
+                    b.rest[k] = bend.rest_angle;
+                    b.weight[k] = bend.weight;
+                }
+            }
+            b.reset_lambda();
+        }
+        self.set_solver(topology, solver);
+    }
+
     /// Whether the distances are swept forward and back at each projection: the mesh has a
     /// vertex with more than [`SYMMETRIC_SWEEP_DEGREE`] of them or is closed
     /// ([`Topology::is_closed`]), or [`Self::sweep_symmetrically`] said so.
@@ -948,7 +978,7 @@ impl ConstraintBatches {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solver::mesh::{Grid, TopologyOptions};
+    use crate::solver::mesh::{BendRest, Grid, TopologyOptions};
     use glam::Vec3;
     use std::collections::HashSet;
 
@@ -981,6 +1011,53 @@ mod tests {
             }
         }
         pos
+    }
+
+    /// Batches measured again for a new rest shape ([`ConstraintBatches::remeasure`]) are the
+    /// batches built anew from it, multipliers zeroed: both bending models, one part and
+    /// four, PBD and XPBD, swept both ways or not.
+    #[test]
+    fn remeasured_batches_are_the_ones_built_anew() {
+        let g = Grid::new(12, 12, 1.0, 1.0);
+        // Stretched unevenly and curved.
+        let shaped: Vec<Vec3> = g
+            .positions()
+            .iter()
+            .map(|p| Vec3::new(p.x * (1.0 + p.z * p.z), 0.2 * (3.0 * p.x).sin(), 1.3 * p.z))
+            .collect();
+        let solvers = [
+            Solver::default(),
+            Solver::Pbd {
+                stretch: 0.9,
+                shear: 0.7,
+                bending: 0.1,
+            },
+        ];
+        for bend_rest in [BendRest::Flat, BendRest::RestShape] {
+            let options = TopologyOptions {
+                bend_rest,
+                ..TopologyOptions::default()
+            };
+            let t = g.topology(options).unwrap();
+            let now = t.reshaped(&shaped).unwrap();
+            for solver in solvers {
+                for (parts, symmetric) in [(1, false), (4, false), (4, true)] {
+                    let mut b = ConstraintBatches::new(&t, solver, parts);
+                    let mut fresh = ConstraintBatches::new(&now, solver, parts);
+                    if symmetric {
+                        b.sweep_symmetrically();
+                        fresh.sweep_symmetrically();
+                    }
+                    assert_ne!(b, fresh);
+                    for p in b.all_parts_mut() {
+                        p.distance.lambda.fill(0.5);
+                        p.bending.lambda.fill(0.5);
+                    }
+                    b.remeasure(&now, solver);
+                    assert_eq!(b, fresh, "{bend_rest:?} {solver:?} {parts} {symmetric}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -145,6 +145,13 @@ pub enum TopologyError {
         /// Its position.
         position: Vec3,
     },
+    /// A new rest shape ([`Topology::reshaped`]) has another vertex count than the topology.
+    VertexCount {
+        /// The topology's vertex count.
+        expected: usize,
+        /// Number of positions given.
+        positions: usize,
+    },
     /// The UV array has a different length from the positions.
     UvCount {
         /// Number of UVs.
@@ -194,6 +201,13 @@ impl core::fmt::Display for TopologyError {
             TopologyError::UvCount { uvs, positions } => {
                 write!(f, "{uvs} UVs for {positions} positions")
             }
+            TopologyError::VertexCount {
+                expected,
+                positions,
+            } => write!(
+                f,
+                "a rest shape of {positions} positions for a topology of {expected} vertices"
+            ),
             TopologyError::PositionTooFar { vertex, position } => write!(
                 f,
                 "vertex {vertex} at {position} is over {MAX_COORDINATE} m from the origin"
@@ -318,18 +332,7 @@ impl Topology {
                 index_count: indices.len(),
             });
         }
-        if let Some(vertex) = positions.iter().position(|p| !p.is_finite()) {
-            return Err(TopologyError::NonFinitePosition { vertex });
-        }
-        if let Some(vertex) = positions
-            .iter()
-            .position(|p| p.abs().max_element() > MAX_COORDINATE)
-        {
-            return Err(TopologyError::PositionTooFar {
-                vertex,
-                position: positions[vertex],
-            });
-        }
+        check_positions(positions)?;
         if let Some(uvs) = uvs
             && uvs.len() != n
         {
@@ -374,11 +377,7 @@ impl Topology {
         if triangles.is_empty() {
             return Err(TopologyError::NoTriangles);
         }
-        let has_area = triangles.iter().any(|t| {
-            let [a, b, c] = t.map(|v| positions[v as usize]);
-            (b - a).cross(c - a).length_squared() > 0.0
-        });
-        if !has_area {
+        if !has_area(positions, &triangles) {
             return Err(TopologyError::ZeroArea);
         }
         let corners = (corner_uvs.is_some() || uvs.is_some()).then_some(corners);
@@ -443,55 +442,105 @@ impl Topology {
             let edge_index = edges.len() as u32;
             edges.push(Edge {
                 v: [a, b],
-                rest: positions[a as usize].distance(positions[b as usize]),
+                rest: 0.0,
                 kind: uv_kind(t, k),
             });
             if j - i == 2 {
                 let (c, d) = (half[i].2, half[i + 1].2);
                 if c != d {
-                    let v = [a, b, c, d];
-                    let x = v.map(|k| positions[k as usize]);
-                    let rest_angle = match options.bend_rest {
-                        BendRest::Flat => 0.0,
-                        BendRest::RestShape => bend_angle(x),
-                    };
                     bends.push(Bend {
-                        v,
-                        rest_angle,
+                        v: [a, b, c, d],
+                        rest_angle: 0.0,
                         edge: edge_index,
-                        coeffs: hinge_coefficients(x),
-                        weight: dihedral_weight(x),
+                        coeffs: [0.0; 4],
+                        weight: 0.0,
                     });
                 }
             }
             i = j;
         }
 
-        let mean_edge = edges.iter().map(|e| e.rest).sum::<f32>() / edges.len().max(1) as f32;
-        let (edge_spread, short_edge) = edge_spread(&edges);
-        let (self_collision_scales, self_collision_triangle_scales) =
-            if edge_spread > EVEN_EDGE_SPREAD {
-                edge_scales(&positions, &triangles)
-            } else {
-                (Vec::new(), Vec::new())
-            };
-        Self {
+        let mut topology = Self {
             rest_positions: positions,
             uvs,
             triangles,
             corner_uvs,
             edges,
             bends,
-            mean_edge,
-            edge_spread,
-            short_edge,
-            self_collision_scales,
-            self_collision_triangle_scales,
+            mean_edge: 0.0,
+            edge_spread: 0.0,
+            short_edge: 0.0,
+            self_collision_scales: Vec::new(),
+            self_collision_triangle_scales: Vec::new(),
             skipped_triangles: 0,
             closed,
             options,
             rest_gaps: LazyGaps::default(),
+        };
+        topology.measure();
+        topology
+    }
+
+    /// Measures everything that depends on the rest positions (the edges' rest lengths, the
+    /// hinges' rest angles and weights, the edge statistics and self-collision scales) from
+    /// [`Self::rest_positions`]; the gaps across the rest shape are made again when asked for.
+    fn measure(&mut self) {
+        let positions = &self.rest_positions;
+        for e in &mut self.edges {
+            let [a, b] = e.v;
+            e.rest = positions[a as usize].distance(positions[b as usize]);
         }
+        for bend in &mut self.bends {
+            let x = bend.v.map(|k| positions[k as usize]);
+            bend.rest_angle = match self.options.bend_rest {
+                BendRest::Flat => 0.0,
+                BendRest::RestShape => bend_angle(x),
+            };
+            bend.coeffs = hinge_coefficients(x);
+            bend.weight = dihedral_weight(x);
+        }
+        let edges = &self.edges;
+        self.mean_edge = edges.iter().map(|e| e.rest).sum::<f32>() / edges.len().max(1) as f32;
+        (self.edge_spread, self.short_edge) = edge_spread(edges);
+        (
+            self.self_collision_scales,
+            self.self_collision_triangle_scales,
+        ) = if self.edge_spread > EVEN_EDGE_SPREAD {
+            edge_scales(positions, &self.triangles)
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        self.rest_gaps = LazyGaps::default();
+    }
+
+    /// This topology with its rest shape at `positions` (one per vertex): the same triangles,
+    /// UVs, edges and bending pairs, with their rest lengths, angles and weights measured
+    /// again. The same as [`Self::from_triangles_with_corner_uvs`] of `positions` and this
+    /// topology's triangles and UVs, without finding the edges and hinges again: the rest
+    /// shape of a cloth whose entity is being scaled, at each frame of the scaling.
+    ///
+    /// # Errors
+    /// [`TopologyError::NonFinitePosition`], [`TopologyError::PositionTooFar`] or
+    /// [`TopologyError::ZeroArea`] as [`Self::from_triangles`];
+    /// [`TopologyError::VertexCount`] for another vertex count.
+    pub fn reshaped(&self, positions: &[Vec3]) -> Result<Self, TopologyError> {
+        let n = self.vertex_count();
+        if positions.len() != n {
+            return Err(TopologyError::VertexCount {
+                expected: n,
+                positions: positions.len(),
+            });
+        }
+        check_positions(positions)?;
+        if !has_area(positions, &self.triangles) {
+            return Err(TopologyError::ZeroArea);
+        }
+        let mut topology = Self {
+            rest_positions: positions.to_vec(),
+            ..self.clone()
+        };
+        topology.measure();
+        Ok(topology)
     }
 
     /// The topology left after tearing `torn` edges (vertex pairs, either order): every
@@ -1002,6 +1051,31 @@ impl core::hash::Hasher for CellHasher {
 /// The most cells around one triangle [`rest_gaps`] looks in.
 const GAP_CELLS: i64 = 4096;
 
+/// `Ok` when every position is finite and within [`MAX_COORDINATE`] of the origin.
+fn check_positions(positions: &[Vec3]) -> Result<(), TopologyError> {
+    if let Some(vertex) = positions.iter().position(|p| !p.is_finite()) {
+        return Err(TopologyError::NonFinitePosition { vertex });
+    }
+    if let Some(vertex) = positions
+        .iter()
+        .position(|p| p.abs().max_element() > MAX_COORDINATE)
+    {
+        return Err(TopologyError::PositionTooFar {
+            vertex,
+            position: positions[vertex],
+        });
+    }
+    Ok(())
+}
+
+/// Whether some triangle has an area at `positions`.
+fn has_area(positions: &[Vec3], triangles: &[[u32; 3]]) -> bool {
+    triangles.iter().any(|t| {
+        let [a, b, c] = t.map(|v| positions[v as usize]);
+        (b - a).cross(c - a).length_squared() > 0.0
+    })
+}
+
 /// [`Topology::self_collision_scales`] and
 /// [`Topology::self_collision_triangle_scales`] of an uneven mesh.
 fn edge_scales(positions: &[Vec3], triangles: &[[u32; 3]]) -> (Vec<f32>, Vec<f32>) {
@@ -1090,6 +1164,79 @@ mod tests {
         // A pin on the vertex in no triangle holds nothing; one out of range is left out.
         assert_eq!(t.loose_pieces([21, 99]), (3, 21));
         assert_eq!(t.loose_pieces([99]), (0, 0));
+    }
+
+    /// A rest shape measured again ([`Topology::reshaped`]) is the topology built from its
+    /// positions: for each bending model and rest angle, on a sheet whose edges become uneven
+    /// (self-collision scales appear), curved, with UVs, a skipped triangle and a tear.
+    #[test]
+    fn a_reshaped_topology_is_the_one_built_from_its_positions() {
+        let grid = Grid::new(14, 11, 1.2, 0.9);
+        let mut indices = grid.indices();
+        indices.extend([0, 0, 1]);
+        let uvs = grid.uvs();
+        let flat = grid.positions();
+        // Squeezed along x towards the middle (edges up to 2.3 times longer at the sides)
+        // and rolled about z into a spiral of 1.3 turns (its layers 6 cm apart).
+        let shaped: Vec<Vec3> = flat
+            .iter()
+            .map(|p| {
+                let u = p.x / 1.2 + 0.5;
+                let u = u + 0.4 * (core::f32::consts::TAU * u).sin() / core::f32::consts::TAU;
+                let angle = 1.3 * core::f32::consts::TAU * u;
+                let r = 0.12 + 0.06 * angle / core::f32::consts::TAU;
+                Vec3::new(r * angle.sin(), r * angle.cos(), p.z)
+            })
+            .collect();
+        let cut = [
+            [grid.index(3, 4), grid.index(4, 4)],
+            [grid.index(7, 2), grid.index(7, 3)],
+        ];
+        for bend_rest in [BendRest::Flat, BendRest::RestShape] {
+            for bending in [BendingModel::Isometric, BendingModel::Dihedral] {
+                let options = TopologyOptions { bend_rest, bending };
+                let built = |positions: &[Vec3]| {
+                    Topology::from_triangles(positions, Some(&uvs), &indices, options).unwrap()
+                };
+                let (before, after) = (built(&flat), built(&shaped));
+                assert!(after.rest_edge_spread() > EVEN_EDGE_SPREAD);
+                // The flat sheet's gaps made (none: infinite) before it is reshaped.
+                assert_eq!(before.narrowest_rest_gap(), f32::INFINITY);
+                let reshaped = before.reshaped(&shaped).unwrap();
+                assert_eq!(reshaped, after, "{options:?}");
+                assert_eq!(reshaped.skipped_triangles(), 1);
+                // The gaps across the rest shape are the new shape's (not compared by `==`).
+                let gap = reshaped.narrowest_rest_gap();
+                assert!(gap < 0.1, "{gap}");
+                assert_eq!(gap, after.narrowest_rest_gap());
+                // Torn, then reshaped: the torn topology of the new shape.
+                let torn = before.without_edges(&cut).reshaped(&shaped).unwrap();
+                assert_eq!(torn, after.without_edges(&cut));
+                assert!(torn.triangles().len() < after.triangles().len());
+            }
+        }
+        let t =
+            Topology::from_triangles(&flat, None, &indices, TopologyOptions::default()).unwrap();
+        assert_eq!(
+            t.reshaped(&flat[1..]),
+            Err(TopologyError::VertexCount {
+                expected: flat.len(),
+                positions: flat.len() - 1,
+            })
+        );
+        let mut bad = flat.clone();
+        bad[5].y = f32::NAN;
+        assert_eq!(
+            t.reshaped(&bad),
+            Err(TopologyError::NonFinitePosition { vertex: 5 })
+        );
+        bad[5] = Vec3::splat(2.0 * MAX_COORDINATE);
+        assert!(matches!(
+            t.reshaped(&bad),
+            Err(TopologyError::PositionTooFar { vertex: 5, .. })
+        ));
+        let on_a_line: Vec<Vec3> = flat.iter().map(|p| Vec3::X * p.x).collect();
+        assert_eq!(t.reshaped(&on_a_line), Err(TopologyError::ZeroArea));
     }
 
     /// Even meshes have no self-collision scales (every vertex keeps the cloth's thickness);

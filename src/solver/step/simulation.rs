@@ -432,8 +432,6 @@ impl Simulation {
     /// [`SolverError::State`] if `topology` has another vertex count (nothing changes).
     pub fn set_rest_shape(&mut self, topology: Topology) -> Result<(), SolverError> {
         self.same_vertices(&topology)?;
-        // The same mesh scaled evenly (an entity grown in by its scale): its tethers scaled
-        // with it instead of searched for again at every frame of the growth.
         let was = &self.topology;
         let same_mesh = was.triangles() == topology.triangles()
             && was
@@ -441,12 +439,29 @@ impl Simulation {
                 .iter()
                 .map(|e| e.v)
                 .eq(topology.edges().iter().map(|e| e.v));
+        let same_hinges = same_mesh
+            && was.options() == topology.options()
+            && was
+                .bends()
+                .iter()
+                .map(|b| b.v)
+                .eq(topology.bends().iter().map(|b| b.v));
+        // The same mesh scaled evenly (an entity grown in by its scale): its tethers scaled
+        // with it instead of searched for again at every frame of the growth.
         let tethers = self
             .tethers
             .take()
             .filter(|_| same_mesh)
             .and_then(|(pins, t)| Some((pins, t.rescaled(&topology)?)));
-        self.take_topology(topology);
+        if same_hinges {
+            // The same constraints at other rest values: measured again, not partitioned and
+            // coloured again.
+            self.topology = topology;
+            self.scratch.implicit.invalidate();
+            self.batches.remeasure(&self.topology, self.params.solver);
+        } else {
+            self.take_topology(topology);
+        }
         self.tethers = tethers;
         self.sleep.wake();
         Ok(())
