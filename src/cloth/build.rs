@@ -288,13 +288,6 @@ pub(super) fn reshape(
     if !changed {
         return Ok(None);
     }
-    // The rest shape at the new pose, the topology's edges and hinges kept.
-    let rest = cs.rest_at(own);
-    let topology = cs
-        .sim
-        .topology()
-        .reshaped(&rest)
-        .map_err(SolverError::from)?;
     // The old shape's linear map turned into the entity's orientation now, and the map from
     // it to the new one.
     let was = Mat3::from_quat(rotation * rotation_was.inverse()) * Mat3::from(cs.shaped.matrix3);
@@ -302,6 +295,15 @@ pub(super) fn reshape(
     if !linear.is_finite() {
         return Ok(None);
     }
+    // The rest shape at the new pose, the topology's edges and hinges kept (and, scaled
+    // evenly, the gaps across it).
+    let rest = cs.rest_at(own);
+    let was_topology = cs.sim.topology();
+    let topology = match even_scale(linear) {
+        Some(by) => was_topology.reshaped_evenly(&rest, by),
+        None => was_topology.reshaped(&rest),
+    }
+    .map_err(SolverError::from)?;
     let stretch = Stretch::holding(
         linear,
         origin_was,
@@ -313,6 +315,26 @@ pub(super) fn reshape(
     cs.reshapes += 1;
     cs.dirty = true;
     Ok(Some(stretch))
+}
+
+/// Relative difference within which the lengths of `linear`'s columns count as one, and
+/// their dot products as nothing ([`even_scale`]).
+const EVEN_SCALE_TOLERANCE: f32 = 1e-5;
+
+/// The factor by which `linear` scales every length, when it is a rotation (or a reflection)
+/// times one even scale within [`EVEN_SCALE_TOLERANCE`]; `None` otherwise.
+fn even_scale(linear: Mat3) -> Option<f32> {
+    let [x, y, z] = [linear.x_axis, linear.y_axis, linear.z_axis];
+    let lengths2 = [x, y, z].map(Vec3::length_squared);
+    let mean2 = lengths2.iter().sum::<f32>() / 3.0;
+    let tolerance = EVEN_SCALE_TOLERANCE * mean2;
+    let square = lengths2
+        .iter()
+        .all(|l| (l - mean2).abs() <= 2.0 * tolerance)
+        && [x.dot(y), y.dot(z), z.dot(x)]
+            .iter()
+            .all(|d| d.abs() <= tolerance);
+    (mean2.is_finite() && mean2 > 0.0 && square).then(|| mean2.sqrt())
 }
 
 /// Applies a change of [`Cloth`] that keeps the welding (the same particles) to the running
@@ -532,6 +554,32 @@ pub(super) fn features(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A map scales evenly when it is a rotation or reflection times one scale (the factor),
+    /// not when it scales one axis more, shears, collapses or is not finite.
+    #[test]
+    fn an_even_scale_is_a_rotation_times_one_factor() {
+        let turn = Mat3::from_quat(Quat::from_euler(EulerRot::YXZ, 0.7, -1.2, 2.9));
+        for by in [1e-4, 0.05, 1.0, 3.0, 2e3] {
+            let even = even_scale(turn * Mat3::from_diagonal(Vec3::splat(by)));
+            assert!(
+                even.is_some_and(|s| (s - by).abs() <= 1e-6 * by),
+                "{by}: {even:?}"
+            );
+        }
+        let mirrored = turn * Mat3::from_diagonal(Vec3::new(-2.0, 2.0, 2.0));
+        assert!(even_scale(mirrored).is_some_and(|s| (s - 2.0).abs() <= 1e-6));
+        for uneven in [
+            Mat3::from_diagonal(Vec3::new(1.0, 1.0, 1.001)),
+            turn * Mat3::from_diagonal(Vec3::new(2.0, 1.0, 2.0)),
+            Mat3::from_cols(Vec3::X, Vec3::new(0.01, 1.0, 0.0), Vec3::Z),
+            Mat3::ZERO,
+            Mat3::from_diagonal(Vec3::new(f32::NAN, 1.0, 1.0)),
+            Mat3::from_diagonal(Vec3::splat(f32::INFINITY)),
+        ] {
+            assert_eq!(even_scale(uneven), None, "{uneven}");
+        }
+    }
 
     /// A cloth is hidden at a zero scale along any axis and below the smallest edge its
     /// position resolves, and placed at any scale above it, near the origin or far from it.
