@@ -57,6 +57,7 @@ impl Built {
             thickness_warned: None,
             gap_warned: None,
             uneven_warned: false,
+            thickness_check_in: THICKNESS_CHECK_STEPS,
             cloth_error: None,
             pins_error: None,
             rule_error: None,
@@ -397,6 +398,11 @@ fn self_collision_thickness(sim: &Simulation, sc: &ClothSelfCollision) -> (f32, 
     }
 }
 
+/// How many steps a cloth's scale holds before its self-collision thickness is checked
+/// ([`warn_self_collision`]): a quarter of a second at 60 steps a second, longer than a
+/// pop-in's tween takes to start after the cloth is built at its first size.
+pub(super) const THICKNESS_CHECK_STEPS: u32 = 15;
+
 /// Warns when a cloth's self-collision thickness was brought down to
 /// [`MAX_SELF_COLLISION_EDGES`] mean edges, once per thickness asked (a tear changes the mean
 /// edge, and with it the thickness used, without warning again); and, once per cloth built,
@@ -705,5 +711,81 @@ mod tests {
         let grid = crate::solver::Grid::new(3, 3, 1.0, 1.0);
         assert_eq!(grid.indices().len() / 3, 8);
         assert_eq!(coarse_warning(grid.indices().len() / 3), None);
+    }
+
+    /// A cloth's self-collision thickness is judged at the size it settles at: a banner
+    /// popped in from a twentieth of its size with a thickness set for its full size is not
+    /// warned about at the sizes it grows through, and one shrunk for good to less than that
+    /// thickness is, once it stops shrinking.
+    #[test]
+    fn the_thickness_is_judged_at_the_size_a_cloth_settles_at() {
+        let mut app = App::new();
+        app.add_plugins((
+            MinimalPlugins,
+            TransformPlugin,
+            AssetPlugin::default(),
+            bevy::mesh::MeshPlugin,
+            crate::foundation::ClothFoundationPlugin::default(),
+            crate::collider::ClothColliderPlugin,
+            crate::wind::ClothWindPlugin,
+            super::super::ClothPlugin,
+        ))
+        .insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
+            std::time::Duration::from_secs_f64(1.0 / 60.0),
+        ))
+        .insert_resource(Time::<Fixed>::from_hz(60.0));
+        // Edges of about 4 cm at full size; a 3 cm thickness.
+        let grid = crate::solver::Grid::new(24, 36, 0.9, 1.4);
+        let mesh = app
+            .world_mut()
+            .resource_mut::<Assets<Mesh>>()
+            .add(crate::foundation::grid_mesh(&grid));
+        let sized = |s: f32| Transform::from_xyz(0.0, 2.0, 0.0).with_scale(Vec3::splat(s));
+        let e = app
+            .world_mut()
+            .spawn((
+                Mesh3d(mesh),
+                sized(0.05),
+                Cloth::default(),
+                ClothPins::rest([grid.index(0, 0), grid.index(23, 0)]),
+                ClothSelfCollision {
+                    thickness: Some(0.03),
+                    ..default()
+                },
+            ))
+            .id();
+        let warned = |app: &App| {
+            let cs = app.world().get::<ClothSim>(e).expect("built");
+            (cs.thickness_warned, cs.thickness_check_in)
+        };
+        let resize = |app: &mut App, s: f32| {
+            *app.world_mut().get_mut::<Transform>(e).unwrap() = sized(s);
+            app.update();
+        };
+        let hold = THICKNESS_CHECK_STEPS;
+        // Built at the first fixed step, at a twentieth of its size.
+        for _ in 0..3 {
+            resize(&mut app, 0.05);
+        }
+        let (at_first, due) = warned(&app);
+        assert!(
+            at_first.is_none() && (1..hold).contains(&due),
+            "built: {due}"
+        );
+        for f in 1..=30 {
+            resize(&mut app, 0.05 + 0.95 * f as f32 / 30.0);
+            assert_eq!(warned(&app), (None, hold), "frame {f} of the growth");
+        }
+        for _ in 0..hold {
+            resize(&mut app, 1.0);
+        }
+        assert_eq!(warned(&app), (None, 0), "grown");
+        // Shrunk to a third for good: its 1.3 cm edges are thinner than the thickness.
+        resize(&mut app, 0.33);
+        assert_eq!(warned(&app), (None, hold), "shrinking");
+        for _ in 0..hold {
+            resize(&mut app, 0.33);
+        }
+        assert_eq!(warned(&app), (Some(0.03), 0), "shrunk");
     }
 }

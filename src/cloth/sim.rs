@@ -76,6 +76,12 @@ pub struct ClothSim {
     /// Whether the warning that the mesh's edges are uneven for self-collision was given
     /// (once per cloth built).
     pub(super) uneven_warned: bool,
+    /// Steps its scale is still to hold before the self-collision thickness is checked
+    /// against the cloth's edges and gaps (0: no check due). Set to
+    /// [`THICKNESS_CHECK_STEPS`](super::build::THICKNESS_CHECK_STEPS) when it is built, scaled
+    /// or its features change: a cloth growing in from a small scale is not warned about at
+    /// the sizes it passes.
+    pub(super) thickness_check_in: u32,
     /// A pin list that was refused (the last valid pins hold meanwhile).
     pub(super) pins_error: Option<ClothError>,
     /// A [`ClothPinRule`](super::ClothPinRule) change that gave no pins (the last pins hold

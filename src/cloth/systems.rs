@@ -7,8 +7,8 @@ use bevy::prelude::*;
 use bevy::tasks::ComputeTaskPool;
 
 use super::build::{
-    build, features, hidden, remake, reshape, typical_edge, warn_coarse, warn_loose,
-    warn_self_collision,
+    THICKNESS_CHECK_STEPS, build, features, hidden, remake, reshape, typical_edge, warn_coarse,
+    warn_loose, warn_self_collision,
 };
 use super::error::report;
 use super::inertia::carry_unfelt_motion;
@@ -173,7 +173,6 @@ pub(super) fn init_cloths(
         match built {
             Ok(b) => {
                 let mut sim = b.into_sim(meshes);
-                warn_self_collision(&mut sim, sc, who);
                 warn_coarse(&sim, who);
                 warn_loose(&mut sim, who);
                 let handle = sim.mesh().clone();
@@ -421,6 +420,12 @@ pub(super) fn sync_cloths(
                 .collect();
             cs.sim.state_mut().set_pin_targets(targets);
         }
+        // The thickness is judged at the size the cloth settles at, not at each size a
+        // growth passes through (nor while it is hidden).
+        let rescaled = matches!(reshaped, Ok(Some(_)));
+        if rescaled {
+            cs.thickness_check_in = THICKNESS_CHECK_STEPS;
+        }
         note_rejection(
             &mut commands,
             who,
@@ -456,7 +461,7 @@ pub(super) fn sync_cloths(
                         // Tethers added (or changed) on a running cloth pull it back at once.
                         cs.sim.settle();
                     }
-                    warn_self_collision(cs, sc, who);
+                    cs.thickness_check_in = THICKNESS_CHECK_STEPS;
                 }
                 Ok(())
             })
@@ -468,6 +473,12 @@ pub(super) fn sync_cloths(
                 result,
                 ("settings", "it keeps its last valid settings"),
             );
+        }
+        if cs.thickness_check_in > 0 && placed.is_some() && !rescaled {
+            cs.thickness_check_in -= 1;
+            if cs.thickness_check_in == 0 {
+                warn_self_collision(cs, sc, who);
+            }
         }
         let list = pin_list(&pins, cs.binding.weld()).map(|mut list| {
             attach(&mut list, &mut cs.attached, cs.sim.state(), &poses);
