@@ -11,7 +11,9 @@
 //! cargo run --release --example pop_in -- --headless --frames 300
 //! ```
 //! Options: `--banners N` (default 4), `--columns N --rows N` (each banner's grid, default
-//! 24 × 36), `--period SECONDS` (from one pop to the next, default 4).
+//! 24 × 36), `--period SECONDS` (from one pop to the next, default 4), `--self-collision`
+//! (each banner with `ClothSelfCollision` at a 3 cm thickness: set for its full size, and
+//! judged there, not at the sizes a growth passes).
 
 #[path = "support/mod.rs"]
 mod support;
@@ -34,6 +36,7 @@ struct Setup {
     banners: u32,
     grid: Grid,
     period: f32,
+    self_collision: bool,
 }
 
 /// A banner's mount on the rail: the entity the tween scales (the cloth is its child), and
@@ -92,6 +95,12 @@ fn spawn_banners(
                     ClothPins::rest(pins.iter().copied()),
                     ClothTethers::default(),
                 ));
+                if setup.self_collision {
+                    banner.insert(ClothSelfCollision {
+                        thickness: Some(0.03),
+                        ..default()
+                    });
+                }
                 if materials.is_some() {
                     banner.insert(support::ClothLook(colours[b as usize % colours.len()]));
                 }
@@ -207,6 +216,7 @@ fn main() {
         banners: args.get("banners", 4u32).max(1),
         grid,
         period: args.get("period", 4.0f32).max(GROW + SHRINK + 0.5),
+        self_collision: args.rest.contains_key("self-collision"),
     };
     let mut app = support::app(&args, "bevy_cloth: pop-in", 1.0 / 60.0);
     app.insert_resource(setup)
