@@ -20,6 +20,7 @@ use bevy::camera::visibility::NoFrustumCulling;
 use bevy::mesh::MeshVertexAttribute;
 use bevy::prelude::*;
 
+use super::layout::BatchesCell;
 use super::mesh::{TangentSource, VertexLayout};
 use super::world::{GpuWorld, MotionTargets};
 use crate::cloth::{Cloth, ClothSim, ClothSteppedElsewhere, ClothTorn};
@@ -98,6 +99,8 @@ pub(crate) struct GpuUpload {
     /// The cloth's own mesh (its copy, drawn through `Mesh3d`), the only one the GPU writes:
     /// a mesh the game puts in `Mesh3d` is the source of the next build, not a target.
     pub mesh: AssetId<Mesh>,
+    /// Its GPU batches, made when a world is first laid out with it.
+    pub batches: Arc<BatchesCell>,
 }
 
 /// Copies a GPU cloth's positions and velocities into its [`ClothSim`] every frame, a frame
@@ -570,7 +573,8 @@ pub(crate) fn choose_backends(
                     // Its state has the carries of the steps queued so far and of this one
                     // (queued next); an edit forgets the others.
                     let carried = if edited { 1 } else { g.pending.len() + 1 };
-                    g.upload = Arc::new(upload(&mut cloth, layout, !edited, carried));
+                    let last = g.upload.clone();
+                    g.upload = Arc::new(upload(&mut cloth, layout, !edited, carried, Some(&last)));
                     hand_over_settle(&mut cloth);
                     g.key = key;
                     g.edits = cloth.edit_count();
@@ -608,7 +612,7 @@ pub(crate) fn choose_backends(
                          from (add ClothReadback to read the GPU's state back)"
                     );
                 }
-                let first = Arc::new(upload(&mut cloth, layout, false, 1));
+                let first = Arc::new(upload(&mut cloth, layout, false, 1, None));
                 hand_over_settle(&mut cloth);
                 // Asleep on the CPU, it starts awake on the GPU (and sleeps there once at rest).
                 if cloth.is_sleeping() {
@@ -705,6 +709,7 @@ fn upload(
     layout: VertexLayout,
     carry: bool,
     carried: usize,
+    last: Option<&GpuUpload>,
 ) -> GpuUpload {
     cloth.bypass_change_detection().prepare_tethers();
     let binding = cloth.binding();
@@ -733,6 +738,8 @@ fn upload(
         carry,
         carried,
         mesh: cloth.mesh().id(),
+        // Measured again from the last upload's where only the rest shape changed.
+        batches: Arc::new(BatchesCell::after(last.map(|u| &u.batches))),
     }
 }
 

@@ -60,6 +60,46 @@ pub fn gpu_part_count(sim: &Simulation) -> usize {
     choose_batches(sim).part_count()
 }
 
+/// A cloth's GPU batches ([`choose_batches`]) for one upload of it, made the first time a
+/// world is laid out with it and kept for the world's later layouts (another cloth's change
+/// lays out the whole world again). Where the upload before it had them and only the rest
+/// shape changed (the same edges and hinges: an entity being scaled), they are that
+/// upload's measured again ([`ConstraintBatches::remeasure`]) instead of partitioned and
+/// coloured again.
+#[derive(Debug, Default)]
+pub(crate) struct BatchesCell {
+    made: std::sync::OnceLock<ConstraintBatches>,
+    /// The last upload's cell (not kept alive by this one), looked at when these are made.
+    seed: Option<std::sync::Weak<BatchesCell>>,
+}
+
+impl BatchesCell {
+    /// A cell whose batches may be measured again from `last`'s (the cloth's last upload's).
+    pub(crate) fn after(last: Option<&std::sync::Arc<BatchesCell>>) -> Self {
+        Self {
+            made: std::sync::OnceLock::new(),
+            seed: last.map(std::sync::Arc::downgrade),
+        }
+    }
+
+    /// The GPU's batches for `sim` (the simulation of this cell's upload).
+    pub(crate) fn get(&self, sim: &Simulation) -> &ConstraintBatches {
+        self.made.get_or_init(|| {
+            let seed = self.seed.as_ref().and_then(std::sync::Weak::upgrade);
+            seed.and_then(|cell| {
+                let mut b = cell.made.get()?.clone();
+                let same = b.built_from(sim.topology())
+                    && b.symmetric_sweeps() == sim.batches().symmetric_sweeps();
+                same.then(|| {
+                    b.remeasure(sim.topology(), sim.params().solver);
+                    b
+                })
+            })
+            .unwrap_or_else(|| choose_batches(sim))
+        })
+    }
+}
+
 /// The GPU's batches for `sim` (see [`gpu_part_count`]).
 fn choose_batches(sim: &Simulation) -> ConstraintBatches {
     let n = sim.state().len();
@@ -311,13 +351,24 @@ fn edge_triangles(t: &Topology) -> Vec<Vec<u32>> {
 }
 
 impl WorldLayout {
-    /// The layout of `sims`, which must share their substep and iteration counts and be all
+    /// [`Self::build_with`] the GPU batches of each of `sims` made afresh.
+    #[must_use]
+    #[cfg(test)]
+    pub(crate) fn build(sims: &[&Simulation]) -> Self {
+        let batches: Vec<ConstraintBatches> = sims.iter().map(|s| choose_batches(s)).collect();
+        let batches: Vec<&ConstraintBatches> = batches.iter().collect();
+        Self::build_with(sims, &batches)
+    }
+
+    /// The layout of `sims`, each with its GPU batches (`chosen`: its upload's
+    /// [`BatchesCell`]'s). They must share their substep and iteration counts and be all
     /// lab-solver cloths or none (the caller groups cloths by [`WorldKey`]).
     ///
     /// # Panics
-    /// If `sims` do not share a key.
+    /// If `sims` do not share a key, or `chosen` is not one set of batches for each.
     #[must_use]
-    pub(crate) fn build(sims: &[&Simulation]) -> Self {
+    pub(crate) fn build_with(sims: &[&Simulation], chosen: &[&ConstraintBatches]) -> Self {
+        assert_eq!(sims.len(), chosen.len(), "one set of batches a cloth");
         let key = sims.first().map(|s| WorldKey::of(s));
         assert!(
             sims.iter().all(|s| Some(WorldKey::of(s)) == key),
@@ -386,7 +437,7 @@ impl WorldLayout {
                     flags |= FLAG_EVEN;
                 }
             }
-            let batches = choose_batches(sim);
+            let batches = chosen[c as usize];
             if batches.bending && !batches.boundary.bending.iso {
                 flags |= FLAG_DIHEDRAL;
             }
@@ -677,6 +728,63 @@ mod tests {
 
     fn standard(n: u32) -> Simulation {
         HangingCloth::new(n).build().unwrap()
+    }
+
+    /// An upload's GPU batches measured again from the last upload's are the batches made
+    /// afresh for it where only the rest shape changed; made afresh after a tear, another
+    /// bending model, or where the last upload's were never made or are gone; kept for the
+    /// upload's later layouts.
+    #[test]
+    fn batches_measured_again_from_the_last_upload_are_the_ones_made_afresh() {
+        use std::sync::Arc;
+        let mut scene = HangingCloth::new(64);
+        scene.params.solver = Solver::Xpbd {
+            stretch: 0.0,
+            shear: 1e-6,
+            bending: 1e-4,
+        };
+        let was = scene.build().unwrap();
+        let first = Arc::new(BatchesCell::after(None));
+        assert_eq!(first.get(&was), &choose_batches(&was));
+        // Its rest shape scaled unevenly and rolled: measured again.
+        let shaped: Vec<glam::Vec3> = was
+            .topology()
+            .rest_positions()
+            .iter()
+            .map(|p| glam::Vec3::new(2.0 * p.x, p.y + 0.3 * (3.0 * p.x).sin(), 0.5 * p.z))
+            .collect();
+        let mut grown = was.clone();
+        grown
+            .set_rest_shape(was.topology().reshaped(&shaped).unwrap())
+            .unwrap();
+        let made = choose_batches(&grown);
+        assert_ne!(&made, first.get(&was));
+        let next = Arc::new(BatchesCell::after(Some(&first)));
+        assert_eq!(next.get(&grown), &made);
+        assert!(first.made.get().unwrap().built_from(grown.topology()));
+        // Kept: asked again (another cloth's change), the same batches.
+        assert!(core::ptr::eq(next.get(&grown), next.get(&grown)));
+        // Torn: other edges, made afresh.
+        let mut torn = grown.clone();
+        torn.tear_edges(&[[0, 1], [64, 65]]);
+        assert!(!next.made.get().unwrap().built_from(torn.topology()));
+        assert_eq!(
+            BatchesCell::after(Some(&next)).get(&torn),
+            &choose_batches(&torn)
+        );
+        // The last upload's never made, or gone: made afresh.
+        let unmade = Arc::new(BatchesCell::after(None));
+        assert_eq!(BatchesCell::after(Some(&unmade)).get(&grown), &made);
+        let gone = BatchesCell::after(Some(&Arc::new(BatchesCell::after(None))));
+        assert_eq!(gone.get(&grown), &made);
+        // Another bending model (the same edges and hinges): made afresh.
+        let mut dihedral = HangingCloth::new(64);
+        dihedral.params = *was.params();
+        dihedral.options.bending = crate::solver::BendingModel::Dihedral;
+        let dihedral = dihedral.build().unwrap();
+        assert!(!first.made.get().unwrap().built_from(dihedral.topology()));
+        let other = BatchesCell::after(Some(&first));
+        assert_eq!(other.get(&dihedral), &choose_batches(&dihedral));
     }
 
     #[test]

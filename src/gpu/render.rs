@@ -31,7 +31,7 @@ use super::backend::{
     GpuUpload, QueuedStep,
 };
 use super::kernels::GpuKernels;
-use super::layout::WorldKey;
+use super::layout::{BatchesCell, WorldKey};
 use super::mesh::{DrawShift, MeshKernel, MeshWriter};
 use super::world::{
     ClothFrame, GpuFrame, GpuWorld, MotionTargets, StepColliders, TornFlags, sum_impulses,
@@ -424,7 +424,9 @@ pub(crate) fn prepare_gpu_worlds(
         while let Some(mut members) = groups.pop() {
             let sims: Vec<&crate::solver::Simulation> =
                 members.iter().map(|m| &m.upload.sim).collect();
-            let mut world = match GpuWorld::new(device, &queue, &pipelines.kernels, &sims) {
+            let cells: Vec<&BatchesCell> = members.iter().map(|m| &*m.upload.batches).collect();
+            let made = GpuWorld::with_batches(device, &queue, &pipelines.kernels, &sims, &cells);
+            let mut world = match made {
                 Ok(world) => world,
                 Err(why) => {
                     if members.len() > 1 {

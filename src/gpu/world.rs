@@ -31,7 +31,7 @@ use wgpu::util::DeviceExt;
 use super::kernels::{
     DeviceSizeLimits, GpuKernels, GpuUnsupported, TABLE_STRIDE, WORKGROUP, dispatch_flat,
 };
-use super::layout::{ClothLayout, WorldKey, WorldLayout};
+use super::layout::{BatchesCell, ClothLayout, WorldKey, WorldLayout};
 use crate::solver::collision::substep_poses;
 use crate::solver::{
     Carry, Collider, ContactImpulse, MAX_SELF_NEIGHBOURS, MAX_SELF_TRIANGLES, Pose, SdfGrid, Shape,
@@ -664,6 +664,21 @@ impl GpuWorld {
         kernels: &GpuKernels,
         sims: &[&Simulation],
     ) -> Result<Self, GpuUnsupported> {
+        let cells: Vec<BatchesCell> = sims.iter().map(|_| BatchesCell::default()).collect();
+        let cells: Vec<&BatchesCell> = cells.iter().collect();
+        Self::with_batches(device, queue, kernels, sims, &cells)
+    }
+
+    /// [`GpuWorld::new`] with each cloth's GPU batches taken from (or made into) its upload's
+    /// cell, so that a world laid out again for another cloth's change does not partition and
+    /// colour this one again.
+    pub(crate) fn with_batches(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        kernels: &GpuKernels,
+        sims: &[&Simulation],
+        cells: &[&BatchesCell],
+    ) -> Result<Self, GpuUnsupported> {
         if let Some(first) = sims.first()
             && sims.iter().any(|s| WorldKey::of(s) != WorldKey::of(first))
         {
@@ -671,7 +686,9 @@ impl GpuWorld {
                 "a world's cloths share substeps, iterations and solver kind".to_owned(),
             ));
         }
-        let layout = WorldLayout::build(sims);
+        let batches: Vec<&crate::solver::ConstraintBatches> =
+            sims.iter().zip(cells).map(|(s, c)| c.get(s)).collect();
+        let layout = WorldLayout::build_with(sims, &batches);
         let n = layout.n;
         let c = layout.cloths.len() as u32;
         let sc = layout.any_sc;

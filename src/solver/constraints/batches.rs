@@ -779,6 +779,36 @@ impl ConstraintBatches {
         batches
     }
 
+    /// Whether these batches were built from `topology`'s edges and bending pairs, as they are
+    /// in it (the same vertices, in the same order, and bending model), so that
+    /// [`Self::remeasure`] with it gives what [`Self::new`] would build.
+    pub(crate) fn built_from(&self, topology: &Topology) -> bool {
+        let (edges, bends) = (topology.edges(), topology.bends());
+        let iso = topology.options().effective_bending() == BendingModel::Isometric;
+        let (mut distances, mut hinges) = (0, 0);
+        let same = self.all_parts().all(|part| {
+            let base = part.range.start as u32;
+            let d = &part.distance;
+            let b = &part.bending;
+            distances += d.edge.len();
+            hinges += b.bend.len();
+            let same_edges = d.edge.iter().enumerate().all(|(i, &e)| {
+                edges
+                    .get(e as usize)
+                    .is_some_and(|e| e.v == [d.a[i] + base, d.b[i] + base])
+            });
+            let same_hinges = b.bend.iter().enumerate().all(|(k, &h)| {
+                bends
+                    .get(h as usize)
+                    .is_some_and(|h| (0..4).all(|c| h.v[c] == b.v[c][k] + base))
+            });
+            same_edges && same_hinges && b.iso == iso
+        });
+        same && distances == edges.len()
+            && hinges == bends.len()
+            && self.boundary.range.end == topology.vertex_count()
+    }
+
     /// Takes the rest lengths, angles and weights of `topology`, whose edges and bending pairs
     /// are the ones these batches were built from (its rest shape measured again:
     /// [`Topology::reshaped`]), and loads the material of `solver`: what [`Self::new`] builds
