@@ -385,13 +385,32 @@ impl WorldLayout {
             lab: key.lab,
             ..Default::default()
         };
-        let mut dist = Distances::default();
-        let mut hinges = Hinges::default();
+        // The big tables at their final sizes from the start: grown as they fill, their copies
+        // and fresh pages were a third of a layout's time.
+        let total = |f: fn(&Topology) -> usize| sims.iter().map(|s| f(s.topology())).sum();
+        // (The lab solver's cloths have no constraint groups.)
+        let (all_edges, all_bends) = if key.lab {
+            (0, 0)
+        } else {
+            let bent = sims.iter().zip(chosen).filter(|(_, b)| b.bending);
+            let bends = bent.map(|(s, _)| s.topology().bends().len()).sum();
+            (total(|t| t.edges().len()), bends)
+        };
+        let all_vertices = total(Topology::vertex_count);
+        let mut dist = Distances {
+            // `cons` takes the hinges' three words each after the distances.
+            cons: Vec::with_capacity(all_edges + 3 * all_bends),
+            edge: Vec::with_capacity(all_edges),
+        };
+        let mut hinges = Hinges {
+            cons: Vec::with_capacity(all_bends),
+            bend: Vec::with_capacity(all_bends),
+        };
         let mut levels: [Vec<GroupSpec>; 4] = Default::default();
-        let mut vertex_cloth = Vec::new();
-        let mut vertex_pin = Vec::new();
+        let mut vertex_cloth = Vec::with_capacity(all_vertices);
+        let mut vertex_pin = Vec::with_capacity(all_vertices);
         let mut records = Vec::new();
-        let mut triangles: Vec<[u32; 3]> = Vec::new();
+        let mut triangles: Vec<[u32; 3]> = Vec::with_capacity(total(|t| t.triangles().len()));
         let mut tethers: Vec<(u32, [u32; 2])> = Vec::new();
         let mut lab_edges: Vec<(u32, [u32; 2])> = Vec::new();
         let mut tear_edges: Vec<[u32; 4]> = Vec::new();
@@ -602,6 +621,7 @@ impl WorldLayout {
             out.pins += pins.len() as u32;
             if any_sc {
                 let scale = |i: usize| scales.get(i).copied().unwrap_or(1.0);
+                out.rest.reserve_exact(all_vertices - out.rest.len());
                 out.rest
                     .extend(rest.iter().enumerate().map(|(i, p)| p.extend(scale(i))));
                 let from_triangles = sim.topology().self_collision_triangle_scales();
@@ -626,7 +646,27 @@ impl WorldLayout {
         out.cons.extend(hinges.cons.iter().flatten());
         // `topo`.
         let n = out.n as usize;
-        let mut topo: Vec<u32> = Vec::new();
+        // Its size, so that it is allocated once: the tables appended below, in order.
+        let lists = |owners: usize, items: usize, words: usize| owners + 1 + words * items;
+        let group_words: usize = levels
+            .iter()
+            .flatten()
+            .map(|g| GROUP_WORDS + g.dist_bounds.len() + g.bend_bounds.len())
+            .sum();
+        let t = triangles.len();
+        let sc_words = if out.any_sc { n + lists(n, t, 1) } else { 0 };
+        let size = records.len() * CLOTH_WORDS
+            + 2 * n
+            + group_words
+            + lists(n, 3 * t, 1)
+            + 3 * t
+            + sc_words
+            + lists(n, tethers.len(), 2)
+            + lists(n, lab_edges.len(), 2)
+            + 4 * tear_edges.len()
+            + lists(tear_edges.len(), edge_tris.len(), 1)
+            + 3 * settle_edges.len();
+        let mut topo: Vec<u32> = Vec::with_capacity(size);
         out.cloth_at = topo.len() as u32;
         topo.extend(records.iter().flatten());
         out.vertex_cloth_at = topo.len() as u32;
@@ -785,6 +825,51 @@ mod tests {
         assert!(!first.made.get().unwrap().built_from(dihedral.topology()));
         let other = BatchesCell::after(Some(&first));
         assert_eq!(other.get(&dihedral), &choose_batches(&dihedral));
+    }
+
+    /// A layout's big tables are allocated at their final sizes (not grown as they fill):
+    /// cloths with and without self-collision, tethers, tearing and a settle, and the lab
+    /// solver's.
+    #[test]
+    fn the_tables_are_allocated_once_at_their_size() {
+        let mut full = HangingCloth::new(24);
+        full.features = Features {
+            self_collision: Some(SelfCollision {
+                thickness: 0.02,
+                friction: 0.2,
+            }),
+            tethers: Some(TetherParams::default()),
+            tear_threshold: Some(2.0),
+        };
+        let full = full.build().unwrap();
+        let mut settling = standard(16);
+        settling.settle();
+        let mut lab = HangingCloth::new(12);
+        lab.params.solver = Solver::Lab {
+            velocity_keep: 0.99,
+        };
+        let lab = lab.build().unwrap();
+        let mut stiff = HangingCloth::new(12);
+        stiff.params.solver = Solver::Pbd {
+            stretch: 1.0,
+            shear: 1.0,
+            bending: 0.0,
+        };
+        let unbent = stiff.build().unwrap();
+        for sims in [
+            vec![&full],
+            vec![&full, &settling],
+            vec![&settling],
+            vec![&lab],
+            vec![&unbent],
+        ] {
+            let w = WorldLayout::build(&sims);
+            assert_eq!(w.topo.capacity(), w.topo.len(), "topo");
+            assert_eq!(w.cons.capacity(), w.cons.len(), "cons");
+            if w.any_sc {
+                assert_eq!(w.rest.capacity(), w.rest.len(), "rest");
+            }
+        }
     }
 
     #[test]
