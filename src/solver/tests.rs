@@ -722,6 +722,11 @@ fn colliders_tethers_and_a_skin_add_no_parallel_region() {
     );
 }
 
+/// `topology`'s triangles as an index list (what a mesh gives [`Topology::from_triangles`]).
+fn triangle_indices(topology: &Topology) -> Vec<u32> {
+    topology.triangles().iter().flatten().copied().collect()
+}
+
 /// A cloth's rest shape scaled evenly (an entity grown in by its scale) keeps its tethers,
 /// scaled: within rounding the limits a search of the new shape finds, and the steps after
 /// keep them. Scaled unevenly, or given another mesh's rest shape, they are
@@ -735,13 +740,7 @@ fn tethers_follow_an_even_scale_of_the_rest_shape_and_are_searched_again_otherwi
     sim.step(dt, &Serial);
     let pins: Vec<u32> = sim.state().pins().iter().map(|p| p.vertex).collect();
     let params = TetherParams::default();
-    let indices: Vec<u32> = sim
-        .topology()
-        .triangles()
-        .iter()
-        .flatten()
-        .copied()
-        .collect();
+    let indices = triangle_indices(sim.topology());
     let rest = sim.topology().rest_positions().to_vec();
     let options = sim.topology().options();
     let shaped = |f: &dyn Fn(Vec3) -> Vec3| {
@@ -802,13 +801,7 @@ fn a_new_rest_shape_gives_the_constraints_built_from_it() {
     let parts = sim.batches().part_count();
     let built = |t: &Topology| ConstraintBatches::new(t, solver, parts);
     let rest = sim.topology().rest_positions().to_vec();
-    let indices: Vec<u32> = sim
-        .topology()
-        .triangles()
-        .iter()
-        .flatten()
-        .copied()
-        .collect();
+    let indices = triangle_indices(sim.topology());
     // The same mesh widened and curved: measured again.
     let shaped: Vec<Vec3> = rest
         .iter()
