@@ -439,13 +439,6 @@ impl Simulation {
                 .iter()
                 .map(|e| e.v)
                 .eq(topology.edges().iter().map(|e| e.v));
-        let same_hinges = same_mesh
-            && was.options() == topology.options()
-            && was
-                .bends()
-                .iter()
-                .map(|b| b.v)
-                .eq(topology.bends().iter().map(|b| b.v));
         // The same mesh scaled evenly (an entity grown in by its scale): its tethers scaled
         // with it instead of searched for again at every frame of the growth.
         let tethers = self
@@ -453,7 +446,7 @@ impl Simulation {
             .take()
             .filter(|_| same_mesh)
             .and_then(|(pins, t)| Some((pins, t.rescaled(&topology)?)));
-        if same_hinges {
+        if self.batches.built_from(&topology) {
             // The same constraints at other rest values: measured again, not partitioned and
             // coloured again.
             self.topology = topology;
